@@ -1,0 +1,38 @@
+# Unit and end-to-end tests (gtest via ctest). The ROS tests (rostest) are added in ros_nodelet.cmake.
+find_package(GTest REQUIRED)
+include(GoogleTest)
+
+# Real pairs live beside the repository (../shared/data); CI sets MCFLOW_SHARED_DATA itself.
+if(DEFINED ENV{MCFLOW_SHARED_DATA})
+  set(MCFLOW_SHARED_DATA_DEFAULT $ENV{MCFLOW_SHARED_DATA})
+else()
+  get_filename_component(MCFLOW_SHARED_DATA_DEFAULT ${CMAKE_CURRENT_SOURCE_DIR}/../shared/data ABSOLUTE)
+endif()
+
+function(mcflow_add_gtest name)
+  file(GLOB sources CONFIGURE_DEPENDS ${ARGN})
+  if(NOT sources)
+    return()
+  endif()
+  add_executable(${name} ${sources})
+  target_link_libraries(${name} PRIVATE ${MCFLOW_TEST_LIBS} GTest::gtest GTest::gtest_main)
+  target_include_directories(${name} PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/test)
+  gtest_discover_tests(${name} DISCOVERY_MODE PRE_TEST
+    PROPERTIES ENVIRONMENT "MCFLOW_SHARED_DATA=${MCFLOW_SHARED_DATA_DEFAULT}")
+  add_dependencies(tests ${name})
+endfunction()
+
+if(NOT TARGET tests)
+  add_custom_target(tests)
+endif()
+
+set(MCFLOW_TEST_LIBS mcflow_core)
+mcflow_add_gtest(test_core ${CMAKE_CURRENT_SOURCE_DIR}/test/core/*.cpp)
+# GPU tests skip (visibly, GTEST_SKIP with the reason) where no CUDA GPU is usable.
+mcflow_add_gtest(test_cuda ${CMAKE_CURRENT_SOURCE_DIR}/test/cuda/*.cpp)
+if(MCFLOW_WITH_OPENCV)
+  set(MCFLOW_TEST_LIBS mcflow_io)
+  mcflow_add_gtest(test_io ${CMAKE_CURRENT_SOURCE_DIR}/test/io/*.cpp)
+  target_compile_definitions(test_io PRIVATE MCFLOW_CLI_PATH="$<TARGET_FILE:mcflow>")
+  add_dependencies(test_io mcflow)
+endif()

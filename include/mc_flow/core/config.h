@@ -1,0 +1,97 @@
+/**
+ * @file config.h
+ * @brief Every solver parameter, with its unit and default, in one place.
+ *
+ * The CLI flags, the JSON config file and the ROS dynamic_reconfigure parameters all map onto this
+ * struct; none of them repeats a default. `validate()` throws mc_flow::ConfigError naming the field.
+ */
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace mc_flow {
+
+enum class Regularizer { Quadratic, TotalVariation };
+enum class Backend { Auto, Cpu, Cuda };
+
+std::string toString(Regularizer r);
+std::string toString(Backend b);
+/// @brief Parses "quad"/"quadratic"/"tv"; throws ConfigError naming the text otherwise.
+Regularizer parseRegularizer(const std::string& s);
+/// @brief Parses "auto"/"cpu"/"cuda"; throws ConfigError naming the text otherwise.
+Backend parseBackend(const std::string& s);
+
+struct Config {
+  // ---- input ----
+  double max_depth = 5.0;   ///< [m] depth beyond this is treated as invalid (paper: 5 m)
+  double min_depth = 0.1;   ///< [m] depth below this is treated as invalid
+
+  // ---- pyramid ----
+  int coarsest_min_width = 20;  ///< [px] the pyramid stops before a level narrower than this (20x15 at 320x240 input)
+  int processing_level = 0;     ///< pyramid level the solver finishes at (0 = input resolution; 1 = half);
+                                ///< outputs are always written at the input resolution
+  double depth_downsample_range = 0.1;  ///< [m] neighbours further than this from the centre depth are not averaged
+
+  // ---- initialisation ----
+  int initial_labels = 20;       ///< K-means clusters on 3D points (paper: 20)
+  int kmeans_max_iterations = 10;
+  double kmeans_tolerance = 0.01;  ///< [m] stop when no centre moves further
+  int kmeans_level_offset = 2;     ///< K-means runs this many levels coarser than the label level
+  unsigned seed = 1;               ///< K-means seeding is deterministic for a given seed
+
+  // ---- outer loop (Algorithm 1) ----
+  int outer_iterations = 4;           ///< motion step + label step + label-count update, repeated
+  double outer_convergence = 1e-3;    ///< stop when the mean absolute label change is below this
+  int label_level_offset = 1;         ///< label step inside the loop runs this many levels above processing_level
+                                      ///< (a final label step at processing_level follows the loop)
+
+  // ---- motion step (Cauchy IRLS, eqs. 8-10, interpolation model eq. 2) ----
+  int motion_iterations_per_level = 6;  ///< IRLS iterations at each pyramid level
+  int motion_coarse_levels_after_first = 2;  ///< later outer iterations start this many levels above the finest
+  double alpha = 2.0;             ///< weight of the geometric (depth) cost against the photometric one
+  double cauchy_c_intensity = 0.04;  ///< [intensity, 0..1] Cauchy scale of photometric residuals
+  double cauchy_c_depth = 0.03;      ///< [m] Cauchy scale of geometric residuals
+  double motion_damping = 1e-4;      ///< Levenberg damping added to the normal equations (relative to the diagonal)
+  double motion_min_update = 1e-6;   ///< stop IRLS at a level when the largest twist update is below this
+  double min_label_weight = 0.01;    ///< soft-label values below this do not enter a label's normal equations
+
+  // ---- label step (eq. 4, primal-dual, supplement) ----
+  Regularizer regularizer = Regularizer::Quadratic;
+  double lambda_quadratic = 4.0;   ///< weight of the quadratic regulariser (eq. 13)
+  double lambda_tv = 1.0;          ///< weight of the TV regulariser (eq. 12)
+  int label_iterations = 150;      ///< primal-dual iterations per label step
+  int label_iterations_final = 80; ///< primal-dual iterations of the final, full-resolution label step
+  double label_tolerance = 1e-4;   ///< stop when the largest label change of an iteration is below this
+  double outlier_cost = 3.5;       ///< K_D: constant data cost of the outlier label (normalised Cauchy units)
+  double out_of_view_cost = 5.0;   ///< data cost of a label whose warp leaves the image at a non-occluded pixel
+  double min_geometric_weight = 1e-3;  ///< floor of the 3D-distance weights (0 would disconnect the graph)
+
+  // ---- label count (section 5) ----
+  double merge_translation = 0.006;  ///< [m] merge two labels when their motions move the segments' centroids
+                                     ///< differently by less than this
+  double merge_rotation = 0.01;      ///< [rad] ... and their rotations differ by less than this
+  double min_support_fraction = 0.004;  ///< labels with support below this fraction of the valid pixels go to the outlier label
+
+  // ---- occlusion (section 6) ----
+  bool detect_occlusions = true;
+  double occlusion_kz = 20.0;   ///< [1/m] K_z: weight of the depth test against the warp count
+  double occlusion_ko = 2.5;    ///< K_o: threshold on C(W(x)) + K_z * O_Z(x)
+
+  // ---- execution ----
+  Backend backend = Backend::Auto;  ///< label step on the GPU when available (Auto) or forced
+  int threads = 0;                  ///< OpenMP threads (0 = OpenMP default)
+  bool verbose = false;             ///< progress on stderr
+
+  /// @brief Throws ConfigError naming the first field out of range.
+  void validate() const;
+  /// @brief The regulariser weight for the selected regulariser.
+  double lambda() const { return regularizer == Regularizer::Quadratic ? lambda_quadratic : lambda_tv; }
+  /// @brief Sets a field by name from text (JSON/YAML keys and CLI use this); throws ConfigError on an
+  /// unknown name or an unparsable value.
+  void set(const std::string& name, const std::string& value);
+  /// @brief Every field as (name, value-as-text), in declaration order.
+  std::vector<std::pair<std::string, std::string>> fields() const;
+};
+
+}  // namespace mc_flow

@@ -1,0 +1,27 @@
+/**
+ * @file kmeans.h
+ * @brief Initial labels: K-means (Lloyd) on the 3D points, deterministic for a given seed.
+ */
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "mc_flow/core/image.h"
+
+namespace mc_flow {
+
+struct KMeansResult {
+  std::vector<Eigen::Vector3f> centres;
+  ImageI32 assignment;  ///< cluster index per pixel, -1 where the point is invalid
+  int iterations = 0;
+};
+
+/// @brief K-means on the valid points of a 3 channel point image. Seeds: k-means++ with a PRNG seeded
+/// by `seed` (same input + seed = same output). Returns fewer centres when fewer distinct points exist.
+KMeansResult kmeansPoints(const ImageF& points, int k, int max_iterations, double tolerance_m, unsigned seed);
+
+/// @brief Nearest-centre assignment of each valid point (-1 where invalid).
+ImageI32 assignToNearestCentre(const ImageF& points, const std::vector<Eigen::Vector3f>& centres);
+
+}  // namespace mc_flow

@@ -1,0 +1,28 @@
+/**
+ * @file scene_flow.h
+ * @brief The interpolated motion per pixel: warped points, scene flow and optical flow.
+ */
+#pragma once
+
+#include <vector>
+
+#include "mc_flow/core/image.h"
+#include "mc_flow/core/se3.h"
+#include "mc_flow/core/soft_labels.h"
+
+namespace mc_flow {
+
+/// @brief xi_bar(x) = sum_i w_i(x) xi_i over motion labels, w = u renormalised without the outlier label;
+/// pixels with (almost) no motion-label mass use `fallback_label` (may be null: then the largest motion label).
+Vector6d interpolatedTwist(const SoftLabels& u, int x, int y, const std::vector<Vector6d>& twists,
+                           const ImageI32* fallback_label);
+
+/// @brief P2(x) = exp(xi_bar(x)) P(x): 3 channels, NaN where the point is invalid.
+ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<Vector6d>& twists,
+                  const ImageI32* fallback_label = nullptr);
+
+/// @brief Scene flow P2 - P (3 channels, m) and optical flow pi(P2) - x (2 channels, px); NaN where invalid.
+void sceneAndOpticalFlow(const ImageF& points, const ImageF& warped_points, const Intrinsics& K, ImageF& scene_flow,
+                         ImageF& optical_flow);
+
+}  // namespace mc_flow

@@ -1,0 +1,87 @@
+/**
+ * @file solver.h
+ * @brief The MC-Flow solver (Algorithm 1): K-means initialisation, then alternating motion step,
+ * label step and label-count update; occlusion mask; scene flow outputs.
+ */
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "mc_flow/core/config.h"
+#include "mc_flow/core/image.h"
+#include "mc_flow/core/se3.h"
+#include "mc_flow/core/soft_labels.h"
+
+namespace mc_flow {
+
+/// @brief One rigid part. The twist and transform map frame-1 points to where they are in frame 2
+/// (camera optical frame of frame 1), over the frame interval (not per second).
+struct Segment {
+  int id = 0;                   ///< 1..m (0 is reserved for the outlier label in label images)
+  Vector6d twist = Vector6d::Zero();  ///< (v [m], w [rad]) over the interval
+  Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();  ///< exp(twist)
+  double support = 0;           ///< sum of u over the pixels (input resolution)
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  ///< [m] support-weighted centroid of its points
+};
+
+/// @brief Wall-clock time per stage [ms].
+struct StageTimings {
+  double preprocessing = 0, initialisation = 0, motion = 0, labels = 0, adaptation = 0, occlusion = 0, outputs = 0,
+         total = 0;
+};
+
+struct OuterIterationStats {
+  int iteration = 0;
+  int labels_before = 0;  ///< motion labels at the start (outlier label not counted)
+  int labels_after = 0;   ///< after merging / removal
+  int merged = 0, removed = 0;
+  int motion_iterations = 0;  ///< IRLS iterations summed over levels
+  int label_iterations = 0;   ///< primal-dual iterations
+  double label_change = 0;    ///< mean |u_k+1 - u_k| at the label level
+  double energy = 0;          ///< E(u) of eq. 4 after the label step
+};
+
+/// @brief Everything the solver produces. Images are at the input resolution.
+struct Result {
+  int width = 0, height = 0;
+  Intrinsics intrinsics;
+  std::vector<Segment> segments;
+  SoftLabels soft_labels;  ///< planes 0..m-1 = segments (in order), plane m = outlier
+  ImageI32 labels;         ///< argmax segment id 1..m; 0 = outlier or no depth
+  ImageU8 occlusion;       ///< 255 = occluded
+  ImageF scene_flow;       ///< 3 channels [m], frame-1 camera frame; NaN where depth is invalid
+  ImageF optical_flow;     ///< 2 channels [px]; NaN where depth is invalid
+  StageTimings timings;
+  std::vector<OuterIterationStats> iterations;
+  double energy = 0;             ///< final E(u) (processing level)
+  int processing_width = 0, processing_height = 0;
+  int pyramid_levels = 0;
+  std::string backend;           ///< "cpu" or "cuda"
+  std::string backend_note;      ///< why Auto chose what it chose
+};
+
+/// @brief Solver with a fixed Config. Not thread-safe; reuse one per stream.
+class Solver {
+ public:
+  /// @brief Validates the config (throws ConfigError) and resolves the backend (throws BackendError
+  /// when CUDA is forced but unusable).
+  explicit Solver(const Config& config);
+  ~Solver();
+  Solver(const Solver&) = delete;
+  Solver& operator=(const Solver&) = delete;
+
+  /// @brief Solves one pair. Throws InputError for bad input (sizes, non-finite values, no valid depth,
+  /// bad intrinsics).
+  Result solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K);
+
+  const Config& config() const;
+  std::string backendName() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace mc_flow

@@ -1,0 +1,60 @@
+/**
+ * @file synthetic_scene.h
+ * @brief The project's own synthetic RGB-D scenes with known motion (no files, no OpenCV).
+ *
+ * A textured room (static background), independent rigid objects and one articulated arm whose
+ * elbow blends the two links' motions smoothly; rendered by ray casting with a z-buffer so that
+ * occlusions, disocclusions and out-of-view points are exact.
+ */
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "mc_flow/core/image.h"
+#include "mc_flow/core/se3.h"
+
+namespace mc_flow {
+
+struct SyntheticSceneOptions {
+  int width = 320;
+  int height = 240;
+  int variant = 0;              ///< 0..N-1 selects a scene layout/motion set (see syntheticVariantCount())
+  double motion_scale = 1.0;    ///< scales every twist
+  double intensity_noise = 0.0; ///< std dev added to intensity (0..1 units)
+  double depth_noise = 0.0;     ///< [m] std dev at 1 m, growing with depth^2 (Kinect-like)
+  unsigned seed = 1;            ///< noise seed
+};
+
+struct SyntheticPart {
+  int id = 0;            ///< value in SyntheticPair::gt_parts
+  std::string name;
+  Vector6d twist = Vector6d::Zero();  ///< motion over the pair interval (frame-1 camera frame)
+};
+
+/// @brief A rendered pair and its ground truth (all at width x height).
+struct SyntheticPair {
+  Intrinsics intrinsics;
+  RgbdFrame frame1, frame2;
+  ImageU8 color1, color2;     ///< 3 channels RGB
+  ImageF gt_scene_flow;       ///< 3 channels [m]; NaN where frame 1 has no surface
+  ImageF gt_optical_flow;     ///< 2 channels [px]; NaN where frame 1 has no surface
+  ImageU8 gt_occlusion;       ///< 255 where the frame-1 point is hidden or out of view in frame 2
+  ImageI32 gt_parts;          ///< part id per pixel (0 = static background)
+  std::vector<SyntheticPart> parts;
+};
+
+int syntheticVariantCount();
+
+/// @brief Renders the pair (t = 0, t = 1) of a variant.
+SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options);
+
+/// @brief Renders frame `t` of a smoothly moving sequence (t = 0, 1, 2, ...): the colour, the frame and,
+/// when t > 0, nothing else. Consecutive frames t, t+1 form a pair with motion like renderSyntheticPair.
+void renderSyntheticFrame(const SyntheticSceneOptions& options, int t, RgbdFrame& frame, ImageU8& color,
+                          Intrinsics& K);
+
+/// @brief Ground-truth twists of the parts between frame t and t+1 of the sequence.
+std::vector<SyntheticPart> syntheticSequenceMotions(const SyntheticSceneOptions& options, int t);
+
+}  // namespace mc_flow

@@ -1,0 +1,302 @@
+// Label step on the CPU: data costs (eq. 5), geometric weights (eq. 11) and the diagonally
+// preconditioned primal-dual iteration. The derivation of every step is in docs/ALGORITHM.md.
+#include "mc_flow/core/label_optimization.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/motion_estimation.h"
+#include "mc_flow/core/sampling.h"
+
+namespace mc_flow {
+
+void projectOntoSimplex(float* v, int n) {
+  // Michelot's active-set algorithm: theta = (sum of the active values - 1) / |active|, drop the values
+  // below theta, repeat. Same result as the sort-based projection of Duchi et al. (2008) without a sort:
+  // most pixels are nearly one-hot, so it ends after one or two passes of n.
+  double sum = 0;
+  for (int i = 0; i < n; ++i) sum += v[i];
+  double theta = (sum - 1.0) / n;
+  for (int pass = 0; pass < n; ++pass) {
+    double active_sum = 0;
+    int active = 0;
+    for (int i = 0; i < n; ++i)
+      if (v[i] > theta) {
+        active_sum += v[i];
+        ++active;
+      }
+    const double next = (active_sum - 1.0) / active;
+    if (next <= theta) break;  // theta only grows; no change means the active set is final
+    theta = next;
+  }
+  const float t = float(theta);
+  for (int i = 0; i < n; ++i) v[i] = std::max(v[i] - t, 0.f);
+}
+
+void geometricWeights(const PyramidLevel& frame1, double min_weight, ImageF& weight_x, ImageF& weight_y) {
+  const ImageF& P = frame1.points;
+  const int W = P.width, H = P.height;
+  weight_x = ImageF(W, H, 1, 0.f);
+  weight_y = ImageF(W, H, 1, 0.f);
+  const float fmean = float(0.5 * (frame1.intrinsics.fx + frame1.intrinsics.fy));
+  const float wmin = float(min_weight);
+  // r = footprint / max(footprint, distance): 1 on a fronto-parallel surface at any depth and resolution,
+  // falling as 1/distance across depth discontinuities (the paper's inverse 3D distance, normalised).
+  auto weight = [&](int x0, int y0, int x1, int y1) {
+    const float z0 = P(x0, y0, 2), z1 = P(x1, y1, 2);
+    if (!std::isfinite(z0) || !std::isfinite(z1)) return wmin;
+    const float dx = P(x0, y0, 0) - P(x1, y1, 0), dy = P(x0, y0, 1) - P(x1, y1, 1), dz = z0 - z1;
+    const float distance = std::sqrt(dx * dx + dy * dy + dz * dz);
+    const float footprint = 0.5f * (z0 + z1) / fmean;
+    return std::max(wmin, footprint / std::max(footprint, distance));
+  };
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      if (x + 1 < W) weight_x(x, y) = weight(x, y, x + 1, y);
+      if (y + 1 < H) weight_y(x, y) = weight(x, y, x, y + 1);
+    }
+  }
+}
+
+void computeDataCosts(const PyramidLevel& frame1, const PyramidLevel& frame2, const std::vector<Vector6d>& twists,
+                      const ImageU8* occluded, const Config& config, LabelProblem& problem) {
+  const int W = frame1.points.width, H = frame1.points.height;
+  const int motion_labels = int(twists.size());
+  const int n = motion_labels + 1;
+  problem.width = W;
+  problem.height = H;
+  problem.count = n;
+  problem.regularizer = config.regularizer;
+  problem.lambda = config.lambda();
+  problem.data_cost.assign(std::size_t(W) * H * n, 0.f);
+  problem.outlier_only = ImageU8(W, H, 1, 0);
+
+  std::vector<Eigen::Matrix<float, 3, 4>> transforms(static_cast<std::size_t>(motion_labels));
+  for (int i = 0; i < motion_labels; ++i) transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
+  const Intrinsics& K = frame2.intrinsics;
+  const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
+  const float cI = float(config.cauchy_c_intensity), cZ = float(config.cauchy_c_depth), alpha = float(config.alpha);
+  const float outlier_cost = float(config.outlier_cost), out_of_view = float(config.out_of_view_cost);
+  const float missing_depth_cost = alpha * std::log(2.f);  // as if |r_Z| = c_Z: no evidence either way
+  const std::size_t plane = std::size_t(W) * H;
+
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t idx = std::size_t(y) * W + x;
+      const Eigen::Vector3f P(frame1.points(x, y, 0), frame1.points(x, y, 1), frame1.points(x, y, 2));
+      if (!std::isfinite(P.z())) {
+        problem.outlier_only.data[idx] = 1;
+        for (int i = 0; i < n; ++i) problem.data_cost[i * plane + idx] = 0.f;
+        continue;
+      }
+      if (occluded && occluded->data[idx]) continue;  // section 6: no data term, the regulariser decides
+      problem.data_cost[std::size_t(motion_labels) * plane + idx] = outlier_cost;
+      const float I1 = frame1.intensity(x, y);
+      for (int i = 0; i < motion_labels; ++i) {
+        const Eigen::Vector3f P2 = transforms[std::size_t(i)] * P.homogeneous();
+        float cost = out_of_view;
+        if (P2.z() > 1e-3f) {
+          const float u = fx * P2.x() / P2.z() + cx, v = fy * P2.y() / P2.z() + cy;
+          float I2, Z2;
+          if (sampleBilinear(frame2.intensity, u, v, 0, I2)) {
+            const float rI = (I1 - I2) / cI;
+            cost = std::log1p(rI * rI);
+            if (sampleDepthBilinear(frame2.depth, u, v, Z2)) {
+              const float rZ = (P2.z() - Z2) / cZ;
+              cost += alpha * std::log1p(rZ * rZ);
+            } else {
+              cost += missing_depth_cost;
+            }
+          }
+        }
+        problem.data_cost[std::size_t(i) * plane + idx] = cost;
+      }
+    }
+  }
+}
+
+namespace {
+
+// Regulariser value of one pixel of one label given its weighted forward differences.
+inline double regulariserTerm(Regularizer reg, double qx, double qy) {
+  return reg == Regularizer::TotalVariation ? std::sqrt(qx * qx + qy * qy) : qx * qx + qy * qy;
+}
+
+}  // namespace
+
+double labelEnergy(const LabelProblem& problem, const SoftLabels& u) {
+  const int W = problem.width, H = problem.height, n = problem.count;
+  const std::size_t plane = std::size_t(W) * H;
+  double energy = 0;
+#pragma omp parallel for reduction(+ : energy) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t idx = std::size_t(y) * W + x;
+      for (int i = 0; i < n; ++i) {
+        const float* ui = u.plane(i);
+        energy += double(ui[idx]) * problem.data_cost[i * plane + idx];
+        const double qx = x + 1 < W ? problem.weight_x.data[idx] * (ui[idx + 1] - ui[idx]) : 0.0;
+        const double qy = y + 1 < H ? problem.weight_y.data[idx] * (ui[idx + W] - ui[idx]) : 0.0;
+        energy += problem.lambda * regulariserTerm(problem.regularizer, qx, qy);
+      }
+    }
+  }
+  return energy;
+}
+
+namespace {
+
+class CpuLabelOptimizer final : public LabelOptimizer {
+ public:
+  std::string name() const override { return "cpu"; }
+
+  LabelStats optimize(const LabelProblem& problem, SoftLabels& u, LabelDual& dual, int iterations,
+                      double tolerance) override {
+    const int W = problem.width, H = problem.height, n = problem.count;
+    if (u.width != W || u.height != H || u.count != n)
+      throw InputError("label step: labels are " + std::to_string(u.width) + "x" + std::to_string(u.height) + "x" +
+                       std::to_string(u.count) + " but the problem is " + std::to_string(W) + "x" +
+                       std::to_string(H) + "x" + std::to_string(n));
+    if (dual.width != W || dual.height != H || dual.count != n) dual.reset(W, H, n);
+    const std::size_t plane = std::size_t(W) * H;
+    const float* rx = problem.weight_x.ptr();
+    const float* ry = problem.weight_y.ptr();
+    const bool tv = problem.regularizer == Regularizer::TotalVariation;
+    const float lambda = float(problem.lambda);
+
+    // Diagonal preconditioning (Pock & Chambolle 2011, alpha = 1). Row sums of |K| give sigma, column sums tau.
+    // TV projects p onto a disc, which is only the proximal map when both components share one sigma:
+    // use the smaller of the two there (a smaller step keeps the convergence condition).
+    sigma_x_.resize(plane);
+    sigma_y_.resize(plane);
+    tau_.resize(plane);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const std::size_t i = std::size_t(y) * W + x;
+        float sx = rx[i] > 0.f ? 1.f / (2.f * rx[i]) : 0.f;
+        float sy = ry[i] > 0.f ? 1.f / (2.f * ry[i]) : 0.f;
+        if (tv) {
+          const float m = std::max(rx[i], ry[i]);
+          sx = sy = m > 0.f ? 1.f / (2.f * m) : 0.f;
+        }
+        sigma_x_[i] = sx;
+        sigma_y_[i] = sy;
+        const float column = rx[i] + ry[i] + (x > 0 ? rx[i - 1] : 0.f) + (y > 0 ? ry[i - W] : 0.f);
+        tau_[i] = column > 0.f ? 1.f / column : 1e3f;
+      }
+    u_bar_ = u.data;
+
+    LabelStats stats;
+    for (int it = 0; it < iterations; ++it) {
+      // Dual ascent + prox of sigma Q*.
+#pragma omp parallel for schedule(static)
+      for (int y = 0; y < H; ++y) {
+        for (int label = 0; label < n; ++label) {
+          const float* ub = u_bar_.data() + label * plane;
+          float* px = dual.p.data() + (2 * label) * plane;
+          float* py = dual.p.data() + (2 * label + 1) * plane;
+          for (int x = 0; x < W; ++x) {
+            const std::size_t i = std::size_t(y) * W + x;
+            const float gx = x + 1 < W ? rx[i] * (ub[i + 1] - ub[i]) : 0.f;
+            const float gy = y + 1 < H ? ry[i] * (ub[i + W] - ub[i]) : 0.f;
+            float qx = px[i] + sigma_x_[i] * gx, qy = py[i] + sigma_y_[i] * gy;
+            if (tv) {
+              const float scale = std::max(1.f, std::sqrt(qx * qx + qy * qy) / lambda);
+              qx /= scale;
+              qy /= scale;
+            } else {
+              qx /= 1.f + sigma_x_[i] / (2.f * lambda);
+              qy /= 1.f + sigma_y_[i] / (2.f * lambda);
+            }
+            px[i] = qx;
+            py[i] = qy;
+          }
+        }
+      }
+      // Primal descent + projection onto the simplex, then extrapolation (theta = 1).
+      float max_change = 0.f;
+#pragma omp parallel for schedule(static) reduction(max : max_change)
+      for (int y = 0; y < H; ++y) {
+        float v[128];
+        for (int x = 0; x < W; ++x) {
+          const std::size_t i = std::size_t(y) * W + x;
+          if (problem.outlier_only.data[i]) {
+            for (int label = 0; label < n; ++label) {
+              const float target = label == n - 1 ? 1.f : 0.f;
+              max_change = std::max(max_change, std::fabs(u.data[label * plane + i] - target));
+              u.data[label * plane + i] = target;
+              u_bar_[label * plane + i] = target;
+            }
+            continue;
+          }
+          for (int label = 0; label < n; ++label) {
+            const float* px = dual.p.data() + (2 * label) * plane;
+            const float* py = dual.p.data() + (2 * label + 1) * plane;
+            // K^T p = -(weighted backward divergence of p).
+            float divergence = rx[i] * px[i] + ry[i] * py[i];
+            if (x > 0) divergence -= rx[i - 1] * px[i - 1];
+            if (y > 0) divergence -= ry[i - W] * py[i - W];
+            v[label] = u.data[label * plane + i] - tau_[i] * (-divergence + problem.data_cost[label * plane + i]);
+          }
+          projectOntoSimplex(v, n);
+          for (int label = 0; label < n; ++label) {
+            const float old = u.data[label * plane + i];
+            max_change = std::max(max_change, std::fabs(v[label] - old));
+            u.data[label * plane + i] = v[label];
+            u_bar_[label * plane + i] = 2.f * v[label] - old;
+          }
+        }
+      }
+      stats.iterations = it + 1;
+      stats.last_change = max_change;
+      if (max_change < tolerance) break;
+    }
+    stats.energy = labelEnergy(problem, u);
+    return stats;
+  }
+
+ private:
+  std::vector<float> sigma_x_, sigma_y_, tau_, u_bar_;
+};
+
+}  // namespace
+
+std::unique_ptr<LabelOptimizer> makeCpuLabelOptimizer() { return std::make_unique<CpuLabelOptimizer>(); }
+
+#ifndef MCFLOW_HAVE_CUDA
+bool cudaBackendAvailable(std::string* why) {
+  if (why) *why = "this build of mc_flow has no CUDA backend (nvcc was not found when it was configured)";
+  return false;
+}
+std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer() {
+  std::string why;
+  cudaBackendAvailable(&why);
+  throw BackendError("CUDA backend requested but unavailable: " + why);
+}
+#endif
+
+std::unique_ptr<LabelOptimizer> makeLabelOptimizer(Backend backend, std::string* note) {
+  std::string why;
+  switch (backend) {
+    case Backend::Cpu:
+      if (note) *note = "cpu (requested)";
+      return makeCpuLabelOptimizer();
+    case Backend::Cuda:
+      if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);
+      if (note) *note = "cuda (requested)";
+      return makeCudaLabelOptimizer();
+    case Backend::Auto:
+    default:
+      if (cudaBackendAvailable(&why)) {
+        if (note) *note = "cuda (auto: GPU available)";
+        return makeCudaLabelOptimizer();
+      }
+      if (note) *note = "cpu (auto: " + why + ")";
+      return makeCpuLabelOptimizer();
+  }
+}
+
+}  // namespace mc_flow

@@ -1,0 +1,191 @@
+// Motion step: all labels' twists solved jointly by IRLS with the Cauchy M-estimator (eqs. 8-10) under
+// the motion-interpolation model (eq. 2). A pixel's residual uses xi_bar(x) = sum_i w_i(x) xi_i, so its
+// Jacobian row for label i is w_i(x) J(x) and the normal equations couple labels that share pixels.
+#include "mc_flow/core/motion_estimation.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "mc_flow/core/sampling.h"
+#include "mc_flow/core/scene_flow.h"
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+namespace mc_flow {
+
+namespace {
+
+using Vector6f = Eigen::Matrix<float, 6, 1>;
+
+struct Accumulator {
+  Eigen::MatrixXd H;
+  Eigen::VectorXd g;
+  double cost = 0;
+  int pixels = 0;
+  void reset(int dims) {
+    H.setZero(dims, dims);
+    g.setZero(dims);
+    cost = 0;
+    pixels = 0;
+  }
+};
+
+// Jacobian of the transformed point P2 = exp(xi_bar) P with respect to a left increment of xi_bar
+// (first order, rotation part linearised at P2): dP2 = dv + dw x P2.
+inline void pointJacobian(const Eigen::Vector3f& P2, const Eigen::RowVector3f& row, Vector6f& out) {
+  // out^T = row * [I | -skew(P2)]
+  out(0) = row(0);
+  out(1) = row(1);
+  out(2) = row(2);
+  out(3) = row(2) * P2.y() - row(1) * P2.z();
+  out(4) = row(0) * P2.z() - row(2) * P2.x();
+  out(5) = row(1) * P2.x() - row(0) * P2.y();
+}
+
+}  // namespace
+
+MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
+                                        const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config) {
+  MotionLevelStats stats;
+  const int W = frame1.points.width, H = frame1.points.height;
+  const int motion_labels = labels.count - 1;
+  if (motion_labels <= 0 || int(twists.size()) != motion_labels) return stats;
+  const int dims = 6 * motion_labels;
+  const std::size_t plane = std::size_t(W) * H;
+  const Intrinsics& K = frame2.intrinsics;
+  const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
+  const float cI = float(config.cauchy_c_intensity), cZ = float(config.cauchy_c_depth);
+  const float alpha = float(config.alpha), min_weight = float(config.min_label_weight);
+
+  int threads = 1;
+#ifdef _OPENMP
+  threads = omp_get_max_threads();
+#endif
+  std::vector<Accumulator> accumulators(static_cast<std::size_t>(threads));
+
+  for (int iteration = 0; iteration < config.motion_iterations_per_level; ++iteration) {
+    std::vector<Eigen::Matrix<float, 3, 4>> transforms(static_cast<std::size_t>(motion_labels));
+    for (int i = 0; i < motion_labels; ++i) transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
+    for (auto& a : accumulators) a.reset(dims);
+
+#pragma omp parallel
+    {
+      int thread = 0;
+#ifdef _OPENMP
+      thread = omp_get_thread_num();
+#endif
+      Accumulator& acc = accumulators[std::size_t(thread)];
+      std::vector<int> active(static_cast<std::size_t>(motion_labels));
+      std::vector<float> weights(static_cast<std::size_t>(motion_labels));
+#pragma omp for schedule(dynamic, 4)
+      for (int y = 0; y < H; ++y) {
+        for (int x = 0; x < W; ++x) {
+          const std::size_t idx = std::size_t(y) * W + x;
+          const Eigen::Vector3f P(frame1.points(x, y, 0), frame1.points(x, y, 1), frame1.points(x, y, 2));
+          if (!std::isfinite(P.z())) continue;
+          if (occluded && occluded->data[idx]) continue;
+          // Interpolation weights over the motion labels; the outlier share scales the pixel down.
+          float mass = 0.f;
+          for (int i = 0; i < motion_labels; ++i) mass += labels.data[i * plane + idx];
+          if (mass < 0.05f) continue;
+          int n_active = 0;
+          float active_mass = 0.f;
+          for (int i = 0; i < motion_labels; ++i) {
+            const float w = labels.data[i * plane + idx] / mass;
+            if (w >= min_weight) {
+              active[std::size_t(n_active)] = i;
+              weights[std::size_t(n_active)] = w;
+              active_mass += w;
+              ++n_active;
+            }
+          }
+          if (n_active == 0) continue;
+          for (int k = 0; k < n_active; ++k) weights[std::size_t(k)] /= active_mass;
+
+          Eigen::Vector3f P2;
+          if (n_active == 1) {
+            P2 = transforms[std::size_t(active[0])] * P.homogeneous();
+          } else {
+            Vector6d xi_bar = Vector6d::Zero();
+            for (int k = 0; k < n_active; ++k) xi_bar += double(weights[std::size_t(k)]) * twists[std::size_t(active[std::size_t(k)])];
+            P2 = se3Exp(xi_bar).topRows<3>().cast<float>() * P.homogeneous();
+          }
+          if (P2.z() < 1e-3f) continue;
+          const float inv_z = 1.f / P2.z();
+          const float u = fx * P2.x() * inv_z + cx, v = fy * P2.y() * inv_z + cy;
+          float I2, gIx, gIy;
+          if (!sampleBilinear(frame2.intensity, u, v, 0, I2)) continue;
+          sampleBilinear(frame2.intensity_grad, u, v, 0, gIx);
+          sampleBilinear(frame2.intensity_grad, u, v, 1, gIy);
+          // d(pixel)/dP2
+          const float du_dX = fx * inv_z, du_dZ = -fx * P2.x() * inv_z * inv_z;
+          const float dv_dY = fy * inv_z, dv_dZ = -fy * P2.y() * inv_z * inv_z;
+
+          const float rI = frame1.intensity(x, y) - I2;
+          Vector6f JI;
+          pointJacobian(P2, Eigen::RowVector3f(-gIx * du_dX, -gIy * dv_dY, -(gIx * du_dZ + gIy * dv_dZ)), JI);
+          // IRLS weight of the normalised Cauchy cost ln(1 + (r/c)^2): 1 / (c^2 + r^2).
+          const float wI = 1.f / (cI * cI + rI * rI);
+          Eigen::Matrix<float, 6, 6> Hp = wI * JI * JI.transpose();
+          Vector6f gp = wI * rI * JI;
+          double cost = std::log1p(rI * rI / (cI * cI));
+
+          float Z2;
+          if (sampleDepthBilinear(frame2.depth, u, v, Z2)) {
+            float gZx, gZy;
+            sampleBilinear(frame2.depth_grad, u, v, 0, gZx);
+            sampleBilinear(frame2.depth_grad, u, v, 1, gZy);
+            const float rZ = P2.z() - Z2;
+            Vector6f JZ;
+            pointJacobian(P2, Eigen::RowVector3f(-gZx * du_dX, -gZy * dv_dY, 1.f - (gZx * du_dZ + gZy * dv_dZ)), JZ);
+            const float wZ = alpha / (cZ * cZ + rZ * rZ);
+            Hp += wZ * JZ * JZ.transpose();
+            gp += wZ * rZ * JZ;
+            cost += alpha * std::log1p(rZ * rZ / (cZ * cZ));
+          }
+          const Eigen::Matrix<double, 6, 6> Hd = (mass * Hp).cast<double>();
+          const Vector6d gd = (mass * gp).cast<double>();
+          for (int a = 0; a < n_active; ++a) {
+            const int ia = active[std::size_t(a)];
+            const double wa = weights[std::size_t(a)];
+            acc.g.segment<6>(6 * ia) += wa * gd;
+            for (int b = 0; b < n_active; ++b) {
+              const int ib = active[std::size_t(b)];
+              acc.H.block<6, 6>(6 * ia, 6 * ib) += (wa * weights[std::size_t(b)]) * Hd;
+            }
+          }
+          acc.cost += mass * cost;
+          ++acc.pixels;
+        }
+      }
+    }
+    Accumulator& total = accumulators[0];
+    for (std::size_t t = 1; t < accumulators.size(); ++t) {
+      total.H += accumulators[t].H;
+      total.g += accumulators[t].g;
+      total.cost += accumulators[t].cost;
+      total.pixels += accumulators[t].pixels;
+    }
+    if (iteration == 0) stats.cost_before = total.cost;
+    stats.cost_after = total.cost;
+    stats.pixels_used = total.pixels;
+    stats.iterations = iteration + 1;
+    if (total.pixels < 6) break;
+
+    // Levenberg damping on the diagonal; labels without pixels get an identity block (zero update).
+    const double max_diag = total.H.diagonal().maxCoeff();
+    for (int d = 0; d < dims; ++d) total.H(d, d) += config.motion_damping * total.H(d, d) + 1e-9 * std::max(max_diag, 1.0);
+    const Eigen::VectorXd delta = total.H.ldlt().solve(-total.g);
+    if (!delta.allFinite()) break;
+    for (int i = 0; i < motion_labels; ++i) twists[std::size_t(i)] += delta.segment<6>(6 * i);
+    if (delta.cwiseAbs().maxCoeff() < config.motion_min_update) break;
+  }
+  return stats;
+}
+
+}  // namespace mc_flow

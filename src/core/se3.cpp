@@ -1,0 +1,54 @@
+#include "mc_flow/core/se3.h"
+
+#include <cmath>
+
+namespace mc_flow {
+
+Eigen::Matrix3d skew(const Eigen::Vector3d& w) {
+  Eigen::Matrix3d S;
+  S << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
+  return S;
+}
+
+// Closed forms (Rodrigues); Taylor expansions below 1e-8 rad keep small motions exact in double precision.
+Eigen::Matrix4d se3Exp(const Vector6d& xi) {
+  const Eigen::Vector3d v = xi.head<3>(), w = xi.tail<3>();
+  const double theta2 = w.squaredNorm(), theta = std::sqrt(theta2);
+  const Eigen::Matrix3d W = skew(w), W2 = W * W;
+  double a, b, c;  // R = I + a W + b W^2, V = I + b W + c W^2
+  if (theta < 1e-8) {
+    a = 1.0 - theta2 / 6.0;
+    b = 0.5 - theta2 / 24.0;
+    c = 1.0 / 6.0 - theta2 / 120.0;
+  } else {
+    a = std::sin(theta) / theta;
+    b = (1.0 - std::cos(theta)) / theta2;
+    c = (theta - std::sin(theta)) / (theta2 * theta);
+  }
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  T.topLeftCorner<3, 3>() = Eigen::Matrix3d::Identity() + a * W + b * W2;
+  T.topRightCorner<3, 1>() = (Eigen::Matrix3d::Identity() + b * W + c * W2) * v;
+  return T;
+}
+
+Vector6d se3Log(const Eigen::Matrix4d& T) {
+  const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
+  const Eigen::AngleAxisd aa(R);
+  const double theta = aa.angle();
+  const Eigen::Vector3d w = aa.axis() * theta;
+  const Eigen::Matrix3d W = skew(w), W2 = W * W;
+  Eigen::Matrix3d Vinv;
+  if (theta < 1e-8) {
+    Vinv = Eigen::Matrix3d::Identity() - 0.5 * W + W2 / 12.0;
+  } else {
+    const double half = 0.5 * theta;
+    const double k = (1.0 - half * std::cos(half) / std::sin(half)) / (theta * theta);
+    Vinv = Eigen::Matrix3d::Identity() - 0.5 * W + k * W2;
+  }
+  Vector6d xi;
+  xi.head<3>() = Vinv * T.topRightCorner<3, 1>();
+  xi.tail<3>() = w;
+  return xi;
+}
+
+}  // namespace mc_flow

@@ -1,0 +1,118 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "mc_flow/core/metrics.h"
+
+namespace mc_flow {
+namespace {
+
+const Intrinsics kCamera{60.0, 60.0, 19.5, 14.5};
+constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
+
+TEST(Metrics, EndPointAndAngularErrors) {
+  ImageF estimate(4, 1, 2, 0.f), truth(4, 1, 2, 0.f);
+  estimate(0, 0, 0) = 1.f;                             // EPE 1, angle between (1,0,1) and (0,0,1) = 45 deg
+  estimate(1, 0, 0) = 3.f, estimate(1, 0, 1) = 4.f;    // EPE 5 (excluded below in the second check)
+  truth(2, 0, 0) = 2.f, estimate(2, 0, 0) = 2.f;       // exact: 0
+  estimate(3, 0, 0) = kNan;                            // skipped
+  ImageU8 none(4, 1, 1, 0);
+  const FlowErrors all = opticalFlowErrors(estimate, truth, nullptr);
+  EXPECT_EQ(all.pixels, 3u);
+  EXPECT_NEAR(all.epe, (1.0 + 5.0 + 0.0) / 3.0, 1e-9);
+  const double angle1 = 45.0;
+  const double angle2 = std::acos(1.0 / std::sqrt(26.0)) * 180.0 / M_PI;
+  EXPECT_NEAR(all.aae_deg, (angle1 + angle2) / 3.0, 1e-9);
+  EXPECT_EQ(opticalFlowErrors(estimate, truth, &none).pixels, 3u);
+
+  ImageU8 excluded(4, 1, 1, 0);
+  excluded(1, 0) = 255;
+  const FlowErrors some = opticalFlowErrors(estimate, truth, &excluded);
+  EXPECT_EQ(some.pixels, 2u);
+  EXPECT_NEAR(some.epe, 0.5, 1e-9);
+  EXPECT_NEAR(some.aae_deg, 22.5, 1e-9);
+}
+
+TEST(Metrics, SceneFlowEndPointError) {
+  ImageF estimate(2, 1, 3, 0.f), truth(2, 1, 3, 0.f);
+  estimate(0, 0, 2) = 0.03f, estimate(0, 0, 1) = 0.04f;  // 5 cm
+  truth(1, 0, 0) = kNan;
+  std::size_t pixels = 0;
+  EXPECT_NEAR(sceneFlowEpe(estimate, truth, nullptr, &pixels), 0.05, 1e-7);
+  EXPECT_EQ(pixels, 1u);
+}
+
+// A textured fronto-parallel plane at 2 m; frame 2 is frame 1 shifted right by `shift_px` pixels.
+void shiftedPair(int shift_px, RgbdFrame& f1, RgbdFrame& f2) {
+  const int w = 40, h = 30;
+  auto texture = [](double x, double y) { return float(0.5 + 0.3 * std::sin(0.7 * x) * std::cos(0.4 * y)); };
+  f1.intensity = ImageF(w, h, 1, 0.f);
+  f2.intensity = ImageF(w, h, 1, 0.f);
+  f1.depth = ImageF(w, h, 1, 2.f);
+  f2.depth = ImageF(w, h, 1, 2.f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      f1.intensity(x, y) = texture(x, y);
+      f2.intensity(x, y) = texture(x - shift_px, y);
+    }
+  f1.depth(0, 0) = 0.f;
+}
+
+TEST(Metrics, ZeroFlowOnIdenticalFramesHasZeroResidual) {
+  RgbdFrame f1, f2;
+  shiftedPair(0, f1, f2);
+  const ResidualRmse r = warpResidualRmse(f1, f2, kCamera, nullptr, nullptr);
+  EXPECT_EQ(r.pixels, std::size_t(40 * 30 - 1));
+  EXPECT_NEAR(r.photometric, 0.0, 1e-7);
+  EXPECT_NEAR(r.geometric, 0.0, 1e-7);
+}
+
+TEST(Metrics, CorrectFlowExplainsAShift) {
+  RgbdFrame f1, f2;
+  shiftedPair(3, f1, f2);
+  const ResidualRmse zero = warpResidualRmse(f1, f2, kCamera, nullptr, nullptr);
+  EXPECT_GT(zero.photometric, 0.05);
+
+  ImageF flow(40, 30, 3, 0.f);
+  for (int y = 0; y < 30; ++y)
+    for (int x = 0; x < 40; ++x) flow(x, y, 0) = float(3.0 * 2.0 / kCamera.fx);  // 3 px at 2 m
+  ImageU8 excluded(40, 30, 1, 0);
+  excluded(10, 10) = 1;
+  const ResidualRmse right = warpResidualRmse(f1, f2, kCamera, &flow, &excluded);
+  EXPECT_LT(right.photometric, 1e-5);
+  EXPECT_LT(right.geometric, 1e-5);
+  // Pixels that land outside frame 2 (the last 3 columns), the excluded one and the one without depth drop out.
+  EXPECT_EQ(right.pixels, std::size_t(37 * 30 - 2));
+
+  // A depth change is a geometric residual: frame 2 seen 0.1 m further away.
+  for (float& z : f2.depth.data) z += 0.1f;
+  EXPECT_NEAR(warpResidualRmse(f1, f2, kCamera, &flow, nullptr).geometric, 0.1, 1e-5);
+}
+
+TEST(Metrics, SegmentationAgreementIsInvariantToIds) {
+  ImageI32 truth(6, 1, 1, 0), estimate(6, 1, 1, 0);
+  const int t[6] = {0, 0, 1, 1, 2, 2};
+  const int e[6] = {5, 5, 0, 0, 9, 9};  // a permutation of the ids
+  for (int x = 0; x < 6; ++x) truth(x, 0) = t[x], estimate(x, 0) = e[x];
+  EXPECT_DOUBLE_EQ(segmentationAgreement(estimate, truth), 1.0);
+  estimate(5, 0) = 5;  // one pixel joins the wrong segment
+  EXPECT_DOUBLE_EQ(segmentationAgreement(estimate, truth), 5.0 / 6.0);
+  estimate(5, 0) = -1;  // invalid pixels do not count
+  EXPECT_DOUBLE_EQ(segmentationAgreement(estimate, truth), 1.0);
+  // One estimated segment covering two parts can match only one of them.
+  for (int x = 0; x < 6; ++x) estimate(x, 0) = 0;
+  EXPECT_DOUBLE_EQ(segmentationAgreement(estimate, truth), 2.0 / 6.0);
+}
+
+TEST(Metrics, MaskAgreement) {
+  ImageU8 a(4, 1, 1, 0), b(4, 1, 1, 0), valid(4, 1, 1, 1);
+  a(0, 0) = 255, b(0, 0) = 1;  // both set (any non-zero)
+  a(1, 0) = 255;               // disagree
+  valid(1, 0) = 0;
+  EXPECT_DOUBLE_EQ(maskAgreement(a, b, nullptr), 0.75);
+  EXPECT_DOUBLE_EQ(maskAgreement(a, b, &valid), 1.0);
+}
+
+}  // namespace
+}  // namespace mc_flow

@@ -1,0 +1,81 @@
+#include <gtest/gtest.h>
+
+#include "mc_flow/core/motion_estimation.h"
+#include "mc_flow/core/pyramid.h"
+#include "test_helpers.h"
+
+using namespace mc_flow;
+
+namespace {
+
+// Coarse-to-fine IRLS with one label covering everything (plain robust dense VO).
+std::vector<Vector6d> estimateSingle(const test::TwoPlaneScene& s, const Config& config, int label_count = 1) {
+  const int levels = pyramidLevelCount(s.frame1.width(), s.frame1.height(), config.coarsest_min_width);
+  const Pyramid p1 = buildPyramid(s.frame1, s.K, levels, config);
+  const Pyramid p2 = buildPyramid(s.frame2, s.K, levels, config);
+  std::vector<Vector6d> twists(std::size_t(label_count), Vector6d::Zero());
+  for (int level = levels - 1; level >= 0; --level) {
+    SoftLabels u(p1[level].points.width, p1[level].points.height, label_count + 1, 0.f);
+    for (int y = 0; y < u.height; ++y)
+      for (int x = 0; x < u.width; ++x) {
+        // Split the image into vertical bands, one per label: all labels see the same motion.
+        const int label = std::min(label_count - 1, x * label_count / u.width);
+        u.at(label, x, y) = 1.f;
+      }
+    estimateMotionsAtLevel(p1[level], p2[level], u, nullptr, twists, config);
+  }
+  return twists;
+}
+
+}  // namespace
+
+TEST(MotionEstimation, RecoversSingleRigidMotionToMillimetreAndTwentiethOfDegree) {
+  Vector6d truth;
+  truth << 0.03, -0.015, 0.02, 0.02, -0.03, 0.015;  // 3 cm / ~2 deg: a large inter-frame motion
+  const Eigen::Matrix4d T = se3Exp(truth);
+  const test::TwoPlaneScene s = test::renderTwoPlaneScene(320, 240, T);
+  Config config;
+  config.motion_iterations_per_level = 10;
+  const std::vector<Vector6d> est = estimateSingle(s, config);
+  const Eigen::Matrix4d E = se3Exp(est[0]);
+  const Eigen::Matrix4d D = E.inverse() * T;
+  const double translation_error = D.topRightCorner<3, 1>().norm();
+  const double rotation_error_deg = Eigen::AngleAxisd(Eigen::Matrix3d(D.topLeftCorner<3, 3>())).angle() * 180.0 / M_PI;
+  EXPECT_LT(translation_error, 0.001) << "estimated twist " << est[0].transpose();
+  EXPECT_LT(rotation_error_deg, 0.05) << "estimated twist " << est[0].transpose();
+}
+
+TEST(MotionEstimation, JointLabelsWithTheSameMotionAgree) {
+  Vector6d truth;
+  truth << -0.02, 0.01, -0.015, -0.01, 0.02, 0.01;
+  const test::TwoPlaneScene s = test::renderTwoPlaneScene(320, 240, se3Exp(truth));
+  Config config;
+  config.motion_iterations_per_level = 10;
+  const std::vector<Vector6d> est = estimateSingle(s, config, 3);
+  for (const Vector6d& xi : est) {
+    const Eigen::Matrix4d D = se3Exp(xi).inverse() * se3Exp(truth);
+    EXPECT_LT((D.topRightCorner<3, 1>().norm()), 0.004) << xi.transpose();
+  }
+}
+
+TEST(MotionEstimation, ZeroMotionStaysZero) {
+  const test::TwoPlaneScene s = test::renderTwoPlaneScene(160, 120, Eigen::Matrix4d::Identity());
+  Config config;
+  const std::vector<Vector6d> est = estimateSingle(s, config);
+  EXPECT_LT(est[0].norm(), 1e-4) << est[0].transpose();
+}
+
+TEST(MotionEstimation, RobustCostDecreasesAtALevel) {
+  Vector6d truth;
+  truth << 0.01, 0.0, 0.005, 0.0, 0.01, 0.0;
+  const test::TwoPlaneScene s = test::renderTwoPlaneScene(160, 120, se3Exp(truth));
+  Config config;
+  const Pyramid p1 = buildPyramid(s.frame1, s.K, 1, config);
+  const Pyramid p2 = buildPyramid(s.frame2, s.K, 1, config);
+  SoftLabels u(160, 120, 2, 0.f);
+  std::fill(u.plane(0), u.plane(0) + u.planeSize(), 1.f);
+  std::vector<Vector6d> twists(1, Vector6d::Zero());
+  const MotionLevelStats st = estimateMotionsAtLevel(p1[0], p2[0], u, nullptr, twists, config);
+  EXPECT_GT(st.iterations, 1);
+  EXPECT_LT(st.cost_after, 0.5 * st.cost_before);
+}
