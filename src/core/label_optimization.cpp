@@ -170,9 +170,14 @@ class CpuLabelOptimizer final : public LabelOptimizer {
     // Diagonal preconditioning (Pock & Chambolle 2011, alpha = 1). Row sums of |K| give sigma, column sums tau.
     // TV projects p onto a disc, which is only the proximal map when both components share one sigma:
     // use the smaller of the two there (a smaller step keeps the convergence condition).
+    // The quadratic prox p / (1 + sigma / (2 lambda)) is folded into one factor per pixel.
     sigma_x_.resize(plane);
     sigma_y_.resize(plane);
+    shrink_x_.resize(plane);
+    shrink_y_.resize(plane);
     tau_.resize(plane);
+    rx_left_.resize(plane);
+    ry_up_.resize(plane);
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
         const std::size_t i = std::size_t(y) * W + x;
@@ -184,69 +189,98 @@ class CpuLabelOptimizer final : public LabelOptimizer {
         }
         sigma_x_[i] = sx;
         sigma_y_[i] = sy;
-        const float column = rx[i] + ry[i] + (x > 0 ? rx[i - 1] : 0.f) + (y > 0 ? ry[i - W] : 0.f);
+        shrink_x_[i] = 1.f / (1.f + sx / (2.f * lambda));
+        shrink_y_[i] = 1.f / (1.f + sy / (2.f * lambda));
+        rx_left_[i] = x > 0 ? rx[i - 1] : 0.f;
+        ry_up_[i] = y > 0 ? ry[i - W] : 0.f;
+        const float column = rx[i] + ry[i] + rx_left_[i] + ry_up_[i];
         tau_[i] = column > 0.f ? 1.f / column : 1e3f;
       }
-    u_bar_ = u.data;
+    // u_bar carries W + 1 padding floats so the forward differences of the last row/column read valid memory
+    // (their weights are 0, so the padding never contributes).
+    u_bar_.assign(u.data.size() + std::size_t(W) + 1, 0.f);
+    std::copy(u.data.begin(), u.data.end(), u_bar_.begin());
+    zero_row_.assign(std::size_t(W) + 1, 0.f);
+    const float inv_lambda = 1.f / lambda;
 
     LabelStats stats;
     for (int it = 0; it < iterations; ++it) {
-      // Dual ascent + prox of sigma Q*.
+      // Dual ascent + prox of sigma Q*; branch-free rows so the compiler vectorises them.
 #pragma omp parallel for schedule(static)
       for (int y = 0; y < H; ++y) {
+        const std::size_t row = std::size_t(y) * W;
+        const float* rxr = rx + row;
+        const float* ryr = ry + row;
+        const float* sxr = sigma_x_.data() + row;
+        const float* syr = sigma_y_.data() + row;
+        const float* kxr = shrink_x_.data() + row;
+        const float* kyr = shrink_y_.data() + row;
         for (int label = 0; label < n; ++label) {
-          const float* ub = u_bar_.data() + label * plane;
-          float* px = dual.p.data() + (2 * label) * plane;
-          float* py = dual.p.data() + (2 * label + 1) * plane;
-          for (int x = 0; x < W; ++x) {
-            const std::size_t i = std::size_t(y) * W + x;
-            const float gx = x + 1 < W ? rx[i] * (ub[i + 1] - ub[i]) : 0.f;
-            const float gy = y + 1 < H ? ry[i] * (ub[i + W] - ub[i]) : 0.f;
-            float qx = px[i] + sigma_x_[i] * gx, qy = py[i] + sigma_y_[i] * gy;
-            if (tv) {
-              const float scale = std::max(1.f, std::sqrt(qx * qx + qy * qy) / lambda);
-              qx /= scale;
-              qy /= scale;
-            } else {
-              qx /= 1.f + sigma_x_[i] / (2.f * lambda);
-              qy /= 1.f + sigma_y_[i] / (2.f * lambda);
+          const float* ub = u_bar_.data() + label * plane + row;
+          float* px = dual.p.data() + (2 * label) * plane + row;
+          float* py = dual.p.data() + (2 * label + 1) * plane + row;
+          if (tv) {
+            for (int x = 0; x < W; ++x) {
+              const float qx = px[x] + sxr[x] * rxr[x] * (ub[x + 1] - ub[x]);
+              const float qy = py[x] + syr[x] * ryr[x] * (ub[x + W] - ub[x]);
+              const float scale = 1.f / std::max(1.f, std::sqrt(qx * qx + qy * qy) * inv_lambda);
+              px[x] = qx * scale;
+              py[x] = qy * scale;
             }
-            px[i] = qx;
-            py[i] = qy;
+          } else {
+            for (int x = 0; x < W; ++x) {
+              px[x] = (px[x] + sxr[x] * rxr[x] * (ub[x + 1] - ub[x])) * kxr[x];
+              py[x] = (py[x] + syr[x] * ryr[x] * (ub[x + W] - ub[x])) * kyr[x];
+            }
           }
         }
       }
-      // Primal descent + projection onto the simplex, then extrapolation (theta = 1).
+      // Primal descent, projection onto the simplex per pixel, extrapolation (theta = 1).
       float max_change = 0.f;
-#pragma omp parallel for schedule(static) reduction(max : max_change)
-      for (int y = 0; y < H; ++y) {
-        float v[128];
-        for (int x = 0; x < W; ++x) {
-          const std::size_t i = std::size_t(y) * W + x;
-          if (problem.outlier_only.data[i]) {
-            for (int label = 0; label < n; ++label) {
-              const float target = label == n - 1 ? 1.f : 0.f;
-              max_change = std::max(max_change, std::fabs(u.data[label * plane + i] - target));
-              u.data[label * plane + i] = target;
-              u_bar_[label * plane + i] = target;
+#pragma omp parallel reduction(max : max_change)
+      {
+        std::vector<float> candidate(static_cast<std::size_t>(n) * W), simplex(static_cast<std::size_t>(n));
+#pragma omp for schedule(static)
+        for (int y = 0; y < H; ++y) {
+          const std::size_t row = std::size_t(y) * W;
+          const float* rxr = rx + row;
+          const float* ryr = ry + row;
+          const float* rlr = rx_left_.data() + row;
+          const float* rur = ry_up_.data() + row;
+          const float* taur = tau_.data() + row;
+          for (int label = 0; label < n; ++label) {
+            const float* px = dual.p.data() + (2 * label) * plane + row;
+            const float* py = dual.p.data() + (2 * label + 1) * plane + row;
+            const float* py_up = y > 0 ? py - W : zero_row_.data();
+            const float* ur = u.data.data() + label * plane + row;
+            const float* dr = problem.data_cost.data() + label * plane + row;
+            float* cr = candidate.data() + std::size_t(label) * W;
+            // K^T p = -(weighted backward divergence of p); x = 0 has no left neighbour (rx_left = 0).
+            cr[0] = ur[0] - taur[0] * (-(rxr[0] * px[0] + ryr[0] * py[0] - rur[0] * py_up[0]) + dr[0]);
+            for (int x = 1; x < W; ++x) {
+              const float divergence = rxr[x] * px[x] + ryr[x] * py[x] - rlr[x] * px[x - 1] - rur[x] * py_up[x];
+              cr[x] = ur[x] - taur[x] * (-divergence + dr[x]);
             }
-            continue;
+          }
+          for (int x = 0; x < W; ++x) {
+            if (problem.outlier_only.data[row + x]) {
+              for (int label = 0; label < n; ++label) candidate[std::size_t(label) * W + x] = label == n - 1 ? 1.f : 0.f;
+              continue;
+            }
+            for (int label = 0; label < n; ++label) simplex[std::size_t(label)] = candidate[std::size_t(label) * W + x];
+            projectOntoSimplex(simplex.data(), n);
+            for (int label = 0; label < n; ++label) candidate[std::size_t(label) * W + x] = simplex[std::size_t(label)];
           }
           for (int label = 0; label < n; ++label) {
-            const float* px = dual.p.data() + (2 * label) * plane;
-            const float* py = dual.p.data() + (2 * label + 1) * plane;
-            // K^T p = -(weighted backward divergence of p).
-            float divergence = rx[i] * px[i] + ry[i] * py[i];
-            if (x > 0) divergence -= rx[i - 1] * px[i - 1];
-            if (y > 0) divergence -= ry[i - W] * py[i - W];
-            v[label] = u.data[label * plane + i] - tau_[i] * (-divergence + problem.data_cost[label * plane + i]);
-          }
-          projectOntoSimplex(v, n);
-          for (int label = 0; label < n; ++label) {
-            const float old = u.data[label * plane + i];
-            max_change = std::max(max_change, std::fabs(v[label] - old));
-            u.data[label * plane + i] = v[label];
-            u_bar_[label * plane + i] = 2.f * v[label] - old;
+            float* ur = u.data.data() + label * plane + row;
+            float* ubr = u_bar_.data() + label * plane + row;
+            const float* cr = candidate.data() + std::size_t(label) * W;
+            for (int x = 0; x < W; ++x) {
+              const float old = ur[x];
+              max_change = std::max(max_change, std::fabs(cr[x] - old));
+              ur[x] = cr[x];
+              ubr[x] = 2.f * cr[x] - old;
+            }
           }
         }
       }
@@ -259,7 +293,7 @@ class CpuLabelOptimizer final : public LabelOptimizer {
   }
 
  private:
-  std::vector<float> sigma_x_, sigma_y_, tau_, u_bar_;
+  std::vector<float> sigma_x_, sigma_y_, shrink_x_, shrink_y_, tau_, rx_left_, ry_up_, u_bar_, zero_row_;
 };
 
 }  // namespace

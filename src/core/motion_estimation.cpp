@@ -7,6 +7,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "mc_flow/core/sampling.h"
@@ -25,15 +26,30 @@ using Vector6f = Eigen::Matrix<float, 6, 1>;
 struct Accumulator {
   Eigen::MatrixXd H;
   Eigen::VectorXd g;
+  Eigen::VectorXd label_cost;    // robust cost shared out to the labels by their interpolation weights
+  Eigen::VectorXd label_pixels;  // weighted pixel count per label
   double cost = 0;
   int pixels = 0;
-  void reset(int dims) {
-    H.setZero(dims, dims);
-    g.setZero(dims);
+  void reset(int labels) {
+    H.setZero(6 * labels, 6 * labels);
+    g.setZero(6 * labels);
+    label_cost.setZero(labels);
+    label_pixels.setZero(labels);
     cost = 0;
     pixels = 0;
   }
 };
+
+// A pixel warped out of view (or behind the camera) costs as much as a residual of 10 Cauchy scales in
+// both kinds: otherwise a label could lower its cost by pushing its pixels out of the image.
+constexpr double kOutOfViewResidualScales = 10.0;
+// Fewer (weighted) pixels than this at a level leave a label's twist unchanged there: too few to fix 6 DoF.
+constexpr double kMinLabelPixels = 12.0;
+// A step is undone only when it raised its label's cost by more than this fraction: rounding and the
+// first-order twist update make tiny rises near the optimum that are not divergence.
+constexpr double kRejectRelativeIncrease = 0.01;
+constexpr double kMaxStepTranslation = 0.1;  // [m]
+constexpr double kMaxStepRotation = 0.1;     // [rad]
 
 // Jacobian of the transformed point P2 = exp(xi_bar) P with respect to a left increment of xi_bar
 // (first order, rotation part linearised at P2): dP2 = dv + dw x P2.
@@ -55,7 +71,6 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
   const int W = frame1.points.width, H = frame1.points.height;
   const int motion_labels = labels.count - 1;
   if (motion_labels <= 0 || int(twists.size()) != motion_labels) return stats;
-  const int dims = 6 * motion_labels;
   const std::size_t plane = std::size_t(W) * H;
   const Intrinsics& K = frame2.intrinsics;
   const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
@@ -67,11 +82,19 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
   threads = omp_get_max_threads();
 #endif
   std::vector<Accumulator> accumulators(static_cast<std::size_t>(threads));
+  const double out_of_view_cost =
+      (1.0 + alpha) * std::log1p(kOutOfViewResidualScales * kOutOfViewResidualScales);
+
+  // Per-label Levenberg-Marquardt: a label whose cost rose after its last update is reverted and damped
+  // harder; labels are nearly decoupled (most pixels have one label), so each gets its own trust region.
+  std::vector<double> damping(static_cast<std::size_t>(motion_labels), config.motion_damping);
+  std::vector<double> accepted_cost(static_cast<std::size_t>(motion_labels), std::numeric_limits<double>::infinity());
+  std::vector<Vector6d> accepted_twist = twists;
 
   for (int iteration = 0; iteration < config.motion_iterations_per_level; ++iteration) {
     std::vector<Eigen::Matrix<float, 3, 4>> transforms(static_cast<std::size_t>(motion_labels));
     for (int i = 0; i < motion_labels; ++i) transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
-    for (auto& a : accumulators) a.reset(dims);
+    for (auto& a : accumulators) a.reset(motion_labels);
 
 #pragma omp parallel
     {
@@ -115,11 +138,15 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
             for (int k = 0; k < n_active; ++k) xi_bar += double(weights[std::size_t(k)]) * twists[std::size_t(active[std::size_t(k)])];
             P2 = se3Exp(xi_bar).topRows<3>().cast<float>() * P.homogeneous();
           }
-          if (P2.z() < 1e-3f) continue;
-          const float inv_z = 1.f / P2.z();
+          const float inv_z = 1.f / std::max(P2.z(), 1e-3f);
           const float u = fx * P2.x() * inv_z + cx, v = fy * P2.y() * inv_z + cy;
           float I2, gIx, gIy;
-          if (!sampleBilinear(frame2.intensity, u, v, 0, I2)) continue;
+          if (P2.z() < 1e-3f || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
+            for (int a = 0; a < n_active; ++a)
+              acc.label_cost(active[std::size_t(a)]) += mass * weights[std::size_t(a)] * out_of_view_cost;
+            acc.cost += mass * out_of_view_cost;
+            continue;
+          }
           sampleBilinear(frame2.intensity_grad, u, v, 0, gIx);
           sampleBilinear(frame2.intensity_grad, u, v, 1, gIy);
           // d(pixel)/dP2
@@ -154,6 +181,8 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
             const int ia = active[std::size_t(a)];
             const double wa = weights[std::size_t(a)];
             acc.g.segment<6>(6 * ia) += wa * gd;
+            acc.label_cost(ia) += wa * mass * cost;
+            acc.label_pixels(ia) += wa * mass;
             for (int b = 0; b < n_active; ++b) {
               const int ib = active[std::size_t(b)];
               acc.H.block<6, 6>(6 * ia, 6 * ib) += (wa * weights[std::size_t(b)]) * Hd;
@@ -168,6 +197,8 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
     for (std::size_t t = 1; t < accumulators.size(); ++t) {
       total.H += accumulators[t].H;
       total.g += accumulators[t].g;
+      total.label_cost += accumulators[t].label_cost;
+      total.label_pixels += accumulators[t].label_pixels;
       total.cost += accumulators[t].cost;
       total.pixels += accumulators[t].pixels;
     }
@@ -177,14 +208,50 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
     stats.iterations = iteration + 1;
     if (total.pixels < 6) break;
 
-    // Levenberg damping on the diagonal; labels without pixels get an identity block (zero update).
-    const double max_diag = total.H.diagonal().maxCoeff();
-    for (int d = 0; d < dims; ++d) total.H(d, d) += config.motion_damping * total.H(d, d) + 1e-9 * std::max(max_diag, 1.0);
+    // Accept or reject each label's last step; rejected and unsupported labels get a zero update now.
+    std::vector<bool> frozen(static_cast<std::size_t>(motion_labels), false);
+    for (int i = 0; i < motion_labels; ++i) {
+      const std::size_t k = std::size_t(i);
+      if (total.label_pixels(i) < kMinLabelPixels) {
+        frozen[k] = true;
+      } else if (total.label_cost(i) > accepted_cost[k] * (1.0 + kRejectRelativeIncrease)) {
+        twists[k] = accepted_twist[k];
+        damping[k] = std::min(damping[k] * 10.0, 1e6);
+        frozen[k] = true;
+      } else {
+        accepted_cost[k] = total.label_cost(i);
+        accepted_twist[k] = twists[k];
+        damping[k] = std::max(damping[k] / 3.0, config.motion_damping);
+      }
+    }
+    for (int i = 0; i < motion_labels; ++i) {
+      if (frozen[std::size_t(i)]) {
+        total.H.middleRows(6 * i, 6).setZero();
+        total.H.middleCols(6 * i, 6).setZero();
+        total.H.block<6, 6>(6 * i, 6 * i).setIdentity();
+        total.g.segment<6>(6 * i).setZero();
+        continue;
+      }
+      const double block_max = total.H.block<6, 6>(6 * i, 6 * i).diagonal().maxCoeff();
+      for (int d = 6 * i; d < 6 * i + 6; ++d)
+        total.H(d, d) += damping[std::size_t(i)] * total.H(d, d) + 1e-9 * std::max(block_max, 1e-12);
+    }
     const Eigen::VectorXd delta = total.H.ldlt().solve(-total.g);
     if (!delta.allFinite()) break;
-    for (int i = 0; i < motion_labels; ++i) twists[std::size_t(i)] += delta.segment<6>(6 * i);
-    if (delta.cwiseAbs().maxCoeff() < config.motion_min_update) break;
+    double largest = 0;
+    for (int i = 0; i < motion_labels; ++i) {
+      Vector6d d = delta.segment<6>(6 * i);
+      // Trust region in metres / radians: one IRLS step never moves a label by more than this.
+      const double scale = std::max({1.0, d.head<3>().norm() / kMaxStepTranslation, d.tail<3>().norm() / kMaxStepRotation});
+      d /= scale;
+      twists[std::size_t(i)] += d;
+      largest = std::max(largest, d.cwiseAbs().maxCoeff());
+    }
+    if (largest < config.motion_min_update) break;
   }
+  // A label whose final step was never checked keeps it only if it did not blow up.
+  for (int i = 0; i < motion_labels; ++i)
+    if (!twists[std::size_t(i)].allFinite()) twists[std::size_t(i)] = accepted_twist[std::size_t(i)];
   return stats;
 }
 

@@ -224,11 +224,11 @@ VariantSpec variantSpec(int variant) {
   if (variant == 1) {
     // Closer objects that overlap each other (object-object occlusions), faster rotations.
     spec.boxes.push_back(box("box", 1, {0.42, 0.12, 1.6}, {0.16, 0.14, 0.1}, {15, -30, 10}, {-0.03, -0.01, 0.02},
-                             {2.0, -3.0, 1.2}, 36));
+                             {2.0, -3.0, 1.2}, 24));
     spec.boxes.push_back(box("panel", 2, {0.1, 0.02, 2.45}, {0.34, 0.26, 0.03}, {-5, 15, 4}, {0.02, 0.015, -0.025},
-                             {1.0, 2.0, -3.0}, 44));
+                             {1.0, 2.0, -3.0}, 30));
     spec.boxes.push_back(box("cube", 3, {-0.72, 0.3, 2.1}, {0.11, 0.11, 0.11}, {30, 40, 0}, {0.015, -0.02, -0.01},
-                             {-2.5, 1.5, 2.5}, 32));
+                             {-2.5, 1.5, 2.5}, 22));
     arm.upper_id = 4;
     arm.fore_id = 5;
     arm.centre = Vector3d(-0.35, -0.42, 1.9);
@@ -237,12 +237,12 @@ VariantSpec variantSpec(int variant) {
     arm.velocity_m = Vector3d(-0.012, 0.01, 0.015);
     arm.rotation_rate_deg = Vector3d(-1.0, 1.5, -1.5);
     arm.elbow_rate_deg = Vector3d(-0.5, 0.8, 3.5);
-    arm.period = 42;
+    arm.period = 28;
   } else {
     spec.boxes.push_back(box("box", 1, {-0.6, 0.1, 2.0}, {0.2, 0.16, 0.12}, {-12, 28, 6}, {0.025, -0.012, 0.018},
-                             {1.5, 3.0, -1.2}, 44));
+                             {1.5, 3.0, -1.2}, 28));
     spec.boxes.push_back(box("slab", 2, {0.62, 0.28, 2.4}, {0.26, 0.2, 0.035}, {8, -20, -10}, {-0.03, 0.008, -0.02},
-                             {-2.0, 1.2, 2.5}, 38));
+                             {-2.0, 1.2, 2.5}, 24));
     arm.upper_id = 3;
     arm.fore_id = 4;
     arm.centre = Vector3d(0.05, -0.45, 1.75);
@@ -250,12 +250,12 @@ VariantSpec variantSpec(int variant) {
     arm.velocity_m = Vector3d(0.01, 0.015, -0.01);
     arm.rotation_rate_deg = Vector3d(1.0, -1.5, 2.0);
     arm.elbow_rate_deg = Vector3d(0.5, 1.0, -3.5);
-    arm.period = 40;
+    arm.period = 26;
     if (variant == 2) {
       // The camera moves: the whole room moves rigidly in the camera frame (rotation about the camera centre).
       spec.room.velocity_m = Vector3d(0.015, -0.006, 0.02);
       spec.room.rotation_rate_deg = Vector3d(0.4, -1.0, 0.3);
-      spec.room.period = 46;
+      spec.room.period = 32;
     }
   }
   return spec;
