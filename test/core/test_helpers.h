@@ -66,5 +66,55 @@ inline TwoPlaneScene renderTwoPlaneScene(int width, int height, const Eigen::Mat
   return s;
 }
 
+/// A fronto-parallel textured wall at 2.5 m whose left half (X < split_x in frame-1 coordinates) moves by T
+/// while the right half stays: a motion boundary that no depth cue reveals, so K-means clusters straddle
+/// it and only the label step can put the boundary in the right place. Also returns the true flow.
+struct SplitPlaneScene {
+  Intrinsics K;
+  RgbdFrame frame1, frame2;
+  ImageF gt_optical_flow;  // 2 channels
+};
+
+inline SplitPlaneScene renderSplitPlaneScene(int width, int height, const Eigen::Matrix4d& T, double split_x) {
+  SplitPlaneScene s;
+  const double f = 263.7 * width / 320.0;
+  s.K = {f, f, (width - 1) / 2.0, (height - 1) / 2.0};
+  const double wall = 2.5;
+  const Eigen::Matrix4d Tinv = T.inverse();
+  s.frame1.intensity = ImageF(width, height, 1, 0.f);
+  s.frame1.depth = ImageF(width, height, 1, 0.f);
+  s.frame2 = s.frame1;
+  s.gt_optical_flow = ImageF(width, height, 2, 0.f);
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      const Eigen::Vector3d ray((x - s.K.cx) / s.K.fx, (y - s.K.cy) / s.K.fy, 1.0);
+      // frame 1
+      const Eigen::Vector3d P = wall * ray;
+      s.frame1.intensity(x, y) = textureAt(P);
+      s.frame1.depth(x, y) = float(wall);
+      const Eigen::Vector3d P2 = P.x() < split_x ? Eigen::Vector3d((T * P.homogeneous()).head<3>()) : P;
+      s.gt_optical_flow(x, y, 0) = float(s.K.fx * P2.x() / P2.z() + s.K.cx - x);
+      s.gt_optical_flow(x, y, 1) = float(s.K.fy * P2.y() / P2.z() + s.K.cy - y);
+      // frame 2: the static half, or the moved half (ray taken back into frame-1 coordinates)
+      double best = 1e9;
+      Eigen::Vector3d hit_frame1;
+      if (P.x() >= split_x) {
+        best = wall;
+        hit_frame1 = P;
+      }
+      const Eigen::Vector3d o = Tinv.topRightCorner<3, 1>(), dir = Tinv.topLeftCorner<3, 3>() * ray;
+      const double t = (wall - o.z()) / dir.z();
+      const Eigen::Vector3d Q = o + t * dir;
+      if (t > 0.1 && Q.x() < split_x && t < best) {
+        best = t;
+        hit_frame1 = Q;
+      }
+      if (best > 100) continue;
+      s.frame2.intensity(x, y) = textureAt(hit_frame1);
+      s.frame2.depth(x, y) = float(best);
+    }
+  return s;
+}
+
 }  // namespace test
 }  // namespace mc_flow

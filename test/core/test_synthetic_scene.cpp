@@ -32,7 +32,8 @@ double bilinear(const ImageF& img, double x, double y) {
   if (!(x >= 0.0 && y >= 0.0 && x <= img.width - 1 && y <= img.height - 1)) return NAN;
   const int x0 = std::min(int(x), img.width - 2), y0 = std::min(int(y), img.height - 2);
   const double a = x - x0, b = y - y0;
-  return (1 - b) * ((1 - a) * img(x0, y0) + a * img(x0 + 1, y0)) + b * ((1 - a) * img(x0, y0 + 1) + a * img(x0 + 1, y0 + 1));
+  return (1 - b) * ((1 - a) * img(x0, y0) + a * img(x0 + 1, y0)) +
+         b * ((1 - a) * img(x0, y0 + 1) + a * img(x0 + 1, y0 + 1));
 }
 
 /// True when the four frame-2 depths around (x, y) are valid and within `tolerance` of z (one surface).
@@ -71,7 +72,9 @@ double percentile(std::vector<double> v, double q) {
   return v[k];
 }
 
-double rotationAngle(const Eigen::Matrix4d& T) { return Eigen::AngleAxisd(Eigen::Matrix3d(T.topLeftCorner<3, 3>())).angle(); }
+double rotationAngle(const Eigen::Matrix4d& T) {
+  return Eigen::AngleAxisd(Eigen::Matrix3d(T.topLeftCorner<3, 3>())).angle();
+}
 
 class SyntheticVariants : public ::testing::TestWithParam<int> {};
 
@@ -277,10 +280,11 @@ struct WarpCheck {
            std::max<std::size_t>(1, intensity_error.size());
   }
   void print(const std::string& name) const {
-    std::printf("%s: %d of %d valid pixels checked, %d static; moving: |dI| mean %.4f p50 %.4f p95 %.4f; "
-                "|dZ|/Z p50 %.2e p99 %.2e; occluded %d\n",
-                name.c_str(), checked, valid, still, meanIntensityError(), percentile(intensity_error, 0.5),
-                percentile(intensity_error, 0.95), percentile(depth_error, 0.5), percentile(depth_error, 0.99), occluded);
+    std::printf(
+        "%s: %d of %d valid pixels checked, %d static; moving: |dI| mean %.4f p50 %.4f p95 %.4f; "
+        "|dZ|/Z p50 %.2e p99 %.2e; occluded %d\n",
+        name.c_str(), checked, valid, still, meanIntensityError(), percentile(intensity_error, 0.5),
+        percentile(intensity_error, 0.95), percentile(depth_error, 0.5), percentile(depth_error, 0.99), occluded);
   }
 };
 
@@ -402,7 +406,8 @@ TEST_P(SyntheticVariants, RigidPartsMoveExactlyByTheirTwist) {
       const Eigen::Vector3d sf(p.gt_scene_flow(x, y, 0), p.gt_scene_flow(x, y, 1), p.gt_scene_flow(x, y, 2));
       const Eigen::Vector2d of(p.gt_optical_flow(x, y, 0), p.gt_optical_flow(x, y, 1));
       // Float depth (relative error 6e-8) and float storage bound the error far below 1 um and 1e-3 px.
-      const bool match = (sf - (P2 - P)).norm() < 1e-6 && (of - (project(p.intrinsics, P2) - Eigen::Vector2d(x, y))).norm() < 1e-3;
+      const bool match =
+          (sf - (P2 - P)).norm() < 1e-6 && (of - (project(p.intrinsics, P2) - Eigen::Vector2d(x, y))).norm() < 1e-3;
       ++count[id];
       exact[id] += match;
       if (id != upper_id && id != fore_id) ASSERT_TRUE(match) << "part " << id << " at " << x << "," << y;
@@ -447,7 +452,8 @@ TEST_P(SyntheticVariants, ElbowFlowBlendsTheTwoLinks) {
         // Along the silhouette the interpolation mixes arm and wall: compare inside the surface only.
         if (!neighboursOnSurface(p.frame2.depth, gt.x(), gt.y(), z2, 0.05)) continue;
         // The deformed elbow of frame 2 is where the ground truth says it is.
-        blend_intensity_error.push_back(std::abs(bilinear(p.frame2.intensity, gt.x(), gt.y()) - p.frame1.intensity(x, y)));
+        blend_intensity_error.push_back(
+            std::abs(bilinear(p.frame2.intensity, gt.x(), gt.y()) - p.frame1.intensity(x, y)));
         blend_depth_error.push_back(std::abs(bilinear(p.frame2.depth, gt.x(), gt.y()) - z2));
       }
       // Labels follow the larger weight: upper-arm pixels are nearer the upper arm's flow.
@@ -462,8 +468,9 @@ TEST_P(SyntheticVariants, ElbowFlowBlendsTheTwoLinks) {
   ASSERT_GT(blend_visible, 0.8 * between);
   std::printf("blend zone: %zu of %d visible pixels inside the surface\n", blend_intensity_error.size(), blend_visible);
   EXPECT_GT(blend_intensity_error.size(), 0.7 * blend_visible);
-  std::printf("blend zone: |dI| p50 %.4f p90 %.4f; |dZ| p50 %.2e m p90 %.2e m\n", percentile(blend_intensity_error, 0.5),
-              percentile(blend_intensity_error, 0.9), percentile(blend_depth_error, 0.5), percentile(blend_depth_error, 0.9));
+  std::printf("blend zone: |dI| p50 %.4f p90 %.4f; |dZ| p50 %.2e m p90 %.2e m\n",
+              percentile(blend_intensity_error, 0.5), percentile(blend_intensity_error, 0.9),
+              percentile(blend_depth_error, 0.5), percentile(blend_depth_error, 0.9));
   EXPECT_LT(percentile(blend_intensity_error, 0.5), 0.01);
   EXPECT_LT(percentile(blend_intensity_error, 0.9), 0.05);
   EXPECT_LT(percentile(blend_depth_error, 0.9), 0.002);
@@ -474,7 +481,8 @@ TEST_P(SyntheticVariants, PartsHaveRealisticMotions) {
   std::map<int, std::vector<double>> displacement;
   for (std::size_t i = 0; i < p.gt_parts.pixelCount(); ++i) {
     const float* s = &p.gt_scene_flow.data[3 * i];
-    if (std::isfinite(s[0])) displacement[p.gt_parts.data[i]].push_back(std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]));
+    if (std::isfinite(s[0]))
+      displacement[p.gt_parts.data[i]].push_back(std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]));
   }
   std::set<int> ids;
   for (const SyntheticPart& part : p.parts) {
@@ -549,7 +557,8 @@ TEST(SyntheticSequence, ObjectsStayInView) {
     std::vector<int> object_pixels;
     for (const RgbdFrame& f : frames) {
       int n = 0;
-      for (std::size_t i = 0; i < room.size(); ++i) n += isValidDepth(f.depth.data[i]) && f.depth.data[i] < room[i] - 0.05f;
+      for (std::size_t i = 0; i < room.size(); ++i)
+        n += isValidDepth(f.depth.data[i]) && f.depth.data[i] < room[i] - 0.05f;
       object_pixels.push_back(n);
     }
     for (std::size_t k = 0; k < object_pixels.size(); ++k)
