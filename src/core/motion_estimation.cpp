@@ -140,7 +140,7 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
           }
           const float inv_z = 1.f / std::max(P2.z(), 1e-3f);
           const float u = fx * P2.x() * inv_z + cx, v = fy * P2.y() * inv_z + cy;
-          float I2, gIx, gIy;
+          float I2, gIx = 0.f, gIy = 0.f;
           if (P2.z() < 1e-3f || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
             for (int a = 0; a < n_active; ++a)
               acc.label_cost(active[std::size_t(a)]) += mass * weights[std::size_t(a)] * out_of_view_cost;
@@ -164,7 +164,7 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
 
           float Z2;
           if (sampleDepthBilinear(frame2.depth, u, v, Z2)) {
-            float gZx, gZy;
+            float gZx = 0.f, gZy = 0.f;
             sampleBilinear(frame2.depth_grad, u, v, 0, gZx);
             sampleBilinear(frame2.depth_grad, u, v, 1, gZy);
             const float rZ = P2.z() - Z2;

@@ -1,0 +1,59 @@
+// Internal helpers of the CUDA backend: error checks that throw, and a device buffer that only grows.
+// Included by cuda/*.cu only (needs the CUDA runtime headers).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstddef>
+#include <string>
+
+#include "mc_flow/core/error.h"
+
+namespace mc_flow {
+namespace cuda_detail {
+
+/// @brief Throws BackendError naming the call, the place and the CUDA error when `status` is not cudaSuccess.
+inline void check(cudaError_t status, const char* what, const char* file, int line) {
+  if (status == cudaSuccess) return;
+  throw BackendError(std::string("CUDA error in ") + what + " at " + file + ":" + std::to_string(line) + ": " +
+                     cudaGetErrorName(status) + " (" + std::to_string(int(status)) + "): " +
+                     cudaGetErrorString(status));
+}
+
+/// @brief Device memory of T that is reallocated only when a larger size is requested.
+template <typename T>
+class DeviceBuffer {
+ public:
+  DeviceBuffer() = default;
+  DeviceBuffer(const DeviceBuffer&) = delete;
+  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
+  ~DeviceBuffer() {
+    if (data_) cudaFree(data_);  // no throwing from a destructor; a failure here leaves nothing to recover
+  }
+
+  /// @brief Makes room for at least `count` elements; old contents are lost when it grows.
+  void reserve(std::size_t count) {
+    if (count <= capacity_) return;
+    if (data_) check(cudaFree(data_), "cudaFree", __FILE__, __LINE__);
+    data_ = nullptr;
+    capacity_ = 0;
+    check(cudaMalloc(reinterpret_cast<void**>(&data_), count * sizeof(T)), "cudaMalloc", __FILE__, __LINE__);
+    capacity_ = count;
+  }
+  T* get() { return data_; }
+  const T* get() const { return data_; }
+  std::size_t capacity() const { return capacity_; }
+
+ private:
+  T* data_ = nullptr;
+  std::size_t capacity_ = 0;
+};
+
+}  // namespace cuda_detail
+}  // namespace mc_flow
+
+/// Checks a CUDA runtime call; throws mc_flow::BackendError with the CUDA error string.
+#define MCFLOW_CUDA_CHECK(call) ::mc_flow::cuda_detail::check((call), #call, __FILE__, __LINE__)
+/// Checks the launch of the kernel just enqueued (configuration errors, missing kernel image).
+#define MCFLOW_CUDA_CHECK_LAUNCH(kernel_name) \
+  ::mc_flow::cuda_detail::check(cudaGetLastError(), "launch of " kernel_name, __FILE__, __LINE__)

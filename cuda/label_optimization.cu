@@ -1,0 +1,509 @@
+// Label step on the GPU: the same diagonally preconditioned primal-dual iteration as
+// src/core/label_optimization.cpp (the reference), one kernel per half-step.
+//
+// Arithmetic: every float operation of the iteration uses the explicitly rounded intrinsics
+// (__fadd_rn, __fmul_rn, ...), which nvcc never fuses into FMAs, in the order the CPU code evaluates
+// them (including its precomputed factors sigma * r, 1 / (1 + sigma / (2 lambda)) and 1 / lambda, and its
+// simplex projection in double); sqrt and division are IEEE-rounded as on the CPU. The iteration is
+// therefore the CPU's operation for operation; the tests still allow a stated tolerance, for the day the
+// two orders drift apart.
+//
+// Convergence: the CPU tests max |u_new - u_old| after every iteration; here the test needs a device
+// reduction and a host sync, so it runs every kConvergenceCheckInterval iterations and at the last one.
+// With a tolerance the GPU may therefore run up to kConvergenceCheckInterval - 1 iterations more than the
+// CPU; with tolerance <= 0 both run exactly `iterations` iterations.
+#include <cuda_runtime.h>
+
+#include <cub/device/device_reduce.cuh>
+
+#include <algorithm>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "cuda_check.h"
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/label_optimization.h"
+
+namespace mc_flow {
+
+namespace {
+
+using cuda_detail::DeviceBuffer;
+
+constexpr int kMaxLabels = 128;                 // the CPU's projectOntoSimplex limit
+constexpr int kConvergenceCheckInterval = 10;   // iterations between two max-change reductions
+constexpr int kBlockX = 32, kBlockY = 8;        // a warp spans 32 consecutive pixels of a row
+
+// Rounded float operations that the compiler may not contract into FMAs (keeps the CPU's rounding).
+__device__ __forceinline__ float add(float a, float b) { return __fadd_rn(a, b); }
+__device__ __forceinline__ float sub(float a, float b) { return __fsub_rn(a, b); }
+__device__ __forceinline__ float mul(float a, float b) { return __fmul_rn(a, b); }
+__device__ __forceinline__ float divide(float a, float b) { return __fdiv_rn(a, b); }
+
+// Diagonal preconditioners (Pock & Chambolle 2011, alpha = 1) as the CPU computes them, stored in the form
+// the iteration uses: sigma * r per direction (the CPU multiplies sigma by r first), the quadratic prox
+// factor 1 / (1 + sigma / (2 lambda)), and tau.
+__global__ void computeStepSizes(const float* __restrict__ rx, const float* __restrict__ ry, int width, int height,
+                                 bool tv, float lambda, float* __restrict__ sigma_rx, float* __restrict__ sigma_ry,
+                                 float* __restrict__ shrink_x, float* __restrict__ shrink_y, float* __restrict__ tau) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x;
+  const int y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= width || y >= height) return;
+  const std::size_t i = std::size_t(y) * width + x;
+  float sx = rx[i] > 0.f ? divide(1.f, mul(2.f, rx[i])) : 0.f;
+  float sy = ry[i] > 0.f ? divide(1.f, mul(2.f, ry[i])) : 0.f;
+  if (tv) {
+    const float m = fmaxf(rx[i], ry[i]);
+    sx = sy = m > 0.f ? divide(1.f, mul(2.f, m)) : 0.f;
+  }
+  sigma_rx[i] = mul(sx, rx[i]);
+  sigma_ry[i] = mul(sy, ry[i]);
+  const float two_lambda = mul(2.f, lambda);
+  shrink_x[i] = divide(1.f, add(1.f, divide(sx, two_lambda)));
+  shrink_y[i] = divide(1.f, add(1.f, divide(sy, two_lambda)));
+  float column = add(rx[i], ry[i]);
+  column = add(column, x > 0 ? rx[i - 1] : 0.f);
+  column = add(column, y > 0 ? ry[i - width] : 0.f);
+  tau[i] = column > 0.f ? divide(1.f, column) : 1e3f;
+}
+
+// Dual ascent + prox of sigma Q*; one thread per (pixel, label), label = blockIdx.z.
+// At the last column/row r = 0, so the CPU adds an exact zero there; here the difference is not read.
+__global__ void dualStep(const float* __restrict__ u_bar, float* __restrict__ p, const float* __restrict__ sigma_rx,
+                         const float* __restrict__ sigma_ry, const float* __restrict__ shrink_x,
+                         const float* __restrict__ shrink_y, int width, int height, bool tv, float inv_lambda) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x;
+  const int y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= width || y >= height) return;
+  const int label = blockIdx.z;
+  const std::size_t plane = std::size_t(width) * height;
+  const std::size_t i = std::size_t(y) * width + x;
+  const float* ub = u_bar + label * plane;
+  float* px = p + (2 * std::size_t(label)) * plane;
+  float* py = px + plane;
+  const float step_x = x + 1 < width ? mul(sigma_rx[i], sub(ub[i + 1], ub[i])) : 0.f;
+  const float step_y = y + 1 < height ? mul(sigma_ry[i], sub(ub[i + width], ub[i])) : 0.f;
+  const float qx = add(px[i], step_x);
+  const float qy = add(py[i], step_y);
+  if (tv) {
+    const float scale = divide(1.f, fmaxf(1.f, mul(__fsqrt_rn(add(mul(qx, qx), mul(qy, qy))), inv_lambda)));
+    px[i] = mul(qx, scale);
+    py[i] = mul(qy, scale);
+  } else {
+    px[i] = mul(qx, shrink_x[i]);
+    py[i] = mul(qy, shrink_y[i]);
+  }
+}
+
+// Michelot's active-set projection onto the simplex in double, in the CPU's order (projectOntoSimplex).
+// `v` is this thread's column of the block's shared scratch: element j at v[j * stride].
+__device__ void projectOntoSimplexDevice(float* v, int n, int stride) {
+  double sum = 0;
+  for (int j = 0; j < n; ++j) sum = __dadd_rn(sum, double(v[j * stride]));
+  double theta = __ddiv_rn(__dsub_rn(sum, 1.0), double(n));
+  for (int pass = 0; pass < n; ++pass) {
+    double active_sum = 0;
+    int active = 0;
+    for (int j = 0; j < n; ++j) {
+      const float value = v[j * stride];
+      if (double(value) > theta) {
+        active_sum = __dadd_rn(active_sum, double(value));
+        ++active;
+      }
+    }
+    const double next = __ddiv_rn(__dsub_rn(active_sum, 1.0), double(active));
+    if (next <= theta) break;
+    theta = next;
+  }
+  const float t = float(theta);
+  for (int j = 0; j < n; ++j) v[j * stride] = fmaxf(sub(v[j * stride], t), 0.f);
+}
+
+// Primal descent + simplex projection + extrapolation; one thread per pixel, its n candidate values in shared
+// memory (label-major, so a warp touches 32 consecutive banks; per-thread local arrays overflowed L1 at
+// 640x480 and ran several times slower). Outlier-only pixels take the outlier label, and are extrapolated
+// like every other pixel, as on the CPU.
+// `change` (one float per pixel) receives max_i |u_new - u_old| when record_change is set.
+__global__ void primalStep(float* __restrict__ u, float* __restrict__ u_bar, const float* __restrict__ p,
+                           const float* __restrict__ data_cost, const std::uint8_t* __restrict__ outlier_only,
+                           const float* __restrict__ rx, const float* __restrict__ ry, const float* __restrict__ tau,
+                           int width, int height, int count, bool record_change, float* __restrict__ change) {
+  extern __shared__ float scratch[];
+  const int x = blockIdx.x * blockDim.x + threadIdx.x;
+  const int y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= width || y >= height) return;  // no block-wide synchronisation follows
+  const int stride = blockDim.x * blockDim.y;
+  float* v = scratch + threadIdx.y * blockDim.x + threadIdx.x;
+  const std::size_t plane = std::size_t(width) * height;
+  const std::size_t i = std::size_t(y) * width + x;
+  if (outlier_only[i]) {
+    for (int label = 0; label < count; ++label) v[label * stride] = label == count - 1 ? 1.f : 0.f;
+  } else {
+    const float rx_here = rx[i], ry_here = ry[i], tau_here = tau[i];
+    const float rx_left = x > 0 ? rx[i - 1] : 0.f, ry_up = y > 0 ? ry[i - width] : 0.f;
+    for (int label = 0; label < count; ++label) {
+      const float* px = p + (2 * std::size_t(label)) * plane;
+      const float* py = px + plane;
+      // K^T p = -(weighted backward divergence of p); the CPU subtracts exact zeros at the first column/row.
+      float divergence = add(mul(rx_here, px[i]), mul(ry_here, py[i]));
+      if (x > 0) divergence = sub(divergence, mul(rx_left, px[i - 1]));
+      if (y > 0) divergence = sub(divergence, mul(ry_up, py[i - width]));
+      v[label * stride] = sub(u[label * plane + i], mul(tau_here, add(-divergence, data_cost[label * plane + i])));
+    }
+    projectOntoSimplexDevice(v, count, stride);
+  }
+  float max_change = 0.f;
+  for (int label = 0; label < count; ++label) {
+    const float old = u[label * plane + i];
+    const float value = v[label * stride];
+    max_change = fmaxf(max_change, fabsf(sub(value, old)));
+    u[label * plane + i] = value;
+    u_bar[label * plane + i] = sub(mul(2.f, value), old);
+  }
+  if (record_change) change[i] = max_change;
+}
+
+// Per-pixel contribution to E(u) = sum_i <u_i, D_i> + lambda R(u), in double like labelEnergy().
+__global__ void pixelEnergy(const float* __restrict__ u, const float* __restrict__ data_cost,
+                            const float* __restrict__ rx, const float* __restrict__ ry, int width, int height,
+                            int count, bool tv, double lambda, double* __restrict__ energy) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x;
+  const int y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= width || y >= height) return;
+  const std::size_t plane = std::size_t(width) * height;
+  const std::size_t i = std::size_t(y) * width + x;
+  double sum = 0;
+  for (int label = 0; label < count; ++label) {
+    const float* ui = u + label * plane;
+    sum += double(ui[i]) * data_cost[label * plane + i];
+    const double qx = x + 1 < width ? double(mul(rx[i], sub(ui[i + 1], ui[i]))) : 0.0;
+    const double qy = y + 1 < height ? double(mul(ry[i], sub(ui[i + width], ui[i]))) : 0.0;
+    sum += lambda * (tv ? sqrt(qx * qx + qy * qy) : qx * qx + qy * qy);
+  }
+  energy[i] = sum;
+}
+
+std::string sizeText(int w, int h, int n) {
+  return std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(n);
+}
+
+void validateProblem(const LabelProblem& problem, const SoftLabels& u) {
+  const int W = problem.width, H = problem.height, n = problem.count;
+  if (W <= 0 || H <= 0 || n < 1 || n > kMaxLabels)
+    throw InputError("CUDA label step: problem size " + sizeText(W, H, n) + " is empty or has more than " +
+                     std::to_string(kMaxLabels) + " labels");
+  const std::size_t plane = std::size_t(W) * H;
+  if (u.width != W || u.height != H || u.count != n)
+    throw InputError("label step: labels are " + sizeText(u.width, u.height, u.count) + " but the problem is " +
+                     sizeText(W, H, n));
+  if (u.data.size() != plane * n)
+    throw InputError("CUDA label step: soft-label buffer holds " + std::to_string(u.data.size()) + " values, expected " +
+                     std::to_string(plane * n));
+  if (problem.data_cost.size() != plane * n)
+    throw InputError("CUDA label step: data_cost holds " + std::to_string(problem.data_cost.size()) +
+                     " values, expected " + std::to_string(plane * n) + " (" + sizeText(W, H, n) + ")");
+  auto requirePlane = [&](const char* name, int w, int h, std::size_t values) {
+    if (w != W || h != H || values != plane)
+      throw InputError(std::string("CUDA label step: ") + name + " is " + std::to_string(w) + "x" + std::to_string(h) +
+                       " with " + std::to_string(values) + " values, expected " + std::to_string(W) + "x" +
+                       std::to_string(H) + " with one channel");
+  };
+  requirePlane("weight_x", problem.weight_x.width, problem.weight_x.height, problem.weight_x.data.size());
+  requirePlane("weight_y", problem.weight_y.width, problem.weight_y.height, problem.weight_y.data.size());
+  requirePlane("outlier_only", problem.outlier_only.width, problem.outlier_only.height,
+               problem.outlier_only.data.size());
+}
+
+// Owns a stream and a pinned host scratch area; freed without throwing.
+struct StreamHolder {
+  cudaStream_t stream = nullptr;
+  StreamHolder() { MCFLOW_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking)); }
+  ~StreamHolder() {
+    if (stream) cudaStreamDestroy(stream);
+  }
+  StreamHolder(const StreamHolder&) = delete;
+  StreamHolder& operator=(const StreamHolder&) = delete;
+};
+
+struct PinnedScalars {
+  float max_change = 0.f;
+  double energy = 0.0;
+};
+
+struct PinnedHolder {
+  PinnedScalars* scalars = nullptr;
+  PinnedHolder() {
+    MCFLOW_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&scalars), sizeof(PinnedScalars)));
+  }
+  ~PinnedHolder() {
+    if (scalars) cudaFreeHost(scalars);
+  }
+  PinnedHolder(const PinnedHolder&) = delete;
+  PinnedHolder& operator=(const PinnedHolder&) = delete;
+};
+
+// The iterations between two convergence checks run as one CUDA graph: at the coarse pyramid levels the
+// solver works at (e.g. 160x120), a kernel takes a few microseconds and launch gaps would dominate.
+struct GraphHolder {
+  cudaGraphExec_t exec = nullptr;
+  ~GraphHolder() { reset(); }
+  void reset() {
+    if (exec) cudaGraphExecDestroy(exec);
+    exec = nullptr;
+  }
+};
+
+class CudaLabelOptimizer final : public LabelOptimizer {
+ public:
+  std::string name() const override { return "cuda"; }
+
+  LabelStats optimize(const LabelProblem& problem, SoftLabels& u, LabelDual& dual, int iterations,
+                      double tolerance) override {
+    validateProblem(problem, u);
+    const int W = problem.width, H = problem.height, n = problem.count;
+    if (dual.width != W || dual.height != H || dual.count != n || dual.p.size() != std::size_t(W) * H * n * 2)
+      dual.reset(W, H, n);
+    const std::size_t plane = std::size_t(W) * H;
+    const bool tv = problem.regularizer == Regularizer::TotalVariation;
+    cudaStream_t s = stream_.stream;
+
+    reserve(plane, n);
+    // Per-call traffic: the problem and the warm start up, u and p down; everything else stays on the device.
+    upload(data_cost_.get(), problem.data_cost.data(), plane * n);
+    upload(rx_.get(), problem.weight_x.ptr(), plane);
+    upload(ry_.get(), problem.weight_y.ptr(), plane);
+    upload(outlier_only_.get(), problem.outlier_only.ptr(), plane);
+    upload(u_.get(), u.data.data(), plane * n);
+    upload(p_.get(), dual.p.data(), plane * n * 2);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u_bar_.get(), u_.get(), plane * n * sizeof(float), cudaMemcpyDeviceToDevice, s));
+
+    const Launch launch = makeLaunch(W, H, n, tv, float(problem.lambda));
+    computeStepSizes<<<launch.grid, launch.block, 0, s>>>(rx_.get(), ry_.get(), W, H, tv, float(problem.lambda),
+                                                          sigma_rx_.get(), sigma_ry_.get(), shrink_x_.get(),
+                                                          shrink_y_.get(), tau_.get());
+    MCFLOW_CUDA_CHECK_LAUNCH("computeStepSizes");
+
+    // Iterations run in rounds that end with a checked iteration (one recording the change): every
+    // kConvergenceCheckInterval-th with a tolerance, and always the last one (for stats.last_change).
+    LabelStats stats;
+    int done = 0;
+    while (done < iterations) {
+      const int round_end = tolerance > 0 ? std::min(iterations, (done / kConvergenceCheckInterval + 1) *
+                                                                      kConvergenceCheckInterval)
+                                          : iterations;
+      int unchecked = round_end - 1 - done;
+      for (; unchecked >= kGraphIterations; unchecked -= kGraphIterations) {
+        MCFLOW_CUDA_CHECK(cudaGraphLaunch(graphFor(launch), s));
+      }
+      for (; unchecked > 0; --unchecked) launchIteration(launch, false);
+      launchIteration(launch, true);
+      done = round_end;
+      stats.iterations = done;
+      std::size_t bytes = temp_bytes_;
+      MCFLOW_CUDA_CHECK(cub::DeviceReduce::Max(temp_.get(), bytes, change_.get(), max_change_.get(), int(plane), s));
+      MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&pinned_.scalars->max_change, max_change_.get(), sizeof(float),
+                                        cudaMemcpyDeviceToHost, s));
+      MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+      stats.last_change = pinned_.scalars->max_change;
+      if (stats.last_change < tolerance) break;
+    }
+
+    pixelEnergy<<<launch.grid, launch.block, 0, s>>>(u_.get(), data_cost_.get(), rx_.get(), ry_.get(), W, H, n, tv,
+                                                     problem.lambda, pixel_energy_.get());
+    MCFLOW_CUDA_CHECK_LAUNCH("pixelEnergy");
+    std::size_t bytes = temp_bytes_;
+    MCFLOW_CUDA_CHECK(cub::DeviceReduce::Sum(temp_.get(), bytes, pixel_energy_.get(), energy_.get(), int(plane), s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&pinned_.scalars->energy, energy_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u.data.data(), u_.get(), plane * n * sizeof(float), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(dual.p.data(), p_.get(), plane * n * 2 * sizeof(float), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    stats.energy = pinned_.scalars->energy;
+    return stats;
+  }
+
+ private:
+  static constexpr int kGraphIterations = kConvergenceCheckInterval - 1;
+
+  // Everything a launch of the iteration depends on; a cached graph is valid while this is unchanged.
+  struct Launch {
+    int width = 0, height = 0, count = 0;
+    bool tv = false;
+    float lambda = 0.f, inv_lambda = 0.f;
+    dim3 block, grid, label_grid, primal_block, primal_grid;
+    std::size_t primal_shared_bytes = 0;
+    std::uint64_t buffers = 0;  // generation of the device buffers (pointers change when they grow)
+    bool operator==(const Launch& o) const {
+      return width == o.width && height == o.height && count == o.count && tv == o.tv && lambda == o.lambda &&
+             buffers == o.buffers;
+    }
+  };
+
+  Launch makeLaunch(int W, int H, int n, bool tv, float lambda) {
+    Launch l;
+    l.width = W;
+    l.height = H;
+    l.count = n;
+    l.tv = tv;
+    l.lambda = lambda;
+    l.inv_lambda = 1.f / lambda;  // the CPU multiplies by this float reciprocal
+    l.buffers = buffer_generation_;
+    l.block = dim3(kBlockX, kBlockY);
+    l.grid = dim3((W + kBlockX - 1) / kBlockX, (H + kBlockY - 1) / kBlockY);
+    l.label_grid = dim3(l.grid.x, l.grid.y, unsigned(n));
+    // The primal kernel's shared scratch grows with n: 128 threads keep it at n / 2 KiB per block.
+    l.primal_block = dim3(kBlockX, kPrimalBlockY);
+    l.primal_grid = dim3((W + kBlockX - 1) / kBlockX, (H + kPrimalBlockY - 1) / kPrimalBlockY);
+    l.primal_shared_bytes = std::size_t(n) * kBlockX * kPrimalBlockY * sizeof(float);
+    if (l.primal_shared_bytes > primal_shared_limit_) {
+      const cudaError_t status = cudaFuncSetAttribute(primalStep, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                                      int(l.primal_shared_bytes));
+      if (status != cudaSuccess) {
+        cudaGetLastError();
+        throw BackendError("CUDA label step: " + std::to_string(n) + " labels need " +
+                           std::to_string(l.primal_shared_bytes) + " bytes of shared memory per block, more than " +
+                           "this GPU allows: " + cudaGetErrorString(status));
+      }
+      primal_shared_limit_ = l.primal_shared_bytes;
+    }
+    return l;
+  }
+
+  void launchIteration(const Launch& l, bool record_change) {
+    cudaStream_t s = stream_.stream;
+    dualStep<<<l.label_grid, l.block, 0, s>>>(u_bar_.get(), p_.get(), sigma_rx_.get(), sigma_ry_.get(),
+                                              shrink_x_.get(), shrink_y_.get(), l.width, l.height, l.tv,
+                                              l.inv_lambda);
+    MCFLOW_CUDA_CHECK_LAUNCH("dualStep");
+    primalStep<<<l.primal_grid, l.primal_block, l.primal_shared_bytes, s>>>(
+        u_.get(), u_bar_.get(), p_.get(), data_cost_.get(), outlier_only_.get(), rx_.get(), ry_.get(), tau_.get(),
+        l.width, l.height, l.count, record_change, change_.get());
+    MCFLOW_CUDA_CHECK_LAUNCH("primalStep");
+  }
+
+  // The graph of kGraphIterations unchecked iterations for this launch configuration, captured on first use.
+  cudaGraphExec_t graphFor(const Launch& l) {
+    if (graph_.exec && graph_launch_ == l) return graph_.exec;
+    graph_.reset();
+    cudaStream_t s = stream_.stream;
+    MCFLOW_CUDA_CHECK(cudaStreamBeginCapture(s, cudaStreamCaptureModeThreadLocal));
+    cudaGraph_t graph = nullptr;
+    try {
+      for (int k = 0; k < kGraphIterations; ++k) launchIteration(l, false);
+    } catch (...) {
+      cudaStreamEndCapture(s, &graph);  // leave capture mode before reporting the launch error
+      if (graph) cudaGraphDestroy(graph);
+      throw;
+    }
+    MCFLOW_CUDA_CHECK(cudaStreamEndCapture(s, &graph));
+    const cudaError_t status = cudaGraphInstantiate(&graph_.exec, graph, 0);
+    cudaGraphDestroy(graph);
+    MCFLOW_CUDA_CHECK(status);
+    graph_launch_ = l;
+    return graph_.exec;
+  }
+
+  template <typename T>
+  void upload(T* device, const T* host, std::size_t count) {
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(device, host, count * sizeof(T), cudaMemcpyHostToDevice, stream_.stream));
+  }
+
+  template <typename T>
+  void grow(DeviceBuffer<T>& buffer, std::size_t count) {
+    if (count <= buffer.capacity()) return;
+    buffer.reserve(count);
+    ++buffer_generation_;
+  }
+
+  // Grows the buffers only when this call needs more than any earlier one.
+  void reserve(std::size_t plane, int n) {
+    const std::size_t labels = plane * std::size_t(n);
+    grow(data_cost_, labels);
+    grow(u_, labels);
+    grow(u_bar_, labels);
+    grow(p_, 2 * labels);
+    grow(rx_, plane);
+    grow(ry_, plane);
+    grow(sigma_rx_, plane);
+    grow(sigma_ry_, plane);
+    grow(shrink_x_, plane);
+    grow(shrink_y_, plane);
+    grow(tau_, plane);
+    grow(outlier_only_, plane);
+    grow(change_, plane);
+    grow(pixel_energy_, plane);
+    grow(max_change_, 1);
+    grow(energy_, 1);
+    if (plane > reduced_items_) {
+      std::size_t max_bytes = 0, sum_bytes = 0;
+      MCFLOW_CUDA_CHECK(cub::DeviceReduce::Max(nullptr, max_bytes, change_.get(), max_change_.get(), int(plane)));
+      MCFLOW_CUDA_CHECK(cub::DeviceReduce::Sum(nullptr, sum_bytes, pixel_energy_.get(), energy_.get(), int(plane)));
+      temp_bytes_ = std::max<std::size_t>(std::max(max_bytes, sum_bytes), 1);
+      temp_.reserve(temp_bytes_);
+      temp_bytes_ = temp_.capacity();
+      reduced_items_ = plane;
+    }
+  }
+
+  static constexpr int kPrimalBlockY = 4;
+  StreamHolder stream_;
+  PinnedHolder pinned_;
+  DeviceBuffer<float> data_cost_, u_, u_bar_, p_, rx_, ry_, sigma_rx_, sigma_ry_, shrink_x_, shrink_y_, tau_;
+  DeviceBuffer<float> change_, max_change_;
+  DeviceBuffer<std::uint8_t> outlier_only_, temp_;
+  DeviceBuffer<double> pixel_energy_, energy_;
+  std::size_t temp_bytes_ = 0, reduced_items_ = 0;
+  std::size_t primal_shared_limit_ = 48 * 1024;  // available without opting in
+  std::uint64_t buffer_generation_ = 0;
+  GraphHolder graph_;  // declared last: destroyed before the buffers it refers to
+  Launch graph_launch_;
+};
+
+}  // namespace
+
+bool cudaBackendAvailable(std::string* why) {
+  int count = 0;
+  const cudaError_t status = cudaGetDeviceCount(&count);
+  if (status != cudaSuccess) {
+    cudaGetLastError();  // clear the (non-sticky) error so later runtime calls start clean
+    if (why)
+      *why = std::string("cudaGetDeviceCount failed: ") + cudaGetErrorName(status) + " (" +
+             std::to_string(int(status)) + "): " + cudaGetErrorString(status);
+    return false;
+  }
+  if (count <= 0) {
+    if (why) *why = "cudaGetDeviceCount found " + std::to_string(count) + " CUDA devices";
+    return false;
+  }
+  int device = 0;
+  cudaDeviceProp properties{};
+  if (cudaGetDevice(&device) != cudaSuccess || cudaGetDeviceProperties(&properties, device) != cudaSuccess) {
+    const cudaError_t error = cudaGetLastError();
+    if (why) *why = std::string("cannot query the current CUDA device: ") + cudaGetErrorString(error);
+    return false;
+  }
+  // A build without code for this GPU's architecture fails only at the first launch: ask now.
+  cudaFuncAttributes attributes{};
+  const cudaError_t kernel_status = cudaFuncGetAttributes(&attributes, primalStep);
+  if (kernel_status != cudaSuccess) {
+    cudaGetLastError();
+    if (why)
+      *why = std::string("this build has no kernels for ") + properties.name + " (compute capability " +
+             std::to_string(properties.major) + "." + std::to_string(properties.minor) +
+             "): " + cudaGetErrorString(kernel_status);
+    return false;
+  }
+  if (why)
+    *why = std::string("CUDA device ") + std::to_string(device) + ": " + properties.name + " (compute capability " +
+           std::to_string(properties.major) + "." + std::to_string(properties.minor) + ")";
+  return true;
+}
+
+std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer() {
+  std::string why;
+  if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);
+  return std::make_unique<CudaLabelOptimizer>();
+}
+
+}  // namespace mc_flow
