@@ -149,6 +149,53 @@ double labelEnergy(const LabelProblem& problem, const SoftLabels& u) {
 
 namespace {
 
+// Row kernels of the primal-dual iteration, written on raw restrict pointers so that the compiler
+// vectorises them (inside OpenMP regions it often cannot prove the arrays do not alias).
+void dualRowQuadratic(int W, const float* __restrict ub, const float* __restrict ub_down, float* __restrict px,
+                      float* __restrict py, const float* __restrict step_x, const float* __restrict step_y,
+                      const float* __restrict shrink_x, const float* __restrict shrink_y) {
+  for (int x = 0; x < W; ++x) {
+    px[x] = (px[x] + step_x[x] * (ub[x + 1] - ub[x])) * shrink_x[x];
+    py[x] = (py[x] + step_y[x] * (ub_down[x] - ub[x])) * shrink_y[x];
+  }
+}
+
+void dualRowTv(int W, const float* __restrict ub, const float* __restrict ub_down, float* __restrict px,
+               float* __restrict py, const float* __restrict step_x, const float* __restrict step_y,
+               float inv_lambda) {
+  for (int x = 0; x < W; ++x) {
+    const float qx = px[x] + step_x[x] * (ub[x + 1] - ub[x]);
+    const float qy = py[x] + step_y[x] * (ub_down[x] - ub[x]);
+    const float scale = 1.f / std::max(1.f, std::sqrt(qx * qx + qy * qy) * inv_lambda);
+    px[x] = qx * scale;
+    py[x] = qy * scale;
+  }
+}
+
+void primalRowCandidate(int W, const float* __restrict u, const float* __restrict data_cost,
+                        const float* __restrict px, const float* __restrict py, const float* __restrict py_up,
+                        const float* __restrict rx, const float* __restrict ry, const float* __restrict rx_left,
+                        const float* __restrict ry_up, const float* __restrict tau, float* __restrict out) {
+  // K^T p = -(weighted backward divergence of p); x = 0 has no left neighbour (rx_left = 0).
+  out[0] = u[0] - tau[0] * (-(rx[0] * px[0] + ry[0] * py[0] - ry_up[0] * py_up[0]) + data_cost[0]);
+  for (int x = 1; x < W; ++x) {
+    const float divergence = rx[x] * px[x] + ry[x] * py[x] - rx_left[x] * px[x - 1] - ry_up[x] * py_up[x];
+    out[x] = u[x] - tau[x] * (-divergence + data_cost[x]);
+  }
+}
+
+float primalRowCommit(int W, const float* __restrict candidate, float* __restrict u, float* __restrict u_bar) {
+  float max_change = 0.f;
+  for (int x = 0; x < W; ++x) {
+    const float old = u[x];
+    const float change = candidate[x] - old;
+    max_change = std::max(max_change, change < 0.f ? -change : change);
+    u[x] = candidate[x];
+    u_bar[x] = 2.f * candidate[x] - old;
+  }
+  return max_change;
+}
+
 class CpuLabelOptimizer final : public LabelOptimizer {
  public:
   std::string name() const override { return "cpu"; }
@@ -187,8 +234,8 @@ class CpuLabelOptimizer final : public LabelOptimizer {
           const float m = std::max(rx[i], ry[i]);
           sx = sy = m > 0.f ? 1.f / (2.f * m) : 0.f;
         }
-        sigma_x_[i] = sx;
-        sigma_y_[i] = sy;
+        sigma_x_[i] = sx * rx[i];  // sigma times the weight of the forward difference
+        sigma_y_[i] = sy * ry[i];
         shrink_x_[i] = 1.f / (1.f + sx / (2.f * lambda));
         shrink_y_[i] = 1.f / (1.f + sy / (2.f * lambda));
         rx_left_[i] = x > 0 ? rx[i - 1] : 0.f;
@@ -209,8 +256,6 @@ class CpuLabelOptimizer final : public LabelOptimizer {
 #pragma omp parallel for schedule(static)
       for (int y = 0; y < H; ++y) {
         const std::size_t row = std::size_t(y) * W;
-        const float* rxr = rx + row;
-        const float* ryr = ry + row;
         const float* sxr = sigma_x_.data() + row;
         const float* syr = sigma_y_.data() + row;
         const float* kxr = shrink_x_.data() + row;
@@ -219,20 +264,8 @@ class CpuLabelOptimizer final : public LabelOptimizer {
           const float* ub = u_bar_.data() + label * plane + row;
           float* px = dual.p.data() + (2 * label) * plane + row;
           float* py = dual.p.data() + (2 * label + 1) * plane + row;
-          if (tv) {
-            for (int x = 0; x < W; ++x) {
-              const float qx = px[x] + sxr[x] * rxr[x] * (ub[x + 1] - ub[x]);
-              const float qy = py[x] + syr[x] * ryr[x] * (ub[x + W] - ub[x]);
-              const float scale = 1.f / std::max(1.f, std::sqrt(qx * qx + qy * qy) * inv_lambda);
-              px[x] = qx * scale;
-              py[x] = qy * scale;
-            }
-          } else {
-            for (int x = 0; x < W; ++x) {
-              px[x] = (px[x] + sxr[x] * rxr[x] * (ub[x + 1] - ub[x])) * kxr[x];
-              py[x] = (py[x] + syr[x] * ryr[x] * (ub[x + W] - ub[x])) * kyr[x];
-            }
-          }
+          if (tv) dualRowTv(W, ub, ub + W, px, py, sxr, syr, inv_lambda);
+          else dualRowQuadratic(W, ub, ub + W, px, py, sxr, syr, kxr, kyr);
         }
       }
       // Primal descent, projection onto the simplex per pixel, extrapolation (theta = 1).
@@ -254,13 +287,7 @@ class CpuLabelOptimizer final : public LabelOptimizer {
             const float* py_up = y > 0 ? py - W : zero_row_.data();
             const float* ur = u.data.data() + label * plane + row;
             const float* dr = problem.data_cost.data() + label * plane + row;
-            float* cr = candidate.data() + std::size_t(label) * W;
-            // K^T p = -(weighted backward divergence of p); x = 0 has no left neighbour (rx_left = 0).
-            cr[0] = ur[0] - taur[0] * (-(rxr[0] * px[0] + ryr[0] * py[0] - rur[0] * py_up[0]) + dr[0]);
-            for (int x = 1; x < W; ++x) {
-              const float divergence = rxr[x] * px[x] + ryr[x] * py[x] - rlr[x] * px[x - 1] - rur[x] * py_up[x];
-              cr[x] = ur[x] - taur[x] * (-divergence + dr[x]);
-            }
+            primalRowCandidate(W, ur, dr, px, py, py_up, rxr, ryr, rlr, rur, taur, candidate.data() + std::size_t(label) * W);
           }
           for (int x = 0; x < W; ++x) {
             if (problem.outlier_only.data[row + x]) {
@@ -271,17 +298,10 @@ class CpuLabelOptimizer final : public LabelOptimizer {
             projectOntoSimplex(simplex.data(), n);
             for (int label = 0; label < n; ++label) candidate[std::size_t(label) * W + x] = simplex[std::size_t(label)];
           }
-          for (int label = 0; label < n; ++label) {
-            float* ur = u.data.data() + label * plane + row;
-            float* ubr = u_bar_.data() + label * plane + row;
-            const float* cr = candidate.data() + std::size_t(label) * W;
-            for (int x = 0; x < W; ++x) {
-              const float old = ur[x];
-              max_change = std::max(max_change, std::fabs(cr[x] - old));
-              ur[x] = cr[x];
-              ubr[x] = 2.f * cr[x] - old;
-            }
-          }
+          for (int label = 0; label < n; ++label)
+            max_change = std::max(max_change, primalRowCommit(W, candidate.data() + std::size_t(label) * W,
+                                                               u.data.data() + label * plane + row,
+                                                               u_bar_.data() + label * plane + row));
         }
       }
       stats.iterations = it + 1;

@@ -144,19 +144,19 @@ struct ArmSpec {
   int upper_id = 0, fore_id = 0;
   Vector3d centre, half_extents;  ///< the bar runs along its local x axis
   Vector3d rotation_deg;
-  double elbow_x = 0.0;           ///< elbow position along the bar [m], local x
-  double blend_length = 0.2;      ///< length of the transition zone [m]
-  Vector3d velocity_m;            ///< shoulder translation per pair [m]
-  Vector3d rotation_rate_deg;     ///< upper-arm rotation about the shoulder [deg]
-  Vector3d elbow_rate_deg;        ///< extra forearm rotation about the elbow [deg]
+  double elbow_x = 0.0;        ///< elbow position along the bar [m], local x
+  double blend_length = 0.2;   ///< length of the transition zone [m]
+  Vector3d velocity_m;         ///< shoulder translation per pair [m]
+  Vector3d rotation_rate_deg;  ///< upper-arm rotation about the shoulder [deg]
+  Vector3d elbow_rate_deg;     ///< extra forearm rotation about the elbow [deg]
   double period = 40.0;
 };
 
 struct RoomSpec {
-  Vector3d min_corner, max_corner;     ///< room box in the frame-0 camera frame [m]
+  Vector3d min_corner, max_corner;                    ///< room box in the frame-0 camera frame [m]
   double window_x0, window_x1, window_y0, window_y1;  ///< hole in the back wall (z = max z) [m]
-  Vector3d velocity_m = Vector3d::Zero();  ///< apparent background motion per pair (camera ego-motion)
-  Vector3d rotation_rate_deg = Vector3d::Zero();  ///< about the camera centre
+  Vector3d velocity_m = Vector3d::Zero();             ///< apparent background motion per pair (camera ego-motion)
+  Vector3d rotation_rate_deg = Vector3d::Zero();      ///< about the camera centre
   double period = 40.0;
 };
 
@@ -223,8 +223,8 @@ VariantSpec variantSpec(int variant) {
   arm.elbow_x = 0.0;
   if (variant == 1) {
     // Closer objects that overlap each other (object-object occlusions), faster rotations.
-    spec.boxes.push_back(box("box", 1, {0.42, 0.12, 1.6}, {0.16, 0.14, 0.1}, {15, -30, 10}, {-0.03, -0.01, 0.02},
-                             {2.0, -3.0, 1.2}, 24));
+    spec.boxes.push_back(
+        box("box", 1, {0.42, 0.12, 1.6}, {0.16, 0.14, 0.1}, {15, -30, 10}, {-0.03, -0.01, 0.02}, {2.0, -3.0, 1.2}, 24));
     spec.boxes.push_back(box("panel", 2, {0.1, 0.02, 2.45}, {0.34, 0.26, 0.03}, {-5, 15, 4}, {0.02, 0.015, -0.025},
                              {1.0, 2.0, -3.0}, 30));
     spec.boxes.push_back(box("cube", 3, {-0.72, 0.3, 2.1}, {0.11, 0.11, 0.11}, {30, 40, 0}, {0.015, -0.02, -0.01},
@@ -239,8 +239,8 @@ VariantSpec variantSpec(int variant) {
     arm.elbow_rate_deg = Vector3d(-0.5, 0.8, 3.5);
     arm.period = 28;
   } else {
-    spec.boxes.push_back(box("box", 1, {-0.6, 0.1, 2.0}, {0.2, 0.16, 0.12}, {-12, 28, 6}, {0.025, -0.012, 0.018},
-                             {1.5, 3.0, -1.2}, 28));
+    spec.boxes.push_back(
+        box("box", 1, {-0.6, 0.1, 2.0}, {0.2, 0.16, 0.12}, {-12, 28, 6}, {0.025, -0.012, 0.018}, {1.5, 3.0, -1.2}, 28));
     spec.boxes.push_back(box("slab", 2, {0.62, 0.28, 2.4}, {0.26, 0.2, 0.035}, {8, -20, -10}, {-0.03, 0.008, -0.02},
                              {-2.0, 1.2, 2.5}, 24));
     arm.upper_id = 3;
@@ -421,7 +421,8 @@ class PosedScene {
     best.kind = SurfaceKind::kBox;
     best.box_index = k;
     best.part_id = spec_.boxes[k].part_id;
-    best.texture_seed = spec_.texture_seed + 1000u + 16u * static_cast<std::uint32_t>(k) + static_cast<std::uint32_t>(face);
+    best.texture_seed =
+        spec_.texture_seed + 1000u + 16u * static_cast<std::uint32_t>(k) + static_cast<std::uint32_t>(face);
     faceCoordinates(p, face, best.u, best.v);
   }
 
@@ -627,8 +628,12 @@ SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options) {
       const Vector3d P = hit.depth * pixelRay(K, x, y);
       Matrix4d M;
       switch (hit.kind) {
-        case SurfaceKind::kRoom: M = background_motion; break;
-        case SurfaceKind::kBox: M = box_motion[hit.box_index]; break;
+        case SurfaceKind::kRoom:
+          M = background_motion;
+          break;
+        case SurfaceKind::kBox:
+          M = box_motion[hit.box_index];
+          break;
         default:
           M = hit.blend == 0.0   ? upper_motion
               : hit.blend == 1.0 ? fore_motion
