@@ -98,6 +98,7 @@ const FieldEntry kFields[] = {
     MCFLOW_FIELD(motion_damping),
     MCFLOW_FIELD(motion_min_update),
     MCFLOW_FIELD(min_label_weight),
+    MCFLOW_FIELD(motion_min_label_pixels),
     MCFLOW_FIELD(regularizer),
     MCFLOW_FIELD(lambda_quadratic),
     MCFLOW_FIELD(lambda_tv),
@@ -214,6 +215,7 @@ void Config::validate() const {
   requireNonNegative("motion_damping", motion_damping);
   requireNonNegative("motion_min_update", motion_min_update);
   requireFraction("min_label_weight", min_label_weight);
+  requireNonNegative("motion_min_label_pixels", motion_min_label_pixels);
 
   if (regularizer != Regularizer::Quadratic && regularizer != Regularizer::TotalVariation)
     rangeError("regularizer", std::to_string(int(regularizer)), "unknown enum value");

@@ -43,16 +43,17 @@ struct Accumulator {
 // A pixel warped out of view (or behind the camera) costs as much as a residual of 10 Cauchy scales in
 // both kinds: otherwise a label could lower its cost by pushing its pixels out of the image.
 constexpr double kOutOfViewResidualScales = 10.0;
-// Fewer (weighted) pixels than this at a level leave a label's twist unchanged there: too few to fix 6 DoF.
-constexpr double kMinLabelPixels = 12.0;
+constexpr float kBorderMargin = 2.f;  // [px]
+constexpr float kDepthEdgeJump = 0.1f;  // [m] depth samples straddling a larger jump carry no geometric residual
 // A step is undone only when it raised its label's cost by more than this fraction: rounding and the
 // first-order twist update make tiny rises near the optimum that are not divergence.
 constexpr double kRejectRelativeIncrease = 0.01;
 constexpr double kMaxStepTranslation = 0.1;  // [m]
 constexpr double kMaxStepRotation = 0.1;     // [rad]
 
-// Jacobian of the transformed point P2 = exp(xi_bar) P with respect to a left increment of xi_bar
-// (first order, rotation part linearised at P2): dP2 = dv + dw x P2.
+// Jacobian of the transformed point P2 = exp(xi_bar) P with respect to a left increment eps
+// (exp(eps) exp(xi_bar)): dP2 = d_eps_v + d_eps_w x P2. The increment of the twist itself maps to eps through
+// the left Jacobian of SE(3).
 inline void pointJacobian(const Eigen::Vector3f& P2, const Eigen::RowVector3f& row, Vector6f& out) {
   // out^T = row * [I | -skew(P2)]
   out(0) = row(0);
@@ -85,15 +86,20 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
   const double out_of_view_cost =
       (1.0 + alpha) * std::log1p(kOutOfViewResidualScales * kOutOfViewResidualScales);
 
-  // Per-label Levenberg-Marquardt: a label whose cost rose after its last update is reverted and damped
-  // harder; labels are nearly decoupled (most pixels have one label), so each gets its own trust region.
+  // Per-label Levenberg-Marquardt with backtracking: a label whose cost rose after its last update goes back
+  // half way and is damped harder; labels are nearly decoupled (most pixels have one label), so each gets its own trust region.
   std::vector<double> damping(static_cast<std::size_t>(motion_labels), config.motion_damping);
   std::vector<double> accepted_cost(static_cast<std::size_t>(motion_labels), std::numeric_limits<double>::infinity());
   std::vector<Vector6d> accepted_twist = twists;
 
   for (int iteration = 0; iteration < config.motion_iterations_per_level; ++iteration) {
     std::vector<Eigen::Matrix<float, 3, 4>> transforms(static_cast<std::size_t>(motion_labels));
-    for (int i = 0; i < motion_labels; ++i) transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
+    // Additive twist increments act on the warp through the left Jacobian: exp(xi + d) = exp(J_l d) exp(xi).
+    std::vector<Eigen::Matrix<float, 6, 6>> left_jacobians(static_cast<std::size_t>(motion_labels));
+    for (int i = 0; i < motion_labels; ++i) {
+      transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
+      left_jacobians[std::size_t(i)] = se3LeftJacobian(twists[std::size_t(i)]).cast<float>();
+    }
     for (auto& a : accumulators) a.reset(motion_labels);
 
 #pragma omp parallel
@@ -131,17 +137,26 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
           for (int k = 0; k < n_active; ++k) weights[std::size_t(k)] /= active_mass;
 
           Eigen::Vector3f P2;
-          if (n_active == 1) {
-            P2 = transforms[std::size_t(active[0])] * P.homogeneous();
-          } else {
+          Eigen::Matrix<float, 6, 6> blended_jacobian;
+          const Eigen::Matrix<float, 6, 6>* left_jacobian = &left_jacobians[std::size_t(active[0])];
+          if (n_active > 1) {
             Vector6d xi_bar = Vector6d::Zero();
             for (int k = 0; k < n_active; ++k) xi_bar += double(weights[std::size_t(k)]) * twists[std::size_t(active[std::size_t(k)])];
             P2 = se3Exp(xi_bar).topRows<3>().cast<float>() * P.homogeneous();
+            blended_jacobian = se3LeftJacobian(xi_bar).cast<float>();
+            left_jacobian = &blended_jacobian;
+          } else {
+            P2 = transforms[std::size_t(active[0])] * P.homogeneous();
           }
           const float inv_z = 1.f / std::max(P2.z(), 1e-3f);
-          const float u = fx * P2.x() * inv_z + cx, v = fy * P2.y() * inv_z + cy;
+          const float u_raw = fx * P2.x() * inv_z + cx, v_raw = fy * P2.y() * inv_z + cy;
+          // Warps up to kBorderMargin px beyond the last pixel centre sample the border (clamped): otherwise a
+          // sub-pixel step would flip whole border columns between "seen" and the out-of-view penalty.
+          const bool in_view = P2.z() >= 1e-3f && u_raw >= -kBorderMargin && v_raw >= -kBorderMargin &&
+                               u_raw <= float(W - 1) + kBorderMargin && v_raw <= float(H - 1) + kBorderMargin;
+          const float u = std::min(std::max(u_raw, 0.f), float(W - 1)), v = std::min(std::max(v_raw, 0.f), float(H - 1));
           float I2, gIx = 0.f, gIy = 0.f;
-          if (P2.z() < 1e-3f || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
+          if (!in_view || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
             for (int a = 0; a < n_active; ++a)
               acc.label_cost(active[std::size_t(a)]) += mass * weights[std::size_t(a)] * out_of_view_cost;
             acc.cost += mass * out_of_view_cost;
@@ -158,22 +173,26 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
           pointJacobian(P2, Eigen::RowVector3f(-gIx * du_dX, -gIy * dv_dY, -(gIx * du_dZ + gIy * dv_dZ)), JI);
           // IRLS weight of the normalised Cauchy cost ln(1 + (r/c)^2): 1 / (c^2 + r^2).
           const float wI = 1.f / (cI * cI + rI * rI);
+          JI = left_jacobian->transpose() * JI;
           Eigen::Matrix<float, 6, 6> Hp = wI * JI * JI.transpose();
           Vector6f gp = wI * rI * JI;
           double cost = std::log1p(rI * rI / (cI * cI));
 
           float Z2;
-          if (sampleDepthBilinear(frame2.depth, u, v, Z2)) {
+          if (sampleDepthBilinearSmooth(frame2.depth, u, v, kDepthEdgeJump, Z2)) {
             float gZx = 0.f, gZy = 0.f;
             sampleBilinear(frame2.depth_grad, u, v, 0, gZx);
             sampleBilinear(frame2.depth_grad, u, v, 1, gZy);
             const float rZ = P2.z() - Z2;
             Vector6f JZ;
             pointJacobian(P2, Eigen::RowVector3f(-gZx * du_dX, -gZy * dv_dY, 1.f - (gZx * du_dZ + gZy * dv_dZ)), JZ);
+            JZ = left_jacobian->transpose() * JZ;
             const float wZ = alpha / (cZ * cZ + rZ * rZ);
             Hp += wZ * JZ * JZ.transpose();
             gp += wZ * rZ * JZ;
             cost += alpha * std::log1p(rZ * rZ / (cZ * cZ));
+          } else {
+            cost += alpha * std::log(2.0);  // no depth evidence: a constant, so costs stay comparable
           }
           const Eigen::Matrix<double, 6, 6> Hd = (mass * Hp).cast<double>();
           const Vector6d gd = (mass * gp).cast<double>();
@@ -212,11 +231,13 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
     std::vector<bool> frozen(static_cast<std::size_t>(motion_labels), false);
     for (int i = 0; i < motion_labels; ++i) {
       const std::size_t k = std::size_t(i);
-      if (total.label_pixels(i) < kMinLabelPixels) {
+      if (total.label_pixels(i) < config.motion_min_label_pixels) {
         frozen[k] = true;
       } else if (total.label_cost(i) > accepted_cost[k] * (1.0 + kRejectRelativeIncrease)) {
-        twists[k] = accepted_twist[k];
-        damping[k] = std::min(damping[k] * 10.0, 1e6);
+        // Backtrack: the quadratic model overshot (residuals of textured images are linear over a fraction of
+        // a pixel only); try half the step next iteration and damp the following solves.
+        twists[k] = accepted_twist[k] + 0.5 * (twists[k] - accepted_twist[k]);
+        damping[k] = std::min(damping[k] * 4.0, 1e6);
         frozen[k] = true;
       } else {
         accepted_cost[k] = total.label_cost(i);
@@ -224,6 +245,8 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
         damping[k] = std::max(damping[k] / 3.0, config.motion_damping);
       }
     }
+    // The last iteration only checks the previous step: an unchecked step could leave a label worse off.
+    if (iteration + 1 == config.motion_iterations_per_level) break;
     for (int i = 0; i < motion_labels; ++i) {
       if (frozen[std::size_t(i)]) {
         total.H.middleRows(6 * i, 6).setZero();
@@ -249,9 +272,8 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
     }
     if (largest < config.motion_min_update) break;
   }
-  // A label whose final step was never checked keeps it only if it did not blow up.
-  for (int i = 0; i < motion_labels; ++i)
-    if (!twists[std::size_t(i)].allFinite()) twists[std::size_t(i)] = accepted_twist[std::size_t(i)];
+  // A backtracked step that was not evaluated any more is dropped: return the last accepted twists.
+  twists = accepted_twist;
   return stats;
 }
 

@@ -51,4 +51,33 @@ Vector6d se3Log(const Eigen::Matrix4d& T) {
   return xi;
 }
 
+Matrix6d se3LeftJacobian(const Vector6d& xi) {
+  // Barfoot, State Estimation for Robotics (2017), eqs. 7.83 and 7.86: J = [[J_SO3, Q], [0, J_SO3]].
+  const Eigen::Vector3d rho = xi.head<3>(), phi = xi.tail<3>();
+  const double t2 = phi.squaredNorm(), t = std::sqrt(t2);
+  const Eigen::Matrix3d F = skew(phi), F2 = F * F, P = skew(rho);
+  double a, b, c, d;  // J_SO3 = I + a F + b F^2; Q uses b, c, d
+  // Series below 1e-3 rad: the closed forms cancel to ~t^5 there.
+  if (t < 1e-3) {
+    a = 0.5 - t2 / 24.0;
+    b = 1.0 / 6.0 - t2 / 120.0;
+    c = 1.0 / 24.0 - t2 / 720.0;
+    d = 1.0 / 120.0 - t2 / 2520.0;
+  } else {
+    const double s = std::sin(t), co = std::cos(t);
+    a = (1.0 - co) / t2;
+    b = (t - s) / (t2 * t);
+    c = (t2 + 2.0 * co - 2.0) / (2.0 * t2 * t2);
+    d = (2.0 * t - 3.0 * s + t * co) / (2.0 * t2 * t2 * t);
+  }
+  const Eigen::Matrix3d J = Eigen::Matrix3d::Identity() + a * F + b * F2;
+  const Eigen::Matrix3d Q = 0.5 * P + b * (F * P + P * F + F * P * F) + c * (F2 * P + P * F2 - 3.0 * F * P * F) +
+                            d * (F * P * F2 + F2 * P * F);
+  Matrix6d out = Matrix6d::Zero();
+  out.topLeftCorner<3, 3>() = J;
+  out.topRightCorner<3, 3>() = Q;
+  out.bottomRightCorner<3, 3>() = J;
+  return out;
+}
+
 }  // namespace mc_flow

@@ -5,6 +5,7 @@
  * Exit codes: 0 success; 1 bad input, configuration or file error; 2 usage error or unusable backend;
  * 3 unexpected internal error.
  */
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -21,6 +22,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/core/synthetic_scene.h"
+#include "mc_flow/io/benchmark.h"
 #include "mc_flow/io/camera_info.h"
 #include "mc_flow/io/config_file.h"
 #include "mc_flow/io/flow_io.h"
@@ -111,6 +113,27 @@ std::vector<Command> commands() {
                    {"backend", true, "auto | cpu | cuda"},
                    {"width", true, "image width (default 320)"},
                    {"height", true, "image height (default 240)"},
+                   {"verbose", false, "progress of the solver on stderr"},
+                   {"help", false, "this help"}}});
+
+  list.push_back({"bench-real",
+                  "mcflow bench-real --data DIR [--pairs A,B] [--set name=value ...] [--processing-level L] [--repeat N]",
+                  "Table 1 of the paper on the real RGB-D pairs in DIR (folders with color0/1.png and 16-bit "
+                  "depth0/1.png, 5000 units per metre): for zero flow, one rigid motion (initial_labels = 1, dense "
+                  "robust visual odometry), MC-TV and MC-Quad, the RMSE of the photometric (intensity 0..1) and "
+                  "geometric (mm) residuals after warping frame 2 back, all on one pixel set (valid, not occluded "
+                  "in any solve, every warp inside frame 2), the number of segments and the median time per stage "
+                  "[ms]; then the average over pairs. Inputs are halved to 320x240 (the paper's resolution) with "
+                  "the solver's depth-aware downsampling unless --full-resolution is given.",
+                  {{"data", true, "directory of the real pairs (e.g. $MCFLOW_SHARED_DATA/real_pairs)"},
+                   {"pairs", true, "comma-separated folder names (default: the four pairs of the shared set)"},
+                   {"config", true, "JSON or YAML file of Config fields"},
+                   {"set", true, "name=value: sets one Config field; may be repeated"},
+                   {"processing-level", true, "pyramid level the solver finishes at (Config::processing_level)"},
+                   {"backend", true, "auto | cpu | cuda"},
+                   {"full-resolution", false, "keep the 640x480 input (default: halve to 320x240)"},
+                   {"mask", true, "union (default: occlusions of all three solves excluded) | mcflow (MC-Flow's only)"},
+                   {"repeat", true, "solves per method and pair; times are the median (default 1)"},
                    {"verbose", false, "progress of the solver on stderr"},
                    {"help", false, "this help"}}});
   return list;
@@ -400,6 +423,49 @@ int cmdDemo(const Arguments& args) {
   return 0;
 }
 
+std::vector<std::string> splitList(const std::string& text) {
+  std::vector<std::string> items;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = std::min(text.find(',', start), text.size());
+    if (comma > start) items.push_back(text.substr(start, comma - start));
+    start = comma + 1;
+  }
+  return items;
+}
+
+int cmdBenchReal(const Arguments& args) {
+  const std::string data = args.require("data");
+  const Config config = buildConfig(args);
+  const std::vector<std::string> pairs = args.has("pairs") ? splitList(args.get("pairs")) : io::realPairNames();
+  if (pairs.empty()) throw UsageError("--pairs '" + args.get("pairs") + "' names no pair");
+  const int repeat = args.has("repeat") ? parseInteger("repeat", args.get("repeat")) : 1;
+  if (repeat < 1) throw InputError("--repeat " + std::to_string(repeat) + ": must be >= 1");
+  io::ExclusionMask mask = io::ExclusionMask::UnionOfAll;
+  if (args.has("mask")) {
+    if (args.get("mask") == "mcflow") mask = io::ExclusionMask::McFlowOnly;
+    else if (args.get("mask") != "union") throw InputError("--mask '" + args.get("mask") + "': expected union or mcflow");
+  }
+  const int halvings = args.has("full-resolution") ? 0 : 1;
+
+  std::vector<io::PairScores> scores;
+  std::string backend;
+  for (const std::string& name : pairs) {
+    progress("pair " + name + ": loading and solving (one label, MC-TV, MC-Quad; " + std::to_string(repeat) +
+             " run(s) each)...");
+    const io::RealPair pair = io::loadRealPair(data, name, halvings, config);
+    const io::PairSolves solves = io::solveRealPair(pair, config, repeat);
+    backend = solves.quad.backend;
+    scores.push_back(io::scoreRealPair(pair, solves, mask));
+  }
+  std::printf("# mcflow bench-real: %s, %s input, processing level %d, backend %s, %d run(s) per solve (median "
+              "times), excluded: %s\n",
+              data.c_str(), halvings ? "320x240 (halved)" : "640x480", config.processing_level, backend.c_str(), repeat,
+              mask == io::ExclusionMask::UnionOfAll ? "occlusions of all solves" : "occlusions of MC-Flow");
+  std::fputs(io::realBenchTable(scores).c_str(), stdout);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -430,6 +496,7 @@ int main(int argc, char** argv) {
     if (name == "run") return cmdRun(args);
     if (name == "synth") return cmdSynth(args);
     if (name == "eval") return cmdEval(args);
+    if (name == "bench-real") return cmdBenchReal(args);
     return cmdDemo(args);
   } catch (const UsageError& e) {
     std::cerr << "mcflow " << name << ": " << e.what() << "\n\n";

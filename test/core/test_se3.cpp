@@ -78,3 +78,18 @@ TEST(Se3, SkewIsCrossProduct) {
 
 }  // namespace
 }  // namespace mc_flow
+
+TEST(Se3LeftJacobian, MatchesFiniteDifferencesOfTheExponential) {
+  mc_flow::Vector6d xi;
+  xi << 0.09, -0.04, 0.03, 0.05, -0.03, 0.04;
+  const Eigen::Matrix4d T = mc_flow::se3Exp(xi);
+  const mc_flow::Matrix6d J = mc_flow::se3LeftJacobian(xi);
+  for (int k = 0; k < 6; ++k) {
+    mc_flow::Vector6d d = mc_flow::Vector6d::Zero();
+    d(k) = 1e-6;
+    // exp(xi + d) exp(xi)^-1 = exp(J d) to first order
+    const mc_flow::Vector6d eps = mc_flow::se3Log(mc_flow::se3Exp(xi + d) * T.inverse()) / 1e-6;
+    for (int r = 0; r < 6; ++r) EXPECT_NEAR(eps(r), J(r, k), 1e-5) << "column " << k << " row " << r;
+  }
+  EXPECT_TRUE(mc_flow::se3LeftJacobian(mc_flow::Vector6d::Zero()).isIdentity(1e-12));
+}

@@ -55,6 +55,9 @@ struct Config {
   double motion_damping = 1e-4;      ///< Levenberg damping added to the normal equations (relative to the diagonal)
   double motion_min_update = 1e-6;   ///< stop IRLS at a level when the largest twist update is below this
   double min_label_weight = 0.01;    ///< soft-label values below this do not enter a label's normal equations
+  double motion_min_label_pixels = 64;  ///< a label with fewer (weighted) pixels at a pyramid level keeps its
+                                        ///< twist there: small parts are blurred into their surroundings at
+                                        ///< coarse levels and give biased motions
 
   // ---- label step (eq. 4, primal-dual, supplement) ----
   Regularizer regularizer = Regularizer::Quadratic;

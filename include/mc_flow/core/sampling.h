@@ -37,4 +37,20 @@ inline bool sampleDepthBilinear(const ImageF& depth, float x, float y, float& ou
   return true;
 }
 
+/// @brief Like sampleDepthBilinear, but also false when the valid corners differ by more than `max_jump`
+/// metres: across a depth discontinuity the interpolated value belongs to no surface, and its linearisation
+/// (the depth gradient) says nothing about how it changes with the warp.
+inline bool sampleDepthBilinearSmooth(const ImageF& depth, float x, float y, float max_jump, float& out) {
+  if (!sampleDepthBilinear(depth, x, y, out)) return false;
+  const int x0 = int(x), y0 = int(y);
+  const int x1 = x0 + 1 < depth.width ? x0 + 1 : x0, y1 = y0 + 1 < depth.height ? y0 + 1 : y0;
+  float lo = 1e30f, hi = 0.f;
+  for (float z : {depth(x0, y0), depth(x1, y0), depth(x0, y1), depth(x1, y1)})
+    if (z > 0.f) {
+      lo = z < lo ? z : lo;
+      hi = z > hi ? z : hi;
+    }
+  return hi - lo <= max_jump;
+}
+
 }  // namespace mc_flow

@@ -19,6 +19,9 @@ using Matrix6d = Eigen::Matrix<double, 6, 6>;
 Eigen::Matrix4d se3Exp(const Vector6d& xi);
 /// @brief log: 4x4 rigid transform -> twist (v, w); inverse of se3Exp for rotation angles < pi.
 Vector6d se3Log(const Eigen::Matrix4d& T);
+/// @brief Left Jacobian of SE(3) (ordering (v, w)): exp(hat(xi + d)) = exp(hat(J d)) exp(hat(xi)) to first
+/// order in d. Lets the motion step update twists additively with the exact first-order Jacobian.
+Matrix6d se3LeftJacobian(const Vector6d& xi);
 /// @brief Skew-symmetric matrix of w (hat(w) x = w cross x).
 Eigen::Matrix3d skew(const Eigen::Vector3d& w);
 
