@@ -87,10 +87,12 @@ const FieldEntry kFields[] = {
     MCFLOW_FIELD(kmeans_tolerance),
     MCFLOW_FIELD(kmeans_level_offset),
     MCFLOW_FIELD(seed),
+    MCFLOW_FIELD(dominant_motion_init),
     MCFLOW_FIELD(outer_iterations),
     MCFLOW_FIELD(outer_convergence),
     MCFLOW_FIELD(label_level_offset),
     MCFLOW_FIELD(motion_iterations_per_level),
+    MCFLOW_FIELD(motion_iterations_refine),
     MCFLOW_FIELD(motion_coarse_levels_after_first),
     MCFLOW_FIELD(alpha),
     MCFLOW_FIELD(cauchy_c_intensity),
@@ -110,6 +112,7 @@ const FieldEntry kFields[] = {
     MCFLOW_FIELD(min_geometric_weight),
     MCFLOW_FIELD(merge_translation),
     MCFLOW_FIELD(merge_rotation),
+    MCFLOW_FIELD(merge_data_cost),
     MCFLOW_FIELD(min_support_fraction),
     MCFLOW_FIELD(detect_occlusions),
     MCFLOW_FIELD(occlusion_kz),
@@ -208,6 +211,7 @@ void Config::validate() const {
   requireIntIn("label_level_offset", label_level_offset, 0, 10);
 
   requireIntAtLeast("motion_iterations_per_level", motion_iterations_per_level, 1);
+  requireIntAtLeast("motion_iterations_refine", motion_iterations_refine, 1);
   requireIntIn("motion_coarse_levels_after_first", motion_coarse_levels_after_first, 0, 10);
   requireNonNegative("alpha", alpha);
   requirePositive("cauchy_c_intensity", cauchy_c_intensity);
@@ -233,6 +237,7 @@ void Config::validate() const {
   requireNonNegative("merge_translation", merge_translation);
   requireNonNegative("merge_rotation", merge_rotation);
   requireFraction("min_support_fraction", min_support_fraction);
+  requireNonNegative("merge_data_cost", merge_data_cost);
 
   requireNonNegative("occlusion_kz", occlusion_kz);
   requireNonNegative("occlusion_ko", occlusion_ko);

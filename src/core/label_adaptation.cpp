@@ -2,6 +2,7 @@
 // (the next label step redistributes those pixels to whichever motion explains them).
 #include "mc_flow/core/label_adaptation.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -50,9 +51,28 @@ bool motionsSimilar(const Vector6d& a, const Vector6d& b, const Eigen::Vector3d&
   return displacement < config.merge_translation && angle < config.merge_rotation;
 }
 
+double extraDataCost(const SoftLabels& u, const std::vector<const float*>& planes, int i, int j) {
+  const std::size_t n = u.planeSize();
+  const float* uj = u.plane(j);
+  const float* Di = planes[std::size_t(i)];
+  const float* Dj = planes[std::size_t(j)];
+  double sum = 0, weight = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    if (uj[k] < 0.5f) continue;  // the label's own pixels, not the fringes it shares
+    sum += double(uj[k]) * (Di[k] - Dj[k]);
+    weight += uj[k];
+  }
+  return weight > 0 ? sum / weight : 0.0;
+}
+
 AdaptationStats adaptLabelCount(SoftLabels& u, std::vector<Vector6d>& twists, const ImageF& points, int valid_pixels,
-                                const Config& config) {
+                                const Config& config, const std::vector<float>* data_cost) {
   AdaptationStats stats;
+  // Data-cost planes follow the labels through merges (the kept label keeps its plane: its twist moves by
+  // less than the merge thresholds, so its costs barely change).
+  std::vector<const float*> planes;
+  if (data_cost && data_cost->size() == u.data.size())
+    for (int i = 0; i < u.count; ++i) planes.push_back(data_cost->data() + std::size_t(i) * u.planeSize());
   // Merge the most similar pair first, then re-evaluate: merging changes centroids and twists.
   for (;;) {
     const int motion_labels = u.count - 1;
@@ -65,8 +85,17 @@ AdaptationStats adaptLabelCount(SoftLabels& u, std::vector<Vector6d>& twists, co
         double displacement, angle;
         motionDifference(twists[std::size_t(a)], twists[std::size_t(b)], centroids[std::size_t(a)],
                          centroids[std::size_t(b)], displacement, angle);
-        if (displacement < config.merge_translation && angle < config.merge_rotation && displacement < best) {
-          best = displacement;
+        // Rank candidates on one scale: the twist test by displacement relative to its threshold, the
+        // data test by extra cost relative to its threshold.
+        double score = std::numeric_limits<double>::infinity();
+        if (displacement < config.merge_translation && angle < config.merge_rotation)
+          score = displacement / config.merge_translation;
+        if (!planes.empty() && config.merge_data_cost > 0) {
+          const double extra = std::max(extraDataCost(u, planes, a, b), extraDataCost(u, planes, b, a));
+          if (extra < config.merge_data_cost) score = std::min(score, std::max(0.0, extra) / config.merge_data_cost);
+        }
+        if (score < best) {
+          best = score;
           best_a = a;
           best_b = b;
         }
@@ -77,6 +106,7 @@ AdaptationStats adaptLabelCount(SoftLabels& u, std::vector<Vector6d>& twists, co
     if (sa + sb > 0) twists[std::size_t(keep)] = (sa * twists[std::size_t(best_a)] + sb * twists[std::size_t(best_b)]) / (sa + sb);
     u.mergeInto(drop, keep);
     twists.erase(twists.begin() + drop);
+    if (!planes.empty()) planes.erase(planes.begin() + drop);
     ++stats.merged;
   }
   // Remove labels with too little support (always keep at least one motion label).

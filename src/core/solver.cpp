@@ -145,7 +145,21 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
       const int a = assignment(x, y);
       u.at(a >= 0 ? a : u.outlier(), x, y) = 1.f;
     }
-  std::vector<Vector6d> twists(std::size_t(initial_motion_labels), Vector6d::Zero());
+  // Every label starts from the dominant motion (one label over all valid pixels, coarse to fine down to the
+  // label level): with a moving camera all labels then start near the truth, and a small segment that is
+  // frozen at the coarse levels (too few pixels there) does not have to find a large motion from zero.
+  Vector6d dominant = Vector6d::Zero();
+  if (config.dominant_motion_init) {
+    for (int level = levels - 1; level >= label_level; --level) {
+      const PyramidLevel& P = pyr1[level];
+      SoftLabels one(P.points.width, P.points.height, 2, 0.f);
+      for (std::size_t k = 0; k < one.planeSize(); ++k) (std::isfinite(P.points.data[k * 3 + 2]) ? one.plane(0) : one.plane(1))[k] = 1.f;
+      std::vector<Vector6d> single{dominant};
+      estimateMotionsAtLevel(P, pyr2[level], one, nullptr, single, config);
+      dominant = single[0];
+    }
+  }
+  std::vector<Vector6d> twists(std::size_t(initial_motion_labels), dominant);
   result.timings.initialisation = elapsedMs(t);
   impl_->progress("pyramid %d levels, labels at level %d, %d initial labels", levels, label_level, initial_motion_labels);
 
@@ -163,11 +177,14 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
     // 1. motion step, coarse to fine
     t = Clock::now();
     const int coarsest = k == 0 ? levels - 1 : std::min(levels - 1, finest + config.motion_coarse_levels_after_first);
+    Config motion_config = config;
+    if (k > 0) motion_config.motion_iterations_per_level = config.motion_iterations_refine;
     for (int level = coarsest; level >= finest; --level) {
       const SoftLabels u_level = labelsAtLevel(u, label_level, level, pyr1);
       const ImageU8 occ_level = resampleMask(occlusion, pyr1[level].points.width, pyr1[level].points.height);
       const MotionLevelStats ms = estimateMotionsAtLevel(pyr1[level], pyr2[level], u_level,
-                                                         config.detect_occlusions ? &occ_level : nullptr, twists, config);
+                                                         config.detect_occlusions ? &occ_level : nullptr, twists,
+                                                         motion_config);
       stats.motion_iterations += ms.iterations;
     }
     result.timings.motion += elapsedMs(t);
@@ -202,7 +219,7 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
 
     // 3. update n
     t = Clock::now();
-    const AdaptationStats as = adaptLabelCount(u, twists, L1.points, valid_label_level, config);
+    const AdaptationStats as = adaptLabelCount(u, twists, L1.points, valid_label_level, config, &problem.data_cost);
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.labels_after = u.count - 1;

@@ -39,15 +39,18 @@ struct Config {
   double kmeans_tolerance = 0.01;  ///< [m] stop when no centre moves further
   int kmeans_level_offset = 2;     ///< K-means runs this many levels coarser than the label level
   unsigned seed = 1;               ///< K-means seeding is deterministic for a given seed
+  bool dominant_motion_init = true;  ///< start every label from the motion of the whole scene (one label),
+                                     ///< estimated down to the label level, instead of from zero
 
   // ---- outer loop (Algorithm 1) ----
-  int outer_iterations = 4;           ///< motion step + label step + label-count update, repeated
+  int outer_iterations = 3;           ///< motion step + label step + label-count update, repeated
   double outer_convergence = 1e-3;    ///< stop when the mean absolute label change is below this
   int label_level_offset = 1;         ///< label step inside the loop runs this many levels above processing_level
                                       ///< (a final label step at processing_level follows the loop)
 
   // ---- motion step (Cauchy IRLS, eqs. 8-10, interpolation model eq. 2) ----
-  int motion_iterations_per_level = 6;  ///< IRLS iterations at each pyramid level
+  int motion_iterations_per_level = 6;  ///< IRLS iterations at each pyramid level (first outer iteration)
+  int motion_iterations_refine = 3;     ///< IRLS iterations per level in later outer iterations (warm start)
   int motion_coarse_levels_after_first = 2;  ///< later outer iterations start this many levels above the finest
   double alpha = 2.0;             ///< weight of the geometric (depth) cost against the photometric one
   double cauchy_c_intensity = 0.04;  ///< [intensity, 0..1] Cauchy scale of photometric residuals
@@ -63,8 +66,8 @@ struct Config {
   Regularizer regularizer = Regularizer::Quadratic;
   double lambda_quadratic = 4.0;   ///< weight of the quadratic regulariser (eq. 13)
   double lambda_tv = 1.0;          ///< weight of the TV regulariser (eq. 12)
-  int label_iterations = 150;      ///< primal-dual iterations per label step
-  int label_iterations_final = 80; ///< primal-dual iterations of the final, full-resolution label step
+  int label_iterations = 50;       ///< primal-dual iterations per label step (warm-started across outer iterations)
+  int label_iterations_final = 30; ///< primal-dual iterations of the final, full-resolution label step
   double label_tolerance = 1e-4;   ///< stop when the largest label change of an iteration is below this
   double outlier_cost = 3.5;       ///< K_D: constant data cost of the outlier label (normalised Cauchy units)
   double out_of_view_cost = 5.0;   ///< data cost of a label whose warp leaves the image at a non-occluded pixel
@@ -74,6 +77,8 @@ struct Config {
   double merge_translation = 0.006;  ///< [m] merge two labels when their motions move the segments' centroids
                                      ///< differently by less than this
   double merge_rotation = 0.01;      ///< [rad] ... and their rotations differ by less than this
+  double merge_data_cost = 0.15;     ///< [normalised Cauchy cost per pixel] ... or when each label's motion explains
+                                     ///< the other's pixels with less extra data cost than this (0 = off)
   double min_support_fraction = 0.004;  ///< labels with support below this fraction of the valid pixels go to the outlier label
 
   // ---- occlusion (section 6) ----

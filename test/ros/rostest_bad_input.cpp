@@ -1,0 +1,146 @@
+// Bad input: unsupported encodings, size/aspect mismatch, all-invalid depth, zero intrinsics, repeated and
+// out-of-order stamps, a stream reset, RGB/depth stamp skew, silent camera_info. The node must warn (naming
+// the value), skip the frame and keep solving afterwards.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "mc_flow/SegmentArray.h"
+#include "rostest_common.h"
+
+using mcflow_test::Collector;
+using mcflow_test::RosoutWatcher;
+using mcflow_test::SyntheticCamera;
+using mcflow_test::waitFor;
+
+namespace {
+
+const ros::Time kStart(3000.0);
+
+std::string dumpWarnings(const RosoutWatcher& watcher) {
+  std::string all;
+  for (const auto& m : watcher.all()) all += "\n  " + m;
+  return all;
+}
+
+}  // namespace
+
+class BadInput : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    camera_ = std::make_unique<SyntheticCamera>(nh_, 320, 240);
+    watcher_ = std::make_unique<RosoutWatcher>(nh_);
+    segments_ = std::make_unique<Collector<mc_flow::SegmentArray>>(nh_, "/mc_flow/segments");
+    ASSERT_TRUE(waitFor([this] { return camera_->inputSubscribers() >= 3; }, 60.0)) << "the nodelet never subscribed";
+    ros::WallDuration(1.0).sleep();
+  }
+
+  /// Publishes one (possibly broken) triple and waits for a warning containing `expected`.
+  void expectWarning(const sensor_msgs::ImagePtr& rgb, const sensor_msgs::ImagePtr& depth,
+                     const sensor_msgs::CameraInfoPtr& info, const std::string& expected) {
+    camera_->publish(rgb, depth, info);
+    EXPECT_TRUE(waitFor([&] { return watcher_->seen(expected); }, 15.0))
+        << "no warning containing \"" << expected << "\"; warnings seen:" << dumpWarnings(*watcher_);
+  }
+
+  ros::Time stamp(double seconds) const { return kStart + ros::Duration(seconds); }
+
+  ros::NodeHandle nh_;
+  std::unique_ptr<SyntheticCamera> camera_;
+  std::unique_ptr<RosoutWatcher> watcher_;
+  std::unique_ptr<Collector<mc_flow::SegmentArray>> segments_;
+};
+
+TEST_F(BadInput, EveryCaseWarnsAndTheNodeKeepsSolving) {
+  // 1. camera_info missing: images alone never synchronise; the warning names the silent topic.
+  {
+    ros::NodeHandle nh;
+    ros::Publisher rgb = nh.advertise<sensor_msgs::Image>("/camera/rgb/image_rect_color", 5);
+    ros::Publisher depth = nh.advertise<sensor_msgs::Image>("/camera/depth_registered/image_rect", 5);
+    ASSERT_TRUE(waitFor([&] { return rgb.getNumSubscribers() > 0 && depth.getNumSubscribers() > 0; }, 10.0));
+    for (int i = 0; i < 40 && !watcher_->seen("no synchronised input"); ++i) {
+      rgb.publish(camera_->rgb(0, stamp(-10 + 0.1 * i)));
+      depth.publish(camera_->depth(0, stamp(-10 + 0.1 * i)));
+      ros::WallDuration(0.1).sleep();
+    }
+    EXPECT_TRUE(waitFor([&] { return watcher_->seen("no synchronised input"); }, 10.0)) << dumpWarnings(*watcher_);
+    EXPECT_TRUE(watcher_->seen("/camera/rgb/camera_info (0 received)")) << dumpWarnings(*watcher_);
+  }
+
+  // 2. Unsupported colour encoding.
+  auto rgb = camera_->rgb(0, stamp(0.0));
+  rgb->encoding = "yuv422";
+  expectWarning(rgb, camera_->depth(0, stamp(0.0)), camera_->info(stamp(0.0)), "unsupported colour encoding 'yuv422'");
+
+  // 3. Unsupported depth encoding.
+  auto depth = camera_->depth(0, stamp(0.1));
+  depth->encoding = "8UC4";
+  expectWarning(camera_->rgb(0, stamp(0.1)), depth, camera_->info(stamp(0.1)), "unsupported depth encoding '8UC4'");
+
+  // 4. Depth of another aspect ratio than the colour image.
+  depth = camera_->depth(0, stamp(0.2));
+  depth->height = 180;
+  depth->data.resize(std::size_t(depth->step) * depth->height);
+  expectWarning(camera_->rgb(0, stamp(0.2)), depth, camera_->info(stamp(0.2)), "depth 320x180 have different aspect");
+
+  // 5. No valid depth at all.
+  depth = camera_->depth(0, stamp(0.3), "16UC1");
+  std::fill(depth->data.begin(), depth->data.end(), 0);
+  expectWarning(camera_->rgb(0, stamp(0.3)), depth, camera_->info(stamp(0.3)), "has no valid pixel");
+
+  // 6. Uncalibrated camera: zero intrinsics.
+  auto info = camera_->info(stamp(0.4));
+  info->K.fill(0.0);
+  info->P.fill(0.0);
+  expectWarning(camera_->rgb(0, stamp(0.4)), camera_->depth(0, stamp(0.4)), info, "fx=0");
+
+  // 7. A repeated stamp: the first frame is kept, its duplicate skipped.
+  camera_->publish(0, stamp(1.0));
+  ros::WallDuration(0.5).sleep();
+  expectWarning(camera_->rgb(1, stamp(1.0)), camera_->depth(1, stamp(1.0)), camera_->info(stamp(1.0)),
+                "repeats the previous");
+
+  // 8. Stamps going back (bag loop / driver restart): a new sequence starts.
+  expectWarning(camera_->rgb(0, stamp(0.5)), camera_->depth(0, stamp(0.5)), camera_->info(stamp(0.5)), "went back from 3001.000000000");
+
+  // 9. RGB and depth 50 ms apart (max_stamp_difference 20 ms): warned, still solved as a pair. The
+  // approximate synchroniser releases such a set only when a later frame shows that no better match comes.
+  const std::size_t solved_before = segments_->count();
+  camera_->publish(camera_->rgb(1, stamp(0.6)), camera_->depth(1, stamp(0.65)), camera_->info(stamp(0.6)));
+  ros::WallDuration(0.2).sleep();
+  camera_->publish(2, stamp(0.7));
+  EXPECT_TRUE(waitFor([&] { return watcher_->seen("differ by"); }, 15.0)) << dumpWarnings(*watcher_);
+  EXPECT_TRUE(watcher_->seen("RGB stamp 3000.600000000 and depth stamp 3000.650000000")) << dumpWarnings(*watcher_);
+  EXPECT_TRUE(waitFor([&] { return segments_->count() > solved_before; }, 90.0)) << "no pair solved after bad input";
+
+  // 10. A long gap starts a new sequence; the node still solves the next pair.
+  // Frames keep coming (a camera does), so the node may also restart its synchroniser on the way.
+  auto solvedAfterGap = [&] {
+    for (const auto& m : segments_->messages()) {
+      if (m->previous_stamp >= stamp(5.0)) return true;
+    }
+    return false;
+  };
+  for (int i = 0; i < 100 && !solvedAfterGap(); ++i) {
+    camera_->publish(i % 4, stamp(5.0 + 0.1 * i));
+    ros::WallDuration(0.3).sleep();
+  }
+  EXPECT_TRUE(watcher_->seen("exceeds max_pair_interval")) << dumpWarnings(*watcher_);
+  ASSERT_TRUE(waitFor(solvedAfterGap, 30.0)) << "the node stopped solving (or paired across the gap)";
+  // Every pair ever published chains frames less than max_pair_interval apart.
+  for (const auto& m : segments_->messages()) {
+    const double dt = (m->header.stamp - m->previous_stamp).toSec();
+    EXPECT_GT(dt, 0.0);
+    EXPECT_LE(dt, 1.0);
+  }
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "mc_flow_bad_input_test");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  const int result = RUN_ALL_TESTS();
+  spinner.stop();
+  return result;
+}

@@ -1,0 +1,94 @@
+/**
+ * @file rostest_common.h
+ * @brief Helpers of the node-level tests: a synthetic RGB-D camera publishing into the nodelet, output
+ * collectors and a /rosout watcher.
+ */
+#pragma once
+
+#include <functional>
+#include <map>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <ros/ros.h>
+#include <rosgraph_msgs/Log.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+
+#include "mc_flow/core/synthetic_scene.h"
+
+namespace mcflow_test {
+
+/// @brief Renders the synthetic sequence and turns frames into camera messages.
+class SyntheticCamera {
+ public:
+  SyntheticCamera(ros::NodeHandle& nh, int width, int height, int variant = 0);
+
+  /// @brief Frame t as messages (rgb8 colour, 32FC1 depth, camera_info), all stamped `stamp`.
+  sensor_msgs::ImagePtr rgb(int t, const ros::Time& stamp);
+  sensor_msgs::ImagePtr depth(int t, const ros::Time& stamp, const std::string& encoding = "32FC1");
+  sensor_msgs::CameraInfoPtr info(const ros::Time& stamp);
+  /// @brief Publishes frame t with one stamp on all three topics.
+  void publish(int t, const ros::Time& stamp);
+  void publish(const sensor_msgs::ImagePtr& rgb, const sensor_msgs::ImagePtr& depth,
+               const sensor_msgs::CameraInfoPtr& info);
+  /// @brief Subscribers of the three input topics (the nodelet's, when it has subscribed).
+  int inputSubscribers() const;
+  const mc_flow::SyntheticSceneOptions& options() const { return options_; }
+  const mc_flow::Intrinsics& intrinsics() { return K_; }
+
+  static const char* frameId() { return "synthetic_rgb_optical_frame"; }
+
+ private:
+  void render(int t);
+  mc_flow::SyntheticSceneOptions options_;
+  mc_flow::Intrinsics K_;
+  std::map<int, std::pair<mc_flow::RgbdFrame, mc_flow::ImageU8>> frames_;
+  ros::Publisher rgb_pub_, depth_pub_, info_pub_;
+};
+
+/// @brief Keeps every message received on one topic.
+template <class M>
+class Collector {
+ public:
+  Collector(ros::NodeHandle& nh, const std::string& topic) {
+    sub_ = nh.subscribe<M>(topic, 50, [this](const boost::shared_ptr<const M>& m) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      messages_.push_back(m);
+    });
+  }
+  std::vector<boost::shared_ptr<const M>> messages() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return messages_;
+  }
+  std::size_t count() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return messages_.size();
+  }
+  void shutdown() { sub_.shutdown(); }
+
+ private:
+  ros::Subscriber sub_;
+  mutable std::mutex mutex_;
+  std::vector<boost::shared_ptr<const M>> messages_;
+};
+
+/// @brief Records WARN and above from /rosout.
+class RosoutWatcher {
+ public:
+  explicit RosoutWatcher(ros::NodeHandle& nh);
+  /// @brief True when a WARN/ERROR containing `text` has been seen.
+  bool seen(const std::string& text) const;
+  std::vector<std::string> all() const;
+
+ private:
+  ros::Subscriber sub_;
+  mutable std::mutex mutex_;
+  std::vector<std::string> messages_;
+};
+
+/// @brief Waits (wall time, spinning in the background) until `done` or `timeout_s`; returns done().
+bool waitFor(const std::function<bool()>& done, double timeout_s);
+
+}  // namespace mcflow_test

@@ -1,0 +1,119 @@
+// Lazy subscription and the drop counter.
+#include <gtest/gtest.h>
+
+#include <tuple>
+
+#include <diagnostic_msgs/DiagnosticArray.h>
+
+#include "mc_flow/SegmentArray.h"
+#include "rostest_common.h"
+
+using mcflow_test::Collector;
+using mcflow_test::SyntheticCamera;
+using mcflow_test::waitFor;
+
+namespace {
+
+bool advertised(const std::string& topic) {
+  ros::master::V_TopicInfo topics;
+  ros::master::getTopics(topics);
+  for (const auto& t : topics) {
+    if (t.name == topic) return true;
+  }
+  return false;
+}
+
+/// Value of `key` in the last MC-Flow diagnostic status seen (empty when none).
+std::string diagnosticValue(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key) {
+  const auto all = diagnostics.messages();
+  for (auto it = all.rbegin(); it != all.rend(); ++it) {
+    for (const auto& status : (*it)->status) {
+      if (status.name.find("MC-Flow") == std::string::npos) continue;
+      for (const auto& kv : status.values) {
+        if (kv.key == key) return kv.value;
+      }
+    }
+  }
+  return "";
+}
+
+long diagnosticCount(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key) {
+  const std::string v = diagnosticValue(diagnostics, key);
+  return v.empty() ? -1 : std::stol(v);
+}
+
+}  // namespace
+
+TEST(LazyAndDrops, InputsAreSubscribedOnlyWhileSomeoneListens) {
+  ros::NodeHandle nh;
+  SyntheticCamera camera(nh, 320, 240);
+  ASSERT_TRUE(waitFor([] { return advertised("/mc_flow/segments"); }, 60.0)) << "the nodelet did not start";
+  ros::WallDuration(2.0).sleep();
+  EXPECT_EQ(camera.inputSubscribers(), 0) << "subscribed to the inputs while nobody listens";
+
+  {
+    Collector<sensor_msgs::Image> occlusion(nh, "/mc_flow/occlusion");
+    EXPECT_TRUE(waitFor([&] { return camera.inputSubscribers() >= 3; }, 10.0)) << "a listener did not start the inputs";
+  }
+  EXPECT_TRUE(waitFor([&] { return camera.inputSubscribers() == 0; }, 10.0)) << "inputs kept after the last listener left";
+
+  {
+    Collector<mc_flow::SegmentArray> segments(nh, "/mc_flow/segments");
+    EXPECT_TRUE(waitFor([&] { return camera.inputSubscribers() >= 3; }, 10.0));
+  }
+  EXPECT_TRUE(waitFor([&] { return camera.inputSubscribers() == 0; }, 10.0));
+}
+
+TEST(LazyAndDrops, FramesArrivingWhileSolvingAreDroppedAndCounted) {
+  ros::NodeHandle nh;
+  SyntheticCamera camera(nh, 320, 240);
+  Collector<diagnostic_msgs::DiagnosticArray> diagnostics(nh, "/diagnostics");
+  Collector<mc_flow::SegmentArray> segments(nh, "/mc_flow/segments");
+  ASSERT_TRUE(waitFor([&] { return camera.inputSubscribers() >= 3; }, 30.0));
+  ros::WallDuration(1.0).sleep();
+
+  // 12 frames at 30 Hz: far faster than one solve, so the worker must drop most of them.
+  const int frames = 12;
+  const ros::Time start(4000.0);
+  std::vector<std::tuple<sensor_msgs::ImagePtr, sensor_msgs::ImagePtr, sensor_msgs::CameraInfoPtr>> triples;
+  for (int t = 0; t < frames; ++t) {  // rendered beforehand so that publishing keeps the rate
+    const ros::Time stamp = start + ros::Duration(t / 30.0);
+    triples.emplace_back(camera.rgb(t, stamp), camera.depth(t, stamp), camera.info(stamp));
+  }
+  for (const auto& [rgb, depth, info] : triples) {
+    camera.publish(rgb, depth, info);
+    ros::WallDuration(1.0 / 30.0).sleep();
+  }
+  // Done when every synchronised frame is accounted for: solved pairs + the first frame + drops.
+  auto accounted = [&] {
+    const long synced = diagnosticCount(diagnostics, "frames synchronised");
+    const long solved = diagnosticCount(diagnostics, "pairs solved");
+    const long dropped = diagnosticCount(diagnostics, "frames dropped (arrived while solving)");
+    return synced == frames && solved >= 1 && solved + 1 + dropped == synced;
+  };
+  ASSERT_TRUE(waitFor(accounted, 120.0)) << "synchronised " << diagnosticValue(diagnostics, "frames synchronised")
+                                         << ", solved " << diagnosticValue(diagnostics, "pairs solved") << ", dropped "
+                                         << diagnosticValue(diagnostics, "frames dropped (arrived while solving)");
+  const long dropped = diagnosticCount(diagnostics, "frames dropped (arrived while solving)");
+  const long solved = diagnosticCount(diagnostics, "pairs solved");
+  EXPECT_GT(dropped, 0);
+  EXPECT_LT(solved, frames - 1);
+  EXPECT_EQ(diagnosticCount(diagnostics, "frames skipped (bad input)"), 0);
+  ASSERT_TRUE(waitFor([&] { return long(segments.count()) == solved; }, 10.0));
+
+  // Pairs chain over the dropped frames: each pair starts where the previous one ended.
+  const auto msgs = segments.messages();
+  for (std::size_t i = 1; i < msgs.size(); ++i) EXPECT_EQ(msgs[i]->previous_stamp, msgs[i - 1]->header.stamp);
+  // The last frame is never lost: it waits for the worker instead of being dropped.
+  EXPECT_EQ(msgs.back()->header.stamp, start + ros::Duration((frames - 1) / 30.0));
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "mc_flow_lazy_test");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  const int result = RUN_ALL_TESTS();
+  spinner.stop();
+  return result;
+}

@@ -1,0 +1,378 @@
+// Message conversions without a running node: input frames, intrinsics, and every output message.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+
+#include <sensor_msgs/image_encodings.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+
+#include "mc_flow/core/se3.h"
+#include "mc_flow/ros/conversions.h"
+#include "mc_flow/ros/segment_tracker.h"
+
+using mc_flow_ros::FrameInputError;
+using mc_flow_ros::InputProblem;
+
+namespace {
+
+sensor_msgs::CameraInfo cameraInfo(int w, int h, double f = 500.0) {
+  sensor_msgs::CameraInfo info;
+  info.width = std::uint32_t(w);
+  info.height = std::uint32_t(h);
+  info.K = {f, 0, w / 2.0 - 0.5, 0, f, h / 2.0 - 0.5, 0, 0, 1};
+  info.P = {f, 0, w / 2.0 - 0.5, 0, 0, f, h / 2.0 - 0.5, 0, 0, 0, 1, 0};
+  return info;
+}
+
+/// A colour image whose pixel (x, y) has r = x, g = y, b = 200 (in the given encoding's channel order).
+sensor_msgs::Image colourImage(int w, int h, const std::string& encoding) {
+  sensor_msgs::Image image;
+  image.header.frame_id = "cam";
+  image.header.stamp = ros::Time(10, 500);
+  image.width = std::uint32_t(w);
+  image.height = std::uint32_t(h);
+  image.encoding = encoding;
+  const int channels = sensor_msgs::image_encodings::numChannels(encoding);
+  const int depth_bytes = sensor_msgs::image_encodings::bitDepth(encoding) / 8;
+  image.step = std::uint32_t(w * channels * depth_bytes);
+  image.data.resize(std::size_t(image.step) * std::size_t(h));
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      std::uint8_t* p = &image.data[std::size_t(y) * image.step + std::size_t(x * channels * depth_bytes)];
+      const std::uint8_t r = std::uint8_t(x), g = std::uint8_t(y), b = 200;
+      if (encoding == "rgb8" || encoding == "rgba8") { p[0] = r; p[1] = g; p[2] = b; }
+      if (encoding == "bgr8" || encoding == "bgra8") { p[0] = b; p[1] = g; p[2] = r; }
+      if (encoding == "rgba8" || encoding == "bgra8") p[3] = 255;
+      if (encoding == "mono8") p[0] = r;
+      if (encoding == "mono16") { const std::uint16_t v = std::uint16_t(r * 257); std::memcpy(p, &v, 2); }
+    }
+  }
+  return image;
+}
+
+sensor_msgs::Image depthImage(int w, int h, const std::string& encoding, float metres) {
+  sensor_msgs::Image image;
+  image.header.frame_id = "cam";
+  image.width = std::uint32_t(w);
+  image.height = std::uint32_t(h);
+  image.encoding = encoding;
+  const bool is16 = encoding == "16UC1";
+  image.step = std::uint32_t(w * (is16 ? 2 : 4));
+  image.data.resize(std::size_t(image.step) * std::size_t(h));
+  for (int i = 0; i < w * h; ++i) {
+    if (is16) {
+      const std::uint16_t mm = std::uint16_t(std::lround(metres * 1000.f));
+      std::memcpy(&image.data[std::size_t(2 * i)], &mm, 2);
+    } else {
+      std::memcpy(&image.data[std::size_t(4 * i)], &metres, 4);
+    }
+  }
+  return image;
+}
+
+void setDepth(sensor_msgs::Image& image, int x, int y, float metres) {
+  std::memcpy(&image.data[std::size_t(y) * image.step + std::size_t(4 * x)], &metres, 4);
+}
+
+}  // namespace
+
+TEST(Conversions, ChooseDownsampleAimsAt320Wide) {
+  EXPECT_EQ(mc_flow_ros::chooseDownsample(0, 640), 2);
+  EXPECT_EQ(mc_flow_ros::chooseDownsample(0, 320), 1);
+  EXPECT_EQ(mc_flow_ros::chooseDownsample(0, 1280), 4);
+  EXPECT_EQ(mc_flow_ros::chooseDownsample(0, 160), 1);
+  EXPECT_EQ(mc_flow_ros::chooseDownsample(3, 640), 3);
+}
+
+TEST(Conversions, IntrinsicsFromPThenKAndRescaled) {
+  sensor_msgs::CameraInfo info = cameraInfo(640, 480, 525.0);
+  info.P[0] = 520.0;  // P wins over K
+  mc_flow::Intrinsics K = mc_flow_ros::intrinsicsFromCameraInfo(info, 640, 480);
+  EXPECT_DOUBLE_EQ(K.fx, 520.0);
+  EXPECT_DOUBLE_EQ(K.fy, 525.0);
+  EXPECT_DOUBLE_EQ(K.cx, 319.5);
+
+  info.P.fill(0.0);  // some drivers fill K only
+  K = mc_flow_ros::intrinsicsFromCameraInfo(info, 640, 480);
+  EXPECT_DOUBLE_EQ(K.fx, 525.0);
+
+  K = mc_flow_ros::intrinsicsFromCameraInfo(info, 320, 240);  // camera_info of the full-size image
+  EXPECT_DOUBLE_EQ(K.fx, 262.5);
+  EXPECT_DOUBLE_EQ(K.cx, (319.5 + 0.5) * 0.5 - 0.5);
+}
+
+TEST(Conversions, ZeroIntrinsicsAreRejectedNamingTheValue) {
+  sensor_msgs::CameraInfo info;  // uncalibrated: all zero
+  try {
+    mc_flow_ros::intrinsicsFromCameraInfo(info, 640, 480);
+    FAIL() << "zero intrinsics accepted";
+  } catch (const FrameInputError& e) {
+    EXPECT_EQ(e.problem, InputProblem::Intrinsics);
+    EXPECT_NE(std::string(e.what()).find("fx=0"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Conversions, EveryColourEncodingGivesTheSameRgbAndIntensity) {
+  for (const std::string encoding : {"rgb8", "bgr8", "rgba8", "bgra8"}) {
+    const auto input = mc_flow_ros::toFrameInput(colourImage(64, 48, encoding), depthImage(64, 48, "16UC1", 1.5f),
+                                                 cameraInfo(64, 48), 1);
+    ASSERT_EQ(input.colour.type(), CV_8UC3) << encoding;
+    const cv::Vec3b p = input.colour.at<cv::Vec3b>(7, 13);
+    EXPECT_EQ(p[0], 13) << encoding;
+    EXPECT_EQ(p[1], 7) << encoding;
+    EXPECT_EQ(p[2], 200) << encoding;
+    const double grey = (0.299 * 13 + 0.587 * 7 + 0.114 * 200) / 255.0;
+    EXPECT_NEAR(input.frame.intensity(13, 7), grey, 1.0 / 255.0) << encoding;
+    EXPECT_FLOAT_EQ(input.frame.depth(13, 7), 1.5f) << encoding;
+    EXPECT_EQ(input.header.frame_id, "cam");
+    EXPECT_EQ(input.header.stamp, ros::Time(10, 500));
+  }
+  for (const std::string encoding : {"mono8", "mono16"}) {
+    const auto input = mc_flow_ros::toFrameInput(colourImage(64, 48, encoding), depthImage(64, 48, "32FC1", 2.0f),
+                                                 cameraInfo(64, 48), 1);
+    EXPECT_NEAR(input.frame.intensity(13, 7), 13.0 / 255.0, 1e-6) << encoding;
+    EXPECT_EQ(input.colour.at<cv::Vec3b>(7, 13)[1], 13) << encoding;
+  }
+}
+
+TEST(Conversions, DownsamplingScalesSizeAndIntrinsics) {
+  const auto input = mc_flow_ros::toFrameInput(colourImage(64, 48, "rgb8"), depthImage(64, 48, "32FC1", 1.0f),
+                                               cameraInfo(64, 48, 100.0), 2);
+  EXPECT_EQ(input.frame.width(), 32);
+  EXPECT_EQ(input.frame.height(), 24);
+  EXPECT_EQ(input.colour.cols, 32);
+  EXPECT_DOUBLE_EQ(input.K.fx, 50.0);
+  EXPECT_DOUBLE_EQ(input.K.cx, (31.5 + 0.5) / 2 - 0.5);
+  EXPECT_EQ(input.downsample, 2);
+  // Block (2x2) averaging of r = x: pixels 26, 27 -> 26.5.
+  EXPECT_NEAR(input.colour.at<cv::Vec3b>(3, 13)[0], 26.5, 0.6);
+}
+
+TEST(Conversions, DepthDownsamplingDoesNotAverageAcrossEdges) {
+  auto depth = depthImage(32, 32, "32FC1", 1.0f);
+  setDepth(depth, 0, 0, 3.0f);  // block (0,0): 3, 1, 1, 1 -> 1 (the far sample is another surface)
+  setDepth(depth, 2, 0, std::nanf(""));  // block (1,0): NaN, 1, 1, 1 -> 1
+  setDepth(depth, 4, 0, 1.02f);          // block (2,0): 1.02, 1, 1, 1 -> 1.005
+  const auto input = mc_flow_ros::toFrameInput(colourImage(32, 32, "rgb8"), depth, cameraInfo(32, 32), 2);
+  EXPECT_FLOAT_EQ(input.frame.depth(0, 0), 1.0f);
+  EXPECT_FLOAT_EQ(input.frame.depth(1, 0), 1.0f);
+  EXPECT_NEAR(input.frame.depth(2, 0), 1.005f, 1e-6);
+}
+
+TEST(Conversions, InvalidDepthBecomesZero) {
+  auto depth = depthImage(32, 24, "32FC1", 1.0f);
+  setDepth(depth, 5, 5, std::nanf(""));
+  setDepth(depth, 6, 5, -1.f);
+  const auto input = mc_flow_ros::toFrameInput(colourImage(32, 24, "rgb8"), depth, cameraInfo(32, 24), 1);
+  EXPECT_EQ(input.frame.depth(5, 5), 0.f);
+  EXPECT_EQ(input.frame.depth(6, 5), 0.f);
+  EXPECT_EQ(input.valid_depth, 32 * 24 - 2);
+}
+
+TEST(Conversions, SmallerRegisteredDepthOfTheSameAspectIsResampled) {
+  const auto input = mc_flow_ros::toFrameInput(colourImage(64, 48, "rgb8"), depthImage(32, 24, "16UC1", 0.8f),
+                                               cameraInfo(64, 48), 1);
+  EXPECT_EQ(input.frame.depth.width, 64);
+  EXPECT_FLOAT_EQ(input.frame.depth(63, 47), 0.8f);
+}
+
+TEST(Conversions, BadInputsThrowTheirKindNamingTheValue) {
+  auto expectProblem = [](const sensor_msgs::Image& rgb, const sensor_msgs::Image& depth,
+                          const sensor_msgs::CameraInfo& info, InputProblem problem, const std::string& named) {
+    try {
+      mc_flow_ros::toFrameInput(rgb, depth, info, 1);
+      ADD_FAILURE() << "accepted; expected a message naming " << named;
+    } catch (const FrameInputError& e) {
+      EXPECT_EQ(int(e.problem), int(problem)) << e.what();
+      EXPECT_NE(std::string(e.what()).find(named), std::string::npos) << e.what();
+    }
+  };
+  auto yuv = colourImage(64, 48, "rgb8");
+  yuv.encoding = "yuv422";
+  expectProblem(yuv, depthImage(64, 48, "16UC1", 1.f), cameraInfo(64, 48), InputProblem::Encoding, "yuv422");
+  auto depth8 = depthImage(64, 48, "16UC1", 1.f);
+  depth8.encoding = "mono8";
+  expectProblem(colourImage(64, 48, "rgb8"), depth8, cameraInfo(64, 48), InputProblem::Encoding, "mono8");
+  expectProblem(colourImage(64, 48, "rgb8"), depthImage(64, 36, "16UC1", 1.f), cameraInfo(64, 48), InputProblem::Size,
+                "64x36");
+  expectProblem(colourImage(64, 48, "rgb8"), depthImage(64, 48, "16UC1", 0.f), cameraInfo(64, 48), InputProblem::Depth,
+                "no valid pixel");
+  expectProblem(colourImage(64, 48, "rgb8"), depthImage(64, 48, "32FC1", std::nanf("")), cameraInfo(64, 48),
+                InputProblem::Depth, "no valid pixel");
+  expectProblem(colourImage(64, 48, "rgb8"), depthImage(64, 48, "16UC1", 1.f), sensor_msgs::CameraInfo(),
+                InputProblem::Intrinsics, "calibrated");
+}
+
+// ---------------------------------------------------------------- outputs from a hand-made Result
+
+namespace {
+
+struct Fixture {
+  mc_flow::Result result;
+  mc_flow_ros::FrameInput previous, current;
+  mc_flow_ros::PairContext pair;
+};
+
+/// 4x3 result: segment 1 = left half (static), segment 2 = right half (moving +x 2 cm per interval);
+/// pixel (0, 0) is an outlier without depth.
+Fixture makeFixture() {
+  Fixture f;
+  const int w = 4, h = 3;
+  mc_flow::Result& r = f.result;
+  r.width = w;
+  r.height = h;
+  r.intrinsics = {2.0, 2.0, 1.5, 1.0};
+  mc_flow::Segment s1, s2;
+  s1.id = 1;
+  s2.id = 2;
+  s2.twist << 0.02, 0, 0, 0, 0, 0.01;
+  s2.transform = mc_flow::se3Exp(s2.twist);
+  s1.support = 5;
+  s2.support = 6;
+  s2.centroid = Eigen::Vector3d(0.5, 0, 2);
+  r.segments = {s1, s2};
+  r.soft_labels = mc_flow::SoftLabels(w, h, 3, 0.f);
+  r.labels = mc_flow::ImageI32(w, h, 1, 0);
+  r.occlusion = mc_flow::ImageU8(w, h, 1, 0);
+  r.scene_flow = mc_flow::ImageF(w, h, 3, 0.f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int label = x < 2 ? 1 : 2;
+      r.labels(x, y) = label;
+      r.soft_labels.at(label - 1, x, y) = 0.75f;
+      r.soft_labels.at(2, x, y) = 0.25f;
+      if (label == 2) r.scene_flow(x, y, 0) = 0.02f;
+    }
+  r.labels(0, 0) = 0;
+  r.occlusion(3, 2) = 255;
+  r.scene_flow(0, 0, 0) = std::nanf("");
+
+  f.previous.frame.depth = mc_flow::ImageF(w, h, 1, 2.0f);
+  f.previous.frame.depth(0, 0) = 0.f;
+  f.previous.frame.intensity = mc_flow::ImageF(w, h, 1, 0.5f);
+  f.previous.colour = cv::Mat(h, w, CV_8UC3, cv::Scalar(10, 20, 30));
+  f.previous.K = r.intrinsics;
+  f.current = f.previous;
+  f.pair.header.frame_id = "camera_rgb_optical_frame";
+  f.pair.header.stamp = ros::Time(100, 200000000);
+  f.pair.previous_stamp = ros::Time(100, 100000000);  // 0.1 s interval
+  f.pair.ids = {7, 9};
+  f.pair.previous = &f.previous;
+  f.pair.current = &f.current;
+  f.pair.solve_time_ms = 12.5;
+  return f;
+}
+
+}  // namespace
+
+TEST(Conversions, SegmentArrayCarriesRatesTransformsIdsAndStamps) {
+  const Fixture f = makeFixture();
+  const mc_flow::SegmentArray msg = mc_flow_ros::makeSegmentArray(f.result, f.pair);
+  EXPECT_EQ(msg.header.stamp, f.pair.header.stamp);
+  EXPECT_EQ(msg.header.frame_id, "camera_rgb_optical_frame");
+  EXPECT_EQ(msg.previous_stamp, f.pair.previous_stamp);
+  ASSERT_EQ(msg.segments.size(), 2u);
+  EXPECT_EQ(msg.segments[0].id, 7u);
+  EXPECT_EQ(msg.segments[1].id, 9u);
+  EXPECT_NEAR(msg.segments[1].twist.linear.x, 0.2, 1e-9);   // 0.02 m / 0.1 s
+  EXPECT_NEAR(msg.segments[1].twist.angular.z, 0.1, 1e-9);  // 0.01 rad / 0.1 s
+  EXPECT_NEAR(msg.segments[1].transform.translation.x, f.result.segments[1].transform(0, 3), 1e-12);
+  EXPECT_NEAR(msg.segments[1].transform.rotation.z, std::sin(0.005), 1e-9);
+  EXPECT_NEAR(msg.segments[1].transform.rotation.w, std::cos(0.005), 1e-9);
+  EXPECT_DOUBLE_EQ(msg.segments[1].support, 6.0);
+  EXPECT_DOUBLE_EQ(msg.segments[1].centroid.z, 2.0);
+  const auto c = mc_flow_ros::colourForId(9);
+  EXPECT_FLOAT_EQ(msg.segments[1].color.r, c.r / 255.f);
+  EXPECT_EQ(msg.width, 4u);
+  EXPECT_DOUBLE_EQ(msg.outlier_support, 1.0);
+  EXPECT_DOUBLE_EQ(msg.solve_time_ms, 12.5);
+}
+
+TEST(Conversions, SoftLabelsImageIsLossless) {
+  Fixture f = makeFixture();
+  f.result.soft_labels.at(0, 1, 1) = 0.123456789f;
+  const auto msg = mc_flow_ros::makeSoftLabelsImage(f.result, f.pair);
+  EXPECT_EQ(msg->encoding, "32FC3");
+  EXPECT_EQ(msg->width, 4u);
+  EXPECT_EQ(msg->height, 3u);
+  EXPECT_EQ(msg->step, 4u * 3u * 4u);
+  EXPECT_EQ(msg->header.stamp, f.pair.header.stamp);
+  const auto* data = reinterpret_cast<const float*>(msg->data.data());
+  for (int y = 0; y < 3; ++y)
+    for (int x = 0; x < 4; ++x)
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(data[(y * 4 + x) * 3 + c], f.result.soft_labels.at(c, x, y));
+}
+
+TEST(Conversions, LabelAndOcclusionImages) {
+  const Fixture f = makeFixture();
+  const auto labels = mc_flow_ros::makeLabelsImage(f.result, f.pair);
+  EXPECT_EQ(labels->encoding, "mono16");
+  const auto* ids = reinterpret_cast<const std::uint16_t*>(labels->data.data());
+  EXPECT_EQ(ids[0], 0);       // outlier
+  EXPECT_EQ(ids[1], 7);       // segment 1 -> id 7
+  EXPECT_EQ(ids[4 + 3], 9);   // segment 2 -> id 9
+  const auto occlusion = mc_flow_ros::makeOcclusionImage(f.result, f.pair);
+  EXPECT_EQ(occlusion->encoding, "mono8");
+  EXPECT_EQ(occlusion->data[2 * 4 + 3], 255);
+  EXPECT_EQ(occlusion->data[0], 0);
+  const auto segmentation = mc_flow_ros::makeSegmentationImage(f.result, f.pair, 1.0);
+  EXPECT_EQ(segmentation->encoding, "rgb8");
+  const auto c7 = mc_flow_ros::colourForId(7), c0 = mc_flow_ros::colourForId(0);
+  EXPECT_NEAR(segmentation->data[(4 + 1) * 3], 0.75 * c7.r + 0.25 * c0.r, 1.0);  // soft blend of the labels
+}
+
+TEST(Conversions, SceneFlowCloudHasTheDocumentedFields) {
+  const Fixture f = makeFixture();
+  const auto cloud = mc_flow_ros::makeSceneFlowCloud(f.result, f.pair);
+  EXPECT_EQ(cloud->width, 4u);
+  EXPECT_EQ(cloud->height, 3u);
+  EXPECT_FALSE(cloud->is_dense);
+  EXPECT_EQ(cloud->header.frame_id, "camera_rgb_optical_frame");
+  const std::vector<std::pair<std::string, int>> expected = {
+      {"x", sensor_msgs::PointField::FLOAT32},  {"y", sensor_msgs::PointField::FLOAT32},
+      {"z", sensor_msgs::PointField::FLOAT32},  {"rgb", sensor_msgs::PointField::FLOAT32},
+      {"vx", sensor_msgs::PointField::FLOAT32}, {"vy", sensor_msgs::PointField::FLOAT32},
+      {"vz", sensor_msgs::PointField::FLOAT32}, {"label", sensor_msgs::PointField::UINT32},
+      {"occluded", sensor_msgs::PointField::UINT8}};
+  ASSERT_EQ(cloud->fields.size(), expected.size());
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_EQ(cloud->fields[i].name, expected[i].first);
+    EXPECT_EQ(cloud->fields[i].datatype, expected[i].second);
+  }
+  sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), vx(*cloud, "vx");
+  sensor_msgs::PointCloud2ConstIterator<std::uint32_t> label(*cloud, "label");
+  sensor_msgs::PointCloud2ConstIterator<std::uint8_t> occluded(*cloud, "occluded");
+  // Pixel (0, 0): no depth -> NaN point.
+  EXPECT_TRUE(std::isnan(x[0]) && std::isnan(x[1]) && std::isnan(x[2]));
+  EXPECT_TRUE(std::isnan(vx[0]));
+  EXPECT_EQ(*label, 0u);
+  // Pixel (3, 2): z = 2, x = (3 - 1.5) / 2 * 2 = 1.5, y = (2 - 1) / 2 * 2 = 1; moving segment, occluded.
+  const int last = 11;
+  x += last;
+  vx += last;
+  label += last;
+  occluded += last;
+  EXPECT_FLOAT_EQ(x[0], 1.5f);
+  EXPECT_FLOAT_EQ(x[1], 1.0f);
+  EXPECT_FLOAT_EQ(x[2], 2.0f);
+  EXPECT_FLOAT_EQ(vx[0], 0.02f);
+  EXPECT_FLOAT_EQ(vx[1], 0.0f);
+  EXPECT_EQ(*label, 9u);
+  EXPECT_EQ(*occluded, 1);
+}
+
+TEST(Conversions, MotionMarkersClearThenOneArrowAndTextPerSegment) {
+  const Fixture f = makeFixture();
+  const auto markers = mc_flow_ros::makeMotionMarkers(f.result, f.pair, 1.0);
+  ASSERT_EQ(markers.markers.size(), 1u + 2u * 2u);
+  EXPECT_EQ(markers.markers[0].action, visualization_msgs::Marker::DELETEALL);
+  const auto& arrow = markers.markers[3];
+  EXPECT_EQ(arrow.type, visualization_msgs::Marker::ARROW);
+  EXPECT_EQ(arrow.id, 9);
+  ASSERT_EQ(arrow.points.size(), 2u);
+  // Centroid velocity over 0.1 s, drawn 1 s ahead.
+  const Eigen::Vector3d v = mc_flow_ros::centroidVelocity(f.result.segments[1], 0.1);
+  EXPECT_NEAR(arrow.points[1].x - arrow.points[0].x, v.x(), 1e-9);
+  EXPECT_GT(v.x(), 0.15);
+}
