@@ -5,6 +5,8 @@
 #include <sstream>
 #include <vector>
 
+#include <yaml-cpp/yaml.h>
+
 #include "mc_flow/core/error.h"
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
@@ -28,95 +30,77 @@ bool parseNumber(const std::string& text, double& value) {
   return end && *end == '\0';
 }
 
-struct YamlLine {
-  int indent = 0;
-  std::string key;    // empty for "- item" lines
-  std::string value;  // text after "key:" or "- "
+// yaml-cpp marks count lines and columns from 0; people count from 1.
+std::string position(const YAML::Mark& mark) {
+  return "line " + std::to_string(mark.line + 1) + ", column " + std::to_string(mark.column + 1);
+}
+
+// A camera matrix as the file gives it: a plain number sequence (message form, `K: [...]`) or a
+// {rows, cols, data: [...]} mapping (camera_calibration_parsers form, `camera_matrix:`).
+struct MatrixEntry {
+  bool present = false;
+  std::string where;    // the key and its position, for messages
+  std::vector<double> values;
+  std::string problem;  // why the values are unusable ("" when they are usable)
 };
 
-// A line-oriented reading of the YAML subset camera_info files use: "key: value", "key: [a, b, ...]"
-// (possibly continued on following lines), nested mappings by indentation and "- item" block sequences.
-std::vector<YamlLine> yamlLines(const std::string& text) {
-  std::vector<YamlLine> lines;
-  std::istringstream in(text);
-  std::string raw;
-  while (std::getline(in, raw)) {
-    const std::size_t hash = raw.find('#');
-    if (hash != std::string::npos) raw = raw.substr(0, hash);
-    if (trim(raw).empty() || trim(raw) == "---" || raw.rfind("%YAML", 0) == 0) continue;
-    YamlLine line;
-    line.indent = int(raw.find_first_not_of(' '));
-    const std::string body = trim(raw);
-    // Continuation of an open flow sequence from the previous line.
-    if (!lines.empty()) {
-      std::string& prev = lines.back().value;
-      if (prev.find('[') != std::string::npos && prev.find(']') == std::string::npos) {
-        prev += " " + body;
-        continue;
+MatrixEntry readMatrix(const YAML::Node& root, const std::vector<std::string>& names, std::size_t expected) {
+  MatrixEntry m;
+  for (const std::string& name : names) {
+    const YAML::Node node = root[name];
+    if (!node.IsDefined() || node.IsNull()) continue;
+    m.present = true;
+    m.where = "'" + name + "' (" + position(node.Mark()) + ")";
+    const std::string& where = m.where;
+    // Copy-construct: assigning to a YAML::Node would overwrite the node it refers to inside the document.
+    const YAML::Node data = node.IsMap() ? node["data"] : node;
+    if (node.IsMap()) {
+      if (!data.IsDefined()) {
+        m.problem = where + " has no 'data' sequence";
+        return m;
+      }
+      const YAML::Node rows = node["rows"], cols = node["cols"];
+      const std::string shape = expected == 9 ? "3x3" : "3x4";
+      if (rows.IsScalar() && cols.IsScalar() && rows.Scalar() + "x" + cols.Scalar() != shape) {
+        m.problem = where + " is " + rows.Scalar() + "x" + cols.Scalar() + ", expected " + shape;
+        return m;
       }
     }
-    if (body.rfind("- ", 0) == 0 || body == "-") {
-      line.value = trim(body.substr(1));
-    } else {
-      const std::size_t colon = body.find(':');
-      if (colon == std::string::npos) continue;
-      line.key = trim(body.substr(0, colon));
-      line.value = trim(body.substr(colon + 1));
+    if (!data.IsSequence()) {
+      m.problem = where + " is not a sequence of numbers";
+      return m;
     }
-    lines.push_back(line);
+    for (std::size_t i = 0; i < data.size(); ++i) {
+      try {
+        m.values.push_back(data[i].as<double>());
+      } catch (const YAML::Exception&) {
+        m.problem = where + " item " + std::to_string(i) + " ('" + (data[i].IsScalar() ? data[i].Scalar() : "...") +
+                    "') is not a number";
+        return m;
+      }
+    }
+    if (m.values.size() != expected)
+      m.problem = where + " has " + std::to_string(m.values.size()) + " numbers, expected " + std::to_string(expected);
+    return m;
   }
-  return lines;
+  return m;
 }
 
-// Values of key `key` at any depth whose parent chain ends with `parent` ("" = any parent).
-bool findNumbers(const std::vector<YamlLine>& lines, const std::string& parent, const std::string& key,
-                 std::vector<double>& numbers) {
-  for (std::size_t i = 0; i < lines.size(); ++i) {
-    if (lines[i].key != key) continue;
-    if (!parent.empty()) {
-      // The parent is the nearest earlier line with smaller indentation.
-      bool parent_ok = false;
-      for (std::size_t j = i; j-- > 0;) {
-        if (lines[j].indent < lines[i].indent && !lines[j].key.empty()) {
-          parent_ok = lines[j].key == parent;
-          break;
-        }
-      }
-      if (!parent_ok) continue;
+// Image width/height under the first of `names` present; 0 when none is.
+int readSize(const YAML::Node& root, const std::vector<std::string>& names, const std::string& what) {
+  for (const std::string& name : names) {
+    const YAML::Node node = root[name];
+    if (!node.IsDefined() || node.IsNull()) continue;
+    int value = -1;
+    try {
+      value = node.as<int>();
+    } catch (const YAML::Exception&) {
     }
-    numbers.clear();
-    std::string value = lines[i].value;
-    if (!value.empty() && value.front() == '[') {
-      const std::size_t close = value.find(']');
-      std::stringstream items(value.substr(1, close == std::string::npos ? std::string::npos : close - 1));
-      std::string item;
-      while (std::getline(items, item, ',')) {
-        double v;
-        if (trim(item).empty()) continue;
-        if (!parseNumber(item, v)) return false;
-        numbers.push_back(v);
-      }
-      return true;
-    }
-    if (value.empty()) {  // block sequence: following "- x" lines
-      for (std::size_t j = i + 1; j < lines.size() && lines[j].key.empty(); ++j) {
-        double v;
-        if (!parseNumber(lines[j].value, v)) return false;
-        numbers.push_back(v);
-      }
-      return true;
-    }
-    double v;
-    if (!parseNumber(value, v)) return false;
-    numbers.push_back(v);
-    return true;
+    if (value < 0)
+      throw InputError(what + ", " + position(node.Mark()) + ": '" + name + "' = '" +
+                       (node.IsScalar() ? node.Scalar() : "...") + "' is not an image size in pixels");
+    return value;
   }
-  return false;
-}
-
-int findInt(const std::vector<YamlLine>& lines, const std::string& key) {
-  std::vector<double> v;
-  if (findNumbers(lines, "", key, v) && v.size() == 1) return int(v[0]);
   return 0;
 }
 
@@ -160,28 +144,35 @@ std::string formatIntrinsics(const Intrinsics& K) {
 }
 
 CameraInfo parseCameraInfoYaml(const std::string& text, const std::string& what) {
-  const std::vector<YamlLine> lines = yamlLines(text);
-  CameraInfo info;
-  std::vector<double> k, p;
-  const bool have_k = findNumbers(lines, "", "K", k) || findNumbers(lines, "", "k", k) ||
-                      findNumbers(lines, "camera_matrix", "data", k);
-  const bool have_p = findNumbers(lines, "", "P", p) || findNumbers(lines, "", "p", p) ||
-                      findNumbers(lines, "projection_matrix", "data", p);
-  const bool k_usable = have_k && k.size() == 9 && k[0] != 0.0 && k[4] != 0.0;
-  const bool p_usable = have_p && p.size() == 12 && p[0] != 0.0 && p[5] != 0.0;
-  if (k_usable) {
-    info.intrinsics = {k[0], k[4], k[2], k[5]};
-  } else if (p_usable) {
-    info.intrinsics = {p[0], p[5], p[2], p[6]};
-  } else if (have_k || have_p) {
-    throw InputError(what + ": K (9 numbers) and P (12 numbers) are both missing, malformed or zero");
-  } else {
-    throw InputError(what + ": no K or P matrix found (expected 'K: [...]' or 'camera_matrix: data: [...]')");
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);  // the first document: `rostopic echo -n 1` output and calibration files alike
+  } catch (const YAML::ParserException& e) {
+    throw InputError(what + ", " + position(e.mark) + ": " + e.msg);
   }
-  info.width = findInt(lines, "width");
-  if (!info.width) info.width = findInt(lines, "image_width");
-  info.height = findInt(lines, "height");
-  if (!info.height) info.height = findInt(lines, "image_height");
+  if (!root.IsMap())
+    throw InputError(what + ": expected a YAML mapping with a K or camera_matrix entry (no K or P matrix found)");
+  // ROS 1 messages spell the matrices K/P, ROS 2 k/p, calibration files camera_matrix/projection_matrix.
+  const MatrixEntry k = readMatrix(root, {"K", "k", "camera_matrix"}, 9);
+  const MatrixEntry p = readMatrix(root, {"P", "p", "projection_matrix"}, 12);
+  const bool k_usable = k.present && k.problem.empty() && k.values[0] != 0.0 && k.values[4] != 0.0;
+  const bool p_usable = p.present && p.problem.empty() && p.values[0] != 0.0 && p.values[5] != 0.0;
+  CameraInfo info;
+  if (k_usable) {
+    info.intrinsics = {k.values[0], k.values[4], k.values[2], k.values[5]};
+  } else if (p_usable) {
+    info.intrinsics = {p.values[0], p.values[5], p.values[2], p.values[6]};
+  } else if (k.present || p.present) {
+    auto why = [](const MatrixEntry& m, const std::string& name) {
+      return !m.present ? name + " is missing" : !m.problem.empty() ? m.problem : m.where + " has zero focal lengths";
+    };
+    throw InputError(what + ": neither K (9 numbers) nor P (12 numbers) is usable: " + why(k, "K") + "; " +
+                     why(p, "P"));
+  } else {
+    throw InputError(what + ": no K or P matrix found (expected 'K: [...]' or 'camera_matrix: {data: [...]}')");
+  }
+  info.width = readSize(root, {"width", "image_width"}, what);
+  info.height = readSize(root, {"height", "image_height"}, what);
   checkIntrinsics(info.intrinsics, what);
   return info;
 }
@@ -193,17 +184,26 @@ CameraInfo loadCameraInfo(const std::string& path) {
 
 void saveCameraInfo(const std::string& path, const CameraInfo& info) {
   const Intrinsics& K = info.intrinsics;
-  char buffer[1024];
-  std::snprintf(buffer, sizeof(buffer),
-                "# sensor_msgs/CameraInfo of the mc_flow synthetic camera (rectified, no distortion)\n"
-                "height: %d\nwidth: %d\ndistortion_model: \"plumb_bob\"\n"
-                "D: [0.0, 0.0, 0.0, 0.0, 0.0]\n"
-                "K: [%.17g, 0.0, %.17g, 0.0, %.17g, %.17g, 0.0, 0.0, 1.0]\n"
-                "R: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]\n"
-                "P: [%.17g, 0.0, %.17g, 0.0, 0.0, %.17g, %.17g, 0.0, 0.0, 0.0, 1.0, 0.0]\n"
-                "binning_x: 0\nbinning_y: 0\n",
-                info.height, info.width, K.fx, K.cx, K.fy, K.cy, K.fx, K.cx, K.fy, K.cy);
-  writeTextFile(path, buffer);
+  const std::vector<double> distortion(5, 0.0);
+  const std::vector<double> camera = {K.fx, 0.0, K.cx, 0.0, K.fy, K.cy, 0.0, 0.0, 1.0};
+  const std::vector<double> rotation = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+  const std::vector<double> projection = {K.fx, 0.0, K.cx, 0.0, 0.0, K.fy, K.cy, 0.0, 0.0, 0.0, 1.0, 0.0};
+  YAML::Emitter out;
+  out.SetDoublePrecision(17);  // enough digits to parse back exactly
+  out << YAML::Comment("sensor_msgs/CameraInfo of the mc_flow synthetic camera (rectified, no distortion)");
+  out << YAML::BeginMap;
+  out << YAML::Key << "height" << YAML::Value << info.height;
+  out << YAML::Key << "width" << YAML::Value << info.width;
+  out << YAML::Key << "distortion_model" << YAML::Value << YAML::DoubleQuoted << "plumb_bob";
+  out << YAML::Key << "D" << YAML::Value << YAML::Flow << distortion;
+  out << YAML::Key << "K" << YAML::Value << YAML::Flow << camera;
+  out << YAML::Key << "R" << YAML::Value << YAML::Flow << rotation;
+  out << YAML::Key << "P" << YAML::Value << YAML::Flow << projection;
+  out << YAML::Key << "binning_x" << YAML::Value << 0;
+  out << YAML::Key << "binning_y" << YAML::Value << 0;
+  out << YAML::EndMap;
+  if (!out.good()) throw FileError("camera info '" + path + "': cannot format: " + out.GetLastError());
+  writeTextFile(path, std::string(out.c_str()) + "\n");
 }
 
 }  // namespace io

@@ -1,10 +1,13 @@
 #include "mc_flow/io/report_io.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
-#include <set>
 #include <sstream>
+
+#include <nlohmann/json.hpp>
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/io/image_io.h"
@@ -13,11 +16,16 @@ namespace mc_flow {
 namespace io {
 namespace {
 
-std::string formatNumber(double v) {
-  if (!std::isfinite(v)) return "null";
-  char buffer[64];
-  std::snprintf(buffer, sizeof(buffer), "%.10g", v);
-  return buffer;
+// ordered_json keeps the keys in the order written, so the files read top-down like the documentation.
+using Json = nlohmann::ordered_json;
+
+// Non-finite numbers become null: JSON has no NaN or infinity.
+Json number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
+
+Json numbers(const std::vector<double>& values) {
+  Json list = Json::array();
+  for (double v : values) list.push_back(number(v));
+  return list;
 }
 
 std::vector<double> twistValues(const Vector6d& xi) { return {xi(0), xi(1), xi(2), xi(3), xi(4), xi(5)}; }
@@ -29,216 +37,108 @@ std::vector<double> transformValues(const Eigen::Matrix4d& T) {
   return v;
 }
 
+// A Config::fields() value (text) as JSON: booleans and numbers bare, enumerations as strings.
+Json configValue(const std::string& text) {
+  if (text == "true" || text == "false") return text == "true";
+  if (text.empty()) return text;
+  char* end = nullptr;
+  const long long integer = std::strtoll(text.c_str(), &end, 10);
+  if (*end == '\0') return integer;
+  const double real = std::strtod(text.c_str(), &end);
+  if (*end == '\0' && std::isfinite(real)) return real;
+  return text;
+}
+
+std::string dump(const Json& json) { return json.dump(2) + "\n"; }
+
 }  // namespace
 
-void JsonWriter::separate() {
-  if (after_key_) {
-    after_key_ = false;
-    return;
-  }
-  if (!first_in_scope_.empty()) {
-    if (!first_in_scope_.back()) out_ += ",";
-    first_in_scope_.back() = false;
-    out_ += "\n" + std::string(2 * first_in_scope_.size(), ' ');
-  }
-}
-
-JsonWriter& JsonWriter::beginObject() {
-  separate();
-  out_ += "{";
-  first_in_scope_.push_back(true);
-  return *this;
-}
-
-JsonWriter& JsonWriter::endObject() {
-  const bool empty = first_in_scope_.back();
-  first_in_scope_.pop_back();
-  if (!empty) out_ += "\n" + std::string(2 * first_in_scope_.size(), ' ');
-  out_ += "}";
-  if (first_in_scope_.empty()) out_ += "\n";
-  return *this;
-}
-
-JsonWriter& JsonWriter::beginArray() {
-  separate();
-  out_ += "[";
-  first_in_scope_.push_back(true);
-  return *this;
-}
-
-JsonWriter& JsonWriter::endArray() {
-  const bool empty = first_in_scope_.back();
-  first_in_scope_.pop_back();
-  if (!empty) out_ += "\n" + std::string(2 * first_in_scope_.size(), ' ');
-  out_ += "]";
-  return *this;
-}
-
-JsonWriter& JsonWriter::key(const std::string& name) {
-  separate();
-  out_ += jsonQuote(name) + ": ";
-  after_key_ = true;
-  return *this;
-}
-
-JsonWriter& JsonWriter::raw(const std::string& json) {
-  separate();
-  out_ += json;
-  return *this;
-}
-
-JsonWriter& JsonWriter::value(double v) { return raw(formatNumber(v)); }
-JsonWriter& JsonWriter::value(int v) { return raw(std::to_string(v)); }
-JsonWriter& JsonWriter::value(long long v) { return raw(std::to_string(v)); }
-JsonWriter& JsonWriter::value(std::size_t v) { return raw(std::to_string(v)); }
-JsonWriter& JsonWriter::value(bool v) { return raw(v ? "true" : "false"); }
-JsonWriter& JsonWriter::value(const std::string& v) { return raw(jsonQuote(v)); }
-JsonWriter& JsonWriter::value(const char* v) { return raw(jsonQuote(v)); }
-
-JsonWriter& JsonWriter::numbers(const std::vector<double>& values) {
-  std::string line = "[";
-  for (std::size_t i = 0; i < values.size(); ++i) line += (i ? ", " : "") + formatNumber(values[i]);
-  return raw(line + "]");
-}
-
-std::string jsonQuote(const std::string& text) {
-  std::string out = "\"";
-  for (unsigned char c : text) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (c < 0x20) {
-          char buffer[8];
-          std::snprintf(buffer, sizeof(buffer), "\\u%04x", c);
-          out += buffer;
-        } else {
-          out.push_back(char(c));
-        }
-    }
-  }
-  return out + "\"";
-}
-
-std::string configValueToJson(const std::string& text) {
-  if (text == "true" || text == "false") return text;
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (!text.empty() && end && *end == '\0' && std::isfinite(v)) return formatNumber(v);
-  return jsonQuote(text);
-}
-
 std::string segmentsJson(const Result& result) {
-  JsonWriter w;
-  w.beginObject();
-  w.key("frame").value("camera optical frame of frame 1 (x right, y down, z forward); transform maps frame-1 "
-                       "points to their frame-2 positions");
-  w.key("units").value("twist: v [m], w [rad] over the frame interval; centroid [m]; support [pixels]");
-  w.key("segments").beginArray();
-  for (const Segment& s : result.segments) {
-    w.beginObject();
-    w.key("id").value(s.id);
-    w.key("twist").numbers(twistValues(s.twist));
-    w.key("transform").numbers(transformValues(s.transform));
-    w.key("support").value(s.support);
-    w.key("centroid").numbers({s.centroid.x(), s.centroid.y(), s.centroid.z()});
-    w.key("speed").value(s.twist.head<3>().norm());
-    w.key("rotation_angle").value(s.twist.tail<3>().norm());
-    w.endObject();
-  }
-  w.endArray();
-  w.endObject();
-  return w.str();
+  Json segments = Json::array();
+  for (const Segment& s : result.segments)
+    segments.push_back({{"id", s.id},
+                        {"twist", numbers(twistValues(s.twist))},
+                        {"transform", numbers(transformValues(s.transform))},
+                        {"support", s.support},
+                        {"centroid", numbers({s.centroid.x(), s.centroid.y(), s.centroid.z()})},
+                        {"speed", number(s.twist.head<3>().norm())},
+                        {"rotation_angle", number(s.twist.tail<3>().norm())}});
+  return dump({{"frame", "camera optical frame of frame 1 (x right, y down, z forward); transform maps frame-1 "
+                         "points to their frame-2 positions"},
+               {"units", "twist: v [m], w [rad] over the frame interval; centroid [m]; support [pixels]"},
+               {"segments", segments}});
 }
 
 std::string reportJson(const Result& result, const Config& config, const RunInfo& info) {
-  JsonWriter w;
-  w.beginObject();
-  w.key("inputs").beginObject();
-  w.key("rgb1").value(info.rgb1).key("depth1").value(info.depth1);
-  w.key("rgb2").value(info.rgb2).key("depth2").value(info.depth2);
-  w.key("depth_scale").value(info.depth_scale);
-  w.endObject();
-  w.key("resolution").beginObject().key("width").value(result.width).key("height").value(result.height).endObject();
-  w.key("processing_resolution")
-      .beginObject()
-      .key("width")
-      .value(result.processing_width)
-      .key("height")
-      .value(result.processing_height)
-      .endObject();
-  w.key("pyramid_levels").value(result.pyramid_levels);
   const Intrinsics& K = result.intrinsics;
-  w.key("intrinsics").beginObject().key("fx").value(K.fx).key("fy").value(K.fy).key("cx").value(K.cx).key("cy").value(K.cy).endObject();
-  w.key("config").beginObject();
-  for (const auto& [name, value] : config.fields()) w.key(name).raw(configValueToJson(value));
-  w.endObject();
-  w.key("backend").value(result.backend);
-  w.key("backend_note").value(result.backend_note);
   const StageTimings& t = result.timings;
-  w.key("timings_ms").beginObject();
-  w.key("load").value(info.load_ms);
-  w.key("preprocessing").value(t.preprocessing);
-  w.key("initialisation").value(t.initialisation);
-  w.key("motion").value(t.motion);
-  w.key("labels").value(t.labels);
-  w.key("adaptation").value(t.adaptation);
-  w.key("occlusion").value(t.occlusion);
-  w.key("outputs").value(t.outputs);
-  w.key("solver_total").value(t.total);
-  w.key("write").value(info.write_ms);
-  w.endObject();
-  w.key("iterations").beginArray();
-  for (const OuterIterationStats& it : result.iterations) {
-    w.beginObject();
-    w.key("iteration").value(it.iteration);
-    w.key("labels_before").value(it.labels_before);
-    w.key("labels_after").value(it.labels_after);
-    w.key("merged").value(it.merged);
-    w.key("removed").value(it.removed);
-    w.key("motion_iterations").value(it.motion_iterations);
-    w.key("label_iterations").value(it.label_iterations);
-    w.key("label_change").value(it.label_change);
-    w.key("energy").value(it.energy);
-    w.endObject();
-  }
-  w.endArray();
-  w.key("final_energy").value(result.energy);
-  w.key("segments").value(int(result.segments.size()));
-  w.endObject();
-  return w.str();
+  Json config_fields = Json::object();
+  for (const auto& [name, value] : config.fields()) config_fields[name] = configValue(value);
+  Json iterations = Json::array();
+  for (const OuterIterationStats& it : result.iterations)
+    iterations.push_back({{"iteration", it.iteration},
+                          {"labels_before", it.labels_before},
+                          {"labels_after", it.labels_after},
+                          {"merged", it.merged},
+                          {"removed", it.removed},
+                          {"motion_iterations", it.motion_iterations},
+                          {"label_iterations", it.label_iterations},
+                          {"label_change", number(it.label_change)},
+                          {"energy", number(it.energy)}});
+  Json report;
+  report["inputs"] = {{"rgb1", info.rgb1},
+                      {"depth1", info.depth1},
+                      {"rgb2", info.rgb2},
+                      {"depth2", info.depth2},
+                      {"depth_scale", number(info.depth_scale)}};
+  report["resolution"] = {{"width", result.width}, {"height", result.height}};
+  report["processing_resolution"] = {{"width", result.processing_width}, {"height", result.processing_height}};
+  report["pyramid_levels"] = result.pyramid_levels;
+  report["intrinsics"] = {{"fx", number(K.fx)}, {"fy", number(K.fy)}, {"cx", number(K.cx)}, {"cy", number(K.cy)}};
+  report["config"] = config_fields;
+  report["backend"] = result.backend;
+  report["backend_note"] = result.backend_note;
+  report["timings_ms"] = {{"load", number(info.load_ms)},
+                          {"preprocessing", number(t.preprocessing)},
+                          {"initialisation", number(t.initialisation)},
+                          {"motion", number(t.motion)},
+                          {"labels", number(t.labels)},
+                          {"adaptation", number(t.adaptation)},
+                          {"occlusion", number(t.occlusion)},
+                          {"outputs", number(t.outputs)},
+                          {"solver_total", number(t.total)},
+                          {"write", number(info.write_ms)}};
+  report["iterations"] = iterations;
+  report["final_energy"] = number(result.energy);
+  report["segments"] = int(result.segments.size());
+  return dump(report);
 }
 
 std::string evalJson(const EvalMetrics& m) {
-  JsonWriter w;
-  const double nan = std::nan("");
   const bool gt = m.has_ground_truth, in = m.has_inputs;
-  w.beginObject();
-  w.key("has_ground_truth").value(gt);
-  w.key("has_inputs").value(in);
-  w.key("segments").value(m.segments);
-  w.key("optical_flow_epe_px").value(gt ? m.flow_epe : nan);
-  w.key("optical_flow_aae_deg").value(gt ? m.flow_aae_deg : nan);
-  w.key("optical_flow_epe_zero_flow_px").value(gt ? m.flow_epe_zero_flow : nan);
-  w.key("optical_flow_pixels").value(m.flow_pixels);
-  w.key("optical_flow_epe_moving_px").value(gt ? m.flow_epe_moving : nan);
-  w.key("optical_flow_epe_moving_zero_flow_px").value(gt ? m.flow_epe_moving_zero_flow : nan);
-  w.key("moving_pixels").value(m.moving_pixels);
-  w.key("scene_flow_epe_m").value(gt ? m.scene_flow_epe : nan);
-  w.key("scene_flow_epe_zero_flow_m").value(gt ? m.scene_flow_epe_zero_flow : nan);
-  w.key("scene_flow_pixels").value(m.scene_flow_pixels);
-  w.key("segmentation_agreement").value(gt ? m.segmentation_agreement : nan);
-  w.key("occlusion_agreement").value(gt ? m.occlusion_agreement : nan);
-  w.key("rmse_photometric").value(in ? m.rmse_photometric : nan);
-  w.key("rmse_geometric_m").value(in ? m.rmse_geometric : nan);
-  w.key("rmse_photometric_zero_flow").value(in ? m.rmse_photometric_zero_flow : nan);
-  w.key("rmse_geometric_zero_flow_m").value(in ? m.rmse_geometric_zero_flow : nan);
-  w.key("residual_pixels").value(m.residual_pixels);
-  w.endObject();
-  return w.str();
+  // Metrics whose source is missing are null rather than a misleading 0.
+  auto ifGt = [&](double v) { return gt ? number(v) : Json(nullptr); };
+  auto ifInputs = [&](double v) { return in ? number(v) : Json(nullptr); };
+  return dump({{"has_ground_truth", gt},
+               {"has_inputs", in},
+               {"segments", m.segments},
+               {"optical_flow_epe_px", ifGt(m.flow_epe)},
+               {"optical_flow_aae_deg", ifGt(m.flow_aae_deg)},
+               {"optical_flow_epe_zero_flow_px", ifGt(m.flow_epe_zero_flow)},
+               {"optical_flow_pixels", m.flow_pixels},
+               {"optical_flow_epe_moving_px", ifGt(m.flow_epe_moving)},
+               {"optical_flow_epe_moving_zero_flow_px", ifGt(m.flow_epe_moving_zero_flow)},
+               {"moving_pixels", m.moving_pixels},
+               {"scene_flow_epe_m", ifGt(m.scene_flow_epe)},
+               {"scene_flow_epe_zero_flow_m", ifGt(m.scene_flow_epe_zero_flow)},
+               {"scene_flow_pixels", m.scene_flow_pixels},
+               {"segmentation_agreement", ifGt(m.segmentation_agreement)},
+               {"occlusion_agreement", ifGt(m.occlusion_agreement)},
+               {"rmse_photometric", ifInputs(m.rmse_photometric)},
+               {"rmse_geometric_m", ifInputs(m.rmse_geometric)},
+               {"rmse_photometric_zero_flow", ifInputs(m.rmse_photometric_zero_flow)},
+               {"rmse_geometric_zero_flow_m", ifInputs(m.rmse_geometric_zero_flow)},
+               {"residual_pixels", m.residual_pixels}});
 }
 
 std::string evalTable(const EvalMetrics& m) {
@@ -274,21 +174,13 @@ std::string evalTable(const EvalMetrics& m) {
 }
 
 std::string groundTruthSegmentsJson(const std::vector<SyntheticPart>& parts) {
-  JsonWriter w;
-  w.beginObject();
-  w.key("units").value("twist: v [m], w [rad] over the frame interval, frame-1 camera frame");
-  w.key("parts").beginArray();
-  for (const SyntheticPart& p : parts) {
-    w.beginObject();
-    w.key("id").value(p.id);
-    w.key("name").value(p.name);
-    w.key("twist").numbers(twistValues(p.twist));
-    w.key("transform").numbers(transformValues(se3Exp(p.twist)));
-    w.endObject();
-  }
-  w.endArray();
-  w.endObject();
-  return w.str();
+  Json list = Json::array();
+  for (const SyntheticPart& p : parts)
+    list.push_back({{"id", p.id},
+                    {"name", p.name},
+                    {"twist", numbers(twistValues(p.twist))},
+                    {"transform", numbers(transformValues(se3Exp(p.twist)))}});
+  return dump({{"units", "twist: v [m], w [rad] over the frame interval, frame-1 camera frame"}, {"parts", list}});
 }
 
 void writeTextFile(const std::string& path, const std::string& text) {
@@ -305,6 +197,18 @@ std::string readTextFile(const std::string& path) {
   std::ostringstream text;
   text << in.rdbuf();
   return text.str();
+}
+
+nlohmann::json readJsonFile(const std::string& path) {
+  const std::string text = readTextFile(path);
+  try {
+    return nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    // e.byte is 1-based; the line is what a person looks for.
+    const std::size_t at = std::min<std::size_t>(e.byte ? e.byte - 1 : 0, text.size());
+    const auto line = 1 + std::count(text.begin(), text.begin() + std::ptrdiff_t(at), '\n');
+    throw InputError("JSON file '" + path + "', line " + std::to_string(line) + ": " + e.what());
+  }
 }
 
 }  // namespace io

@@ -1,5 +1,5 @@
 // Round trips and parsers of the file I/O library: .flo, .pfm, .npy, camera_info YAML, intrinsics text,
-// config files, depth/colour loading.
+// config files (JSON and YAML), the JSON outputs, depth/colour loading.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -9,9 +9,11 @@
 #include <fstream>
 #include <random>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/se3.h"
 #include "mc_flow/io/camera_info.h"
 #include "mc_flow/io/config_file.h"
 #include "mc_flow/io/flow_io.h"
@@ -207,6 +209,89 @@ TEST(CameraInfo, RejectsMissingMatrixAndNamesTheSource) {
   }
 }
 
+// The layout camera_calibration_parsers writes (e.g. ~/.ros/camera_info/<name>.yaml, the calibrator's ost.yaml).
+const char* kRosCalibrationFile =
+    "image_width: 640\n"
+    "image_height: 480\n"
+    "camera_name: rgb_PS1080_PrimeSense\n"
+    "camera_matrix:\n"
+    "  rows: 3\n"
+    "  cols: 3\n"
+    "  data: [517.3, 0., 318.6, 0., 516.5, 255.3, 0., 0., 1.]\n"
+    "distortion_model: plumb_bob\n"
+    "distortion_coefficients:\n"
+    "  rows: 1\n"
+    "  cols: 5\n"
+    "  data: [0.2624, -0.9531, -0.0054, 0.0026, 1.1633]\n"
+    "rectification_matrix:\n"
+    "  rows: 3\n"
+    "  cols: 3\n"
+    "  data: [1., 0., 0., 0., 1., 0., 0., 0., 1.]\n"
+    "projection_matrix:\n"
+    "  rows: 3\n"
+    "  cols: 4\n"
+    "  data: [510.0, 0., 320.0, 0., 0., 511.0, 250.0, 0., 0., 0., 1., 0.]\n";
+
+TEST(CameraInfo, LoadsRosCalibrationFile) {
+  const std::string path = tempPath("rgb_PS1080_PrimeSense.yaml");
+  std::ofstream(path) << kRosCalibrationFile;
+  const io::CameraInfo info = io::loadCameraInfo(path);
+  EXPECT_EQ(info.intrinsics.fx, 517.3);
+  EXPECT_EQ(info.intrinsics.fy, 516.5);
+  EXPECT_EQ(info.intrinsics.cx, 318.6);
+  EXPECT_EQ(info.intrinsics.cy, 255.3);
+  EXPECT_EQ(info.width, 640);
+  EXPECT_EQ(info.height, 480);
+
+  // With an all-zero camera_matrix (uncalibrated), the projection_matrix is used.
+  std::string zero_k = kRosCalibrationFile;
+  const std::string k_data = "[517.3, 0., 318.6, 0., 516.5, 255.3, 0., 0., 1.]";
+  zero_k.replace(zero_k.find(k_data), k_data.size(), "[0., 0., 0., 0., 0., 0., 0., 0., 0.]");
+  const io::CameraInfo from_p = io::parseCameraInfoYaml(zero_k, "zero_k.yaml");
+  EXPECT_EQ(from_p.intrinsics.fx, 510.0);
+  EXPECT_EQ(from_p.intrinsics.fy, 511.0);
+  EXPECT_EQ(from_p.intrinsics.cx, 320.0);
+  EXPECT_EQ(from_p.intrinsics.cy, 250.0);
+}
+
+TEST(CameraInfo, BadMatricesAndSyntaxNameTheFileAndEntry) {
+  // camera_matrix with 8 numbers and no projection matrix.
+  std::string short_k = std::string(kRosCalibrationFile).substr(0, std::string(kRosCalibrationFile).find("projection_matrix"));
+  short_k.replace(short_k.find(", 0., 0., 1.]"), 13, ", 0., 1.]");
+  try {
+    io::parseCameraInfoYaml(short_k, "short.yaml");
+    FAIL() << "accepted a camera_matrix with 8 numbers";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("short.yaml"), std::string::npos) << what;
+    EXPECT_NE(what.find("'camera_matrix'"), std::string::npos) << what;
+    EXPECT_NE(what.find("8 numbers"), std::string::npos) << what;
+  }
+  try {
+    io::parseCameraInfoYaml("K: [525, x, 319.5, 0, 525, 239.5, 0, 0, 1]\n", "letters.yaml");
+    FAIL() << "accepted a non-number in K";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("letters.yaml"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("'x'"), std::string::npos) << e.what();
+  }
+  const std::string broken = tempPath("broken_camera.yaml");
+  std::ofstream(broken) << "width: 640\nK: [525, 0, 319.5,\n  0, 525, 239.5\nheight: 480\n";
+  try {
+    io::loadCameraInfo(broken);
+    FAIL() << "accepted an unclosed flow sequence";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(broken), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("line "), std::string::npos) << e.what();
+  }
+  try {
+    io::parseCameraInfoYaml("width: wide\nK: [525, 0, 319.5, 0, 525, 239.5, 0, 0, 1]\n", "size.yaml");
+    FAIL() << "accepted a non-numeric width";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("'width'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("wide"), std::string::npos) << e.what();
+  }
+}
+
 TEST(CameraInfo, SaveLoadRoundTrip) {
   io::CameraInfo info;
   info.intrinsics = {201.25, 202.5, 80.125, 59.75};
@@ -370,10 +455,32 @@ TEST(ImageIo, LabelsAreEightOrSixteenBit) {
   EXPECT_EQ(io::loadLabels(large).data, labels.data);
 }
 
+namespace {
+
+// Expects `call` to throw E whose message contains every one of `needles`.
+template <typename E, typename F>
+void expectThrowNaming(F call, const std::vector<std::string>& needles) {
+  try {
+    call();
+    ADD_FAILURE() << "expected an exception naming " << needles.front();
+  } catch (const E& e) {
+    for (const std::string& needle : needles)
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << "'" << needle << "' not in: " << e.what();
+  }
+}
+
+std::string writeTemp(const std::string& name, const std::string& text) {
+  const std::string path = tempPath(name);
+  std::ofstream(path) << text;
+  return path;
+}
+
+}  // namespace
+
 TEST(ConfigFile, JsonAndYamlSetFields) {
-  const std::string json = tempPath("config.json");
-  std::ofstream(json) << "{\n  \"alpha\": 3.5,\n  \"initial_labels\": 12,\n  \"regularizer\": \"tv\",\n"
-                         "  \"detect_occlusions\": false\n}\n";
+  const std::string json = writeTemp("config.json",
+                                     "{\n  \"alpha\": 3.5,\n  \"initial_labels\": 12,\n  \"regularizer\": \"tv\",\n"
+                                     "  \"detect_occlusions\": false\n}\n");
   Config a;
   io::applyConfigFile(json, a);
   EXPECT_EQ(a.alpha, 3.5);
@@ -381,43 +488,227 @@ TEST(ConfigFile, JsonAndYamlSetFields) {
   EXPECT_EQ(a.regularizer, Regularizer::TotalVariation);
   EXPECT_FALSE(a.detect_occlusions);
 
-  const std::string yaml = tempPath("config.yaml");
-  std::ofstream(yaml) << "# solver settings\nalpha: 1.25   # weight\ninitial_labels: 9\nregularizer: quad\n";
+  // One-line JSON with exponent notation.
+  const std::string compact = writeTemp("compact.json", "{\"lambda_tv\":2.5e-1,\"outer_iterations\":4}");
+  Config c;
+  io::applyConfigFile(compact, c);
+  EXPECT_EQ(c.lambda_tv, 0.25);
+  EXPECT_EQ(c.outer_iterations, 4);
+
+  const std::string yaml = writeTemp("config.yaml",
+                                     "%YAML 1.2\n---\n# solver settings\nalpha: 1.25   # weight\ninitial_labels: 9\n"
+                                     "regularizer: 'quad'\ndetect_occlusions: true\n");
   Config b;
+  b.detect_occlusions = false;
   io::applyConfigFile(yaml, b);
   EXPECT_EQ(b.alpha, 1.25);
   EXPECT_EQ(b.initial_labels, 9);
   EXPECT_EQ(b.regularizer, Regularizer::Quadratic);
+  EXPECT_TRUE(b.detect_occlusions);
+
+  // A file with only comments changes nothing.
+  const std::string empty = writeTemp("empty.yaml", "# nothing set here\n");
+  Config d, defaults;
+  io::applyConfigFile(empty, d);
+  EXPECT_EQ(d.fields(), defaults.fields());
+}
+
+TEST(ConfigFile, ParsesKeyValuesInFileOrder) {
+  const auto pairs = io::parseFlatKeyValues("{\"b\": 1, \"a\": \"x y\", \"c\": true}", "text");
+  ASSERT_EQ(pairs.size(), 3u);
+  EXPECT_EQ(pairs[0], (std::pair<std::string, std::string>{"b", "1"}));
+  EXPECT_EQ(pairs[1], (std::pair<std::string, std::string>{"a", "x y"}));
+  EXPECT_EQ(pairs[2], (std::pair<std::string, std::string>{"c", "true"}));
 }
 
 TEST(ConfigFile, ErrorsNameFileAndKey) {
-  const std::string path = tempPath("bad_config.yaml");
-  std::ofstream(path) << "alpha: 2\nno_such_field: 1\n";
+  const std::string path = writeTemp("bad_config.yaml", "alpha: 2\nno_such_field: 1\n");
   Config c;
-  try {
-    io::applyConfigFile(path, c);
-    FAIL();
-  } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("no_such_field"), std::string::npos) << e.what();
-  }
-  const std::string nested = tempPath("nested.json");
-  std::ofstream(nested) << "{\"alpha\": {\"x\": 1}}";
-  EXPECT_THROW(io::applyConfigFile(nested, c), ConfigError);
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(path, c); }, {path, "no_such_field"});
+  const std::string bad_value = writeTemp("bad_value.yaml", "alpha: fast\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(bad_value, c); }, {bad_value, "alpha", "fast"});
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(tempPath("no_such_config.yaml"), c); },
+                                 {"no_such_config.yaml", "does not exist"});
   EXPECT_THROW(io::applyConfigAssignment("alpha", c), ConfigError);
   io::applyConfigAssignment("alpha=0.75", c);
   EXPECT_EQ(c.alpha, 0.75);
 }
 
-TEST(Json, WriterEscapesAndWritesNullForNonFinite) {
-  io::JsonWriter w;
-  w.beginObject().key("text").value("a\"b\\c\n").key("nan").value(std::nan("")).key("list").numbers({1.5, 2}).endObject();
-  EXPECT_NE(w.str().find("\"a\\\"b\\\\c\\n\""), std::string::npos) << w.str();
-  EXPECT_NE(w.str().find("\"nan\": null"), std::string::npos) << w.str();
-  EXPECT_NE(w.str().find("[1.5, 2]"), std::string::npos) << w.str();
-  EXPECT_EQ(io::configValueToJson("0.25"), "0.25");
-  EXPECT_EQ(io::configValueToJson("true"), "true");
-  EXPECT_EQ(io::configValueToJson("quad"), "\"quad\"");
+TEST(ConfigFile, NestedMissingAndRepeatedValuesNameFileKeyAndLine) {
+  Config c;
+  const std::string nested_json = writeTemp("nested.json", "{\n  \"lambda_tv\": 1,\n  \"alpha\": {\"x\": 1}\n}\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(nested_json, c); }, {nested_json, "'alpha'", "line 3"});
+  const std::string nested_yaml = writeTemp("nested.yaml", "alpha: 1\nsolver:\n  lambda_tv: 2\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(nested_yaml, c); }, {nested_yaml, "'solver'", "line 2"});
+  const std::string list_value = writeTemp("list.yaml", "alpha: [1, 2]\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(list_value, c); }, {list_value, "'alpha'", "nested"});
+  const std::string no_value = writeTemp("no_value.yaml", "alpha:\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(no_value, c); }, {no_value, "'alpha'", "no value"});
+  const std::string twice = writeTemp("twice.yaml", "alpha: 1\nlambda_tv: 2\nalpha: 3\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(twice, c); }, {twice, "'alpha'", "twice", "line 3"});
+  const std::string list = writeTemp("top_list.yaml", "- alpha\n- 1\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(list, c); }, {list, "mapping"});
+}
+
+TEST(ConfigFile, MalformedFilesNameFileAndLine) {
+  Config c;
+  const std::string unclosed = writeTemp("unclosed.json", "{\n  \"alpha\": 1,\n  \"lambda_tv\": 2\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(unclosed, c); }, {unclosed, "line "});
+  const std::string bad_indent = writeTemp("bad_indent.yaml", "alpha: 1\n  lambda_tv: 2\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(bad_indent, c); }, {bad_indent, "line 2"});
+  const std::string unclosed_list = writeTemp("unclosed_list.yaml", "alpha: 1\nregularizer: [tv\n");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(unclosed_list, c); }, {unclosed_list, "line "});
+  const std::string double_comma = writeTemp("double_comma.json", "{\"alpha\": 1,, \"lambda_tv\": 2}");
+  expectThrowNaming<ConfigError>([&] { io::applyConfigFile(double_comma, c); }, {double_comma, "line 1"});
+  EXPECT_EQ(c.alpha, Config().alpha) << "a malformed file must not half-apply";
+}
+
+// ----------------------------------------------------------------------------------------- JSON outputs
+
+namespace {
+
+Result resultWithTwoSegments() {
+  Result r;
+  r.width = 64;
+  r.height = 48;
+  r.processing_width = 32;
+  r.processing_height = 24;
+  r.pyramid_levels = 3;
+  r.intrinsics = {52.5, 52.75, 31.5, 23.5};
+  r.backend = "cpu";
+  r.backend_note = "forced";
+  r.energy = 123.25;
+  r.timings.motion = 4.5;
+  r.timings.total = 10.0;
+  for (int i = 0; i < 2; ++i) {
+    Segment s;
+    s.id = i + 1;
+    s.twist << 0.01 * (i + 1), -0.02, 0.03, 0.0, 0.1 * i, 0.0;
+    s.transform = se3Exp(s.twist);
+    s.support = 100.5 + i;
+    s.centroid = Eigen::Vector3d(0.1 * i, -0.2, 1.5 + i);
+    r.segments.push_back(s);
+  }
+  r.segments[1].centroid.x() = std::nan("");  // e.g. a segment without valid points
+  OuterIterationStats it;
+  it.iteration = 0;
+  it.labels_before = 4;
+  it.labels_after = 2;
+  it.merged = 2;
+  it.energy = 150.0;
+  it.label_change = 0.125;
+  r.iterations.push_back(it);
+  return r;
+}
+
+}  // namespace
+
+TEST(Json, SegmentsParseBackWithEveryField) {
+  const Result r = resultWithTwoSegments();
+  const std::string path = writeTemp("segments.json", io::segmentsJson(r));
+  const nlohmann::json j = io::readJsonFile(path);
+  ASSERT_TRUE(j.contains("frame") && j.contains("units"));
+  ASSERT_EQ(j.at("segments").size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) {
+    const nlohmann::json& s = j["segments"][i];
+    const Segment& expected = r.segments[i];
+    EXPECT_EQ(s.at("id").get<int>(), expected.id);
+    ASSERT_EQ(s.at("twist").size(), 6u);
+    for (int k = 0; k < 6; ++k) EXPECT_EQ(s["twist"][k].get<double>(), expected.twist(k));
+    ASSERT_EQ(s.at("transform").size(), 16u);
+    for (int k = 0; k < 16; ++k) EXPECT_EQ(s["transform"][k].get<double>(), expected.transform(k / 4, k % 4));
+    EXPECT_EQ(s.at("support").get<double>(), expected.support);
+    EXPECT_NEAR(s.at("speed").get<double>(), expected.twist.head<3>().norm(), 1e-15);
+    EXPECT_NEAR(s.at("rotation_angle").get<double>(), expected.twist.tail<3>().norm(), 1e-15);
+    ASSERT_EQ(s.at("centroid").size(), 3u);
+  }
+  EXPECT_TRUE(j["segments"][1]["centroid"][0].is_null());  // NaN is written as null
+  EXPECT_EQ(j["segments"][1]["centroid"][2].get<double>(), 2.5);
+}
+
+TEST(Json, ReportParsesBackWithConfigTimingsAndIterations) {
+  const Result r = resultWithTwoSegments();
+  Config config;
+  config.alpha = 2.75;
+  config.initial_labels = 7;
+  config.regularizer = Regularizer::TotalVariation;
+  io::RunInfo info;
+  info.rgb1 = "dir/rgb \"1\".png";  // quotes must be escaped
+  info.load_ms = 3.25;
+  const nlohmann::json j = nlohmann::json::parse(io::reportJson(r, config, info));
+  EXPECT_EQ(j.at("resolution").at("width").get<int>(), 64);
+  EXPECT_EQ(j.at("processing_resolution").at("height").get<int>(), 24);
+  EXPECT_EQ(j.at("pyramid_levels").get<int>(), 3);
+  EXPECT_EQ(j.at("intrinsics").at("fy").get<double>(), 52.75);
+  EXPECT_EQ(j.at("inputs").at("rgb1").get<std::string>(), info.rgb1);
+  EXPECT_EQ(j.at("backend").get<std::string>(), "cpu");
+  EXPECT_EQ(j.at("timings_ms").at("load").get<double>(), 3.25);
+  EXPECT_EQ(j.at("timings_ms").at("motion").get<double>(), 4.5);
+  EXPECT_EQ(j.at("final_energy").get<double>(), 123.25);
+  EXPECT_EQ(j.at("segments").get<int>(), 2);
+  ASSERT_EQ(j.at("iterations").size(), 1u);
+  EXPECT_EQ(j["iterations"][0].at("labels_before").get<int>(), 4);
+  EXPECT_EQ(j["iterations"][0].at("label_change").get<double>(), 0.125);
+  // Every Config field, typed: numbers and booleans bare, enumerations as strings.
+  const nlohmann::json& c = j.at("config");
+  EXPECT_EQ(c.size(), config.fields().size());
+  EXPECT_EQ(c.at("alpha").get<double>(), 2.75);
+  EXPECT_TRUE(c.at("initial_labels").is_number_integer());
+  EXPECT_EQ(c.at("initial_labels").get<int>(), 7);
+  EXPECT_TRUE(c.at("detect_occlusions").is_boolean());
+  EXPECT_EQ(c.at("regularizer").get<std::string>(), "tv");
+  // The report's config section is itself a valid config file that reproduces the Config.
+  const std::string config_path = writeTemp("report_config.json", c.dump());
+  Config back;
+  io::applyConfigFile(config_path, back);
+  EXPECT_EQ(back.fields(), config.fields());
+}
+
+TEST(Json, EvalWritesNullForMetricsWithoutSource) {
+  io::EvalMetrics m;
+  m.has_inputs = true;
+  m.rmse_photometric = 0.0625;
+  m.residual_pixels = 1234;
+  m.segments = 3;
+  m.flow_epe = 99.0;  // must not appear: has_ground_truth is false
+  const std::string path = writeTemp("eval.json", io::evalJson(m));
+  const nlohmann::json j = io::readJsonFile(path);
+  EXPECT_FALSE(j.at("has_ground_truth").get<bool>());
+  EXPECT_TRUE(j.at("has_inputs").get<bool>());
+  EXPECT_TRUE(j.at("optical_flow_epe_px").is_null());
+  EXPECT_TRUE(j.at("scene_flow_epe_m").is_null());
+  EXPECT_EQ(j.at("rmse_photometric").get<double>(), 0.0625);
+  EXPECT_EQ(j.at("residual_pixels").get<std::size_t>(), 1234u);
+  EXPECT_EQ(j.at("segments").get<int>(), 3);
+  for (const char* key : {"optical_flow_aae_deg", "optical_flow_epe_moving_px", "segmentation_agreement",
+                          "occlusion_agreement", "rmse_geometric_zero_flow_m", "moving_pixels"})
+    EXPECT_TRUE(j.contains(key)) << key;
+  m.has_ground_truth = true;
+  m.flow_epe = std::nan("");  // e.g. no pixel could be scored
+  const nlohmann::json g = nlohmann::json::parse(io::evalJson(m));
+  EXPECT_TRUE(g.at("optical_flow_epe_px").is_null());
+  EXPECT_EQ(g.at("segmentation_agreement").get<double>(), 0.0);
+}
+
+TEST(Json, GroundTruthSegmentsParseBack) {
+  SyntheticPart part;
+  part.id = 2;
+  part.name = "box";
+  part.twist << 0.05, 0, 0, 0, 0.1, 0;
+  const nlohmann::json j = nlohmann::json::parse(io::groundTruthSegmentsJson({part}));
+  ASSERT_EQ(j.at("parts").size(), 1u);
+  EXPECT_EQ(j["parts"][0].at("name").get<std::string>(), "box");
+  EXPECT_EQ(j["parts"][0].at("id").get<int>(), 2);
+  EXPECT_EQ(j["parts"][0].at("twist")[4].get<double>(), 0.1);
+  const Eigen::Matrix4d T = se3Exp(part.twist);
+  EXPECT_EQ(j["parts"][0].at("transform")[3].get<double>(), T(0, 3));
+  EXPECT_TRUE(j.contains("units"));
+}
+
+TEST(Json, ReadJsonFileNamesFileAndLineOfSyntaxErrors) {
+  const std::string path = writeTemp("broken.json", "{\n  \"a\": 1,\n  \"b\": nan\n}\n");
+  expectThrowNaming<InputError>([&] { io::readJsonFile(path); }, {path, "line 3"});
+  expectThrowNaming<InputError>([&] { io::readJsonFile(tempPath("absent.json")); }, {"absent.json"});
 }
 
 TEST(Visualization, FlowColourWheelDirectionsAndInvalid) {

@@ -1,7 +1,8 @@
 /**
  * @file camera_info.h
  * @brief Intrinsics from text: "FX,FY,CX,CY" and ROS camera_info YAML (K or P, either the message form
- * `K: [...]` as `rostopic echo` prints it or the camera_calibration_parsers form `camera_matrix: {data: [...]}`).
+ * `K: [...]` as `rostopic echo` prints it or the camera_calibration_parsers form `camera_matrix: {data: [...]}`),
+ * read with yaml-cpp.
  */
 #pragma once
 

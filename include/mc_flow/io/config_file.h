@@ -1,7 +1,7 @@
 /**
  * @file config_file.h
  * @brief Solver configuration files: a flat JSON object or flat YAML mapping whose keys are Config member
- * names, applied through Config::set.
+ * names, applied through Config::set. Both forms are read with yaml-cpp (YAML 1.2 is a superset of JSON).
  */
 #pragma once
 
@@ -15,7 +15,7 @@ namespace mc_flow {
 namespace io {
 
 /// @brief (key, value-as-text) pairs of a flat JSON object ("{...}") or flat YAML mapping ("key: value").
-/// Throws ConfigError naming `what` and the line for nested values or syntax errors.
+/// Throws ConfigError naming `what` and the line for syntax errors, nested or missing values and repeated keys.
 std::vector<std::pair<std::string, std::string>> parseFlatKeyValues(const std::string& text, const std::string& what);
 
 /// @brief Reads `path` and applies every key with Config::set; errors name the file and the key.

@@ -1,7 +1,7 @@
 /**
  * @file report_io.h
- * @brief JSON outputs: segments.json, report.json, eval.json, gt_segments.json (small hand-written writer:
- * the files are flat enough that a JSON library would add a dependency for nothing).
+ * @brief JSON outputs: segments.json, report.json, eval.json, gt_segments.json (written with nlohmann/json,
+ * two-space indentation, keys in the documented order). JSON has no NaN: non-finite numbers are written as null.
  */
 #pragma once
 
@@ -9,45 +9,14 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/core/synthetic_scene.h"
 
 namespace mc_flow {
 namespace io {
-
-/// @brief Streaming JSON writer with two-space indentation. Non-finite numbers are written as null.
-class JsonWriter {
- public:
-  JsonWriter& beginObject();
-  JsonWriter& endObject();
-  JsonWriter& beginArray();
-  JsonWriter& endArray();
-  JsonWriter& key(const std::string& name);
-  JsonWriter& value(double v);
-  JsonWriter& value(int v);
-  JsonWriter& value(long long v);
-  JsonWriter& value(std::size_t v);
-  JsonWriter& value(bool v);
-  JsonWriter& value(const std::string& v);
-  JsonWriter& value(const char* v);
-  /// @brief Writes text that is already valid JSON (e.g. a number from Config::fields()).
-  JsonWriter& raw(const std::string& json);
-  /// @brief An array of numbers on one line.
-  JsonWriter& numbers(const std::vector<double>& values);
-  const std::string& str() const { return out_; }
-
- private:
-  void separate();
-  std::string out_;
-  std::vector<bool> first_in_scope_;
-  bool after_key_ = false;
-};
-
-/// @brief JSON string literal (quotes included) of `text`.
-std::string jsonQuote(const std::string& text);
-/// @brief A Config::fields() value as JSON: numbers and booleans bare, anything else quoted.
-std::string configValueToJson(const std::string& text);
 
 /// @brief What the tool knows about a run beyond the solver's Result.
 struct RunInfo {
@@ -95,6 +64,10 @@ std::string groundTruthSegmentsJson(const std::vector<SyntheticPart>& parts);
 void writeTextFile(const std::string& path, const std::string& text);
 /// @brief Reads a whole file; throws InputError naming the path.
 std::string readTextFile(const std::string& path);
+/// @brief Parses a JSON file (e.g. one of the outputs above; null stands for a missing or non-finite number).
+/// Throws InputError naming the path and line when the file is missing or is not valid JSON.
+/// Include <nlohmann/json.hpp> to use the returned value.
+nlohmann::json readJsonFile(const std::string& path);
 
 }  // namespace io
 }  // namespace mc_flow
