@@ -24,6 +24,7 @@
 #include "cuda_check.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/simplex_projection.h"
 
 namespace mc_flow {
 
@@ -96,30 +97,6 @@ __global__ void dualStep(const float* __restrict__ u_bar, float* __restrict__ p,
   }
 }
 
-// Michelot's active-set projection onto the simplex in double, in the CPU's order (projectOntoSimplex).
-// `v` is this thread's column of the block's shared scratch: element j at v[j * stride].
-__device__ void projectOntoSimplexDevice(float* v, int n, int stride) {
-  double sum = 0;
-  for (int j = 0; j < n; ++j) sum = __dadd_rn(sum, double(v[j * stride]));
-  double theta = __ddiv_rn(__dsub_rn(sum, 1.0), double(n));
-  for (int pass = 0; pass < n; ++pass) {
-    double active_sum = 0;
-    int active = 0;
-    for (int j = 0; j < n; ++j) {
-      const float value = v[j * stride];
-      if (double(value) > theta) {
-        active_sum = __dadd_rn(active_sum, double(value));
-        ++active;
-      }
-    }
-    const double next = __ddiv_rn(__dsub_rn(active_sum, 1.0), double(active));
-    if (next <= theta) break;
-    theta = next;
-  }
-  const float t = float(theta);
-  for (int j = 0; j < n; ++j) v[j * stride] = fmaxf(sub(v[j * stride], t), 0.f);
-}
-
 // Primal descent + simplex projection + extrapolation; one thread per pixel, its n candidate values in shared
 // memory (label-major, so a warp touches 32 consecutive banks; per-thread local arrays overflowed L1 at
 // 640x480 and ran several times slower). Outlier-only pixels take the outlier label, and are extrapolated
@@ -151,7 +128,7 @@ __global__ void primalStep(float* __restrict__ u, float* __restrict__ u_bar, con
       if (y > 0) divergence = sub(divergence, mul(ry_up, py[i - width]));
       v[label * stride] = sub(u[label * plane + i], mul(tau_here, add(-divergence, data_cost[label * plane + i])));
     }
-    projectOntoSimplexDevice(v, count, stride);
+    projectOntoSimplexStrided(v, count, stride);
   }
   float max_change = 0.f;
   for (int label = 0; label < count; ++label) {

@@ -8,31 +8,11 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/motion_estimation.h"
 #include "mc_flow/core/sampling.h"
+#include "mc_flow/core/simplex_projection.h"
 
 namespace mc_flow {
 
-void projectOntoSimplex(float* v, int n) {
-  // Michelot's active-set algorithm: theta = (sum of the active values - 1) / |active|, drop the values
-  // below theta, repeat. Same result as the sort-based projection of Duchi et al. (2008) without a sort:
-  // most pixels are nearly one-hot, so it ends after one or two passes of n.
-  double sum = 0;
-  for (int i = 0; i < n; ++i) sum += v[i];
-  double theta = (sum - 1.0) / n;
-  for (int pass = 0; pass < n; ++pass) {
-    double active_sum = 0;
-    int active = 0;
-    for (int i = 0; i < n; ++i)
-      if (v[i] > theta) {
-        active_sum += v[i];
-        ++active;
-      }
-    const double next = (active_sum - 1.0) / active;
-    if (next <= theta) break;  // theta only grows; no change means the active set is final
-    theta = next;
-  }
-  const float t = float(theta);
-  for (int i = 0; i < n; ++i) v[i] = std::max(v[i] - t, 0.f);
-}
+void projectOntoSimplex(float* v, int n) { projectOntoSimplexStrided(v, n, 1); }
 
 void geometricWeights(const PyramidLevel& frame1, double min_weight, ImageF& weight_x, ImageF& weight_y) {
   const ImageF& P = frame1.points;
@@ -272,7 +252,7 @@ class CpuLabelOptimizer final : public LabelOptimizer {
       float max_change = 0.f;
 #pragma omp parallel reduction(max : max_change)
       {
-        std::vector<float> candidate(static_cast<std::size_t>(n) * W), simplex(static_cast<std::size_t>(n));
+        std::vector<float> candidate(static_cast<std::size_t>(n) * W);
 #pragma omp for schedule(static)
         for (int y = 0; y < H; ++y) {
           const std::size_t row = std::size_t(y) * W;
@@ -294,9 +274,7 @@ class CpuLabelOptimizer final : public LabelOptimizer {
               for (int label = 0; label < n; ++label) candidate[std::size_t(label) * W + x] = label == n - 1 ? 1.f : 0.f;
               continue;
             }
-            for (int label = 0; label < n; ++label) simplex[std::size_t(label)] = candidate[std::size_t(label) * W + x];
-            projectOntoSimplex(simplex.data(), n);
-            for (int label = 0; label < n; ++label) candidate[std::size_t(label) * W + x] = simplex[std::size_t(label)];
+            projectOntoSimplexStrided(candidate.data() + x, n, W);
           }
           for (int label = 0; label < n; ++label)
             max_change = std::max(max_change, primalRowCommit(W, candidate.data() + std::size_t(label) * W,
