@@ -4,7 +4,6 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 export PATH="/usr/bin:$PATH"
 bash "$ROOT/scripts/install_deps.sh"
-export MCFLOW_CMAKE_FLAGS="${MCFLOW_CMAKE_FLAGS:--DMCFLOW_WITH_ROS=OFF}"
 bash "$ROOT/scripts/build.sh"
 export MCFLOW_SHARED_DATA="${MCFLOW_SHARED_DATA:-$(cd "$ROOT/.." && pwd)/shared/data}"
 cd "${MCFLOW_BUILD_DIR:-$ROOT/build}"

@@ -1,0 +1,61 @@
+# The nodelet library, its tools and its tests (gtest + rostest). Included after the core targets.
+
+# ROS-free piece of the ROS layer (segment id persistence): its own library so that its test needs no ROS.
+add_library(mc_flow_tracker STATIC src/ros/segment_tracker.cpp)
+target_include_directories(mc_flow_tracker PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include)
+target_link_libraries(mc_flow_tracker PUBLIC mcflow_core)
+target_compile_options(mc_flow_tracker PRIVATE -Wall -Wextra)
+
+add_library(mc_flow_nodelet SHARED
+  src/ros/conversions.cpp
+  src/ros/reconfigure.cpp
+  src/ros/mc_flow_nodelet.cpp)
+target_include_directories(mc_flow_nodelet PUBLIC
+  ${CMAKE_CURRENT_SOURCE_DIR}/include ${catkin_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
+target_link_libraries(mc_flow_nodelet PUBLIC mc_flow_tracker mcflow_core ${catkin_LIBRARIES} ${OpenCV_LIBS})
+target_compile_options(mc_flow_nodelet PRIVATE -Wall -Wextra)
+add_dependencies(mc_flow_nodelet ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_gencfg)
+set_target_properties(mc_flow_nodelet PROPERTIES
+  LIBRARY_OUTPUT_DIRECTORY ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_LIB_DESTINATION})
+
+# Writes the demo bag: a synthetic RGB-D sequence with moving parts (no camera needed).
+add_executable(make_synthetic_bag src/ros/make_synthetic_bag.cpp)
+target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet)
+set_target_properties(make_synthetic_bag PROPERTIES
+  RUNTIME_OUTPUT_DIRECTORY ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_BIN_DESTINATION})
+
+install(TARGETS mc_flow_nodelet make_synthetic_bag
+  LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+  RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+install(DIRECTORY include/mc_flow/ros DESTINATION ${CATKIN_PACKAGE_INCLUDE_DESTINATION}/ros)
+install(FILES nodelet_plugins.xml DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
+install(DIRECTORY launch rviz DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
+catkin_install_python(PROGRAMS scripts/demo_monitor.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+
+if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
+  find_package(GTest REQUIRED)
+  include(GoogleTest)
+  if(NOT TARGET tests)
+    add_custom_target(tests)
+  endif()
+
+  # Unit tests that need no running node: tracker (ROS-free), conversions, reconfigure mapping.
+  add_executable(test_ros_units
+    test/ros/test_segment_tracker.cpp
+    test/ros/test_conversions.cpp
+    test/ros/test_reconfigure.cpp)
+  target_link_libraries(test_ros_units PRIVATE mc_flow_nodelet GTest::gtest GTest::gtest_main)
+  gtest_discover_tests(test_ros_units DISCOVERY_MODE PRE_TEST TEST_PREFIX "ros.")
+  add_dependencies(tests test_ros_units)
+
+  # Node-level tests: rostest starts its own master on a free port, so ctest -j is safe.
+  find_package(rostest REQUIRED)
+  set(MCFLOW_ROSTEST_NODES synthetic bad_input lazy_and_drops)
+  foreach(name ${MCFLOW_ROSTEST_NODES})
+    add_rostest_gtest(rostest_${name} test/ros/${name}.test test/ros/rostest_${name}.cpp test/ros/rostest_common.cpp)
+    target_include_directories(rostest_${name} PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/test/ros)
+    target_link_libraries(rostest_${name} mc_flow_nodelet ${GTEST_LIBRARIES})
+    add_dependencies(rostest_${name} mc_flow_nodelet)
+    add_dependencies(tests rostest_${name})
+  endforeach()
+endif()

@@ -1,0 +1,21 @@
+# catkin, messages, dynamic_reconfigure and catkin_package(). Included before any target is declared.
+set(MCFLOW_CATKIN_COMPONENTS
+  roscpp nodelet pluginlib message_filters image_transport cv_bridge sensor_msgs geometry_msgs std_msgs
+  visualization_msgs tf2 tf2_ros tf2_eigen tf2_msgs dynamic_reconfigure diagnostic_updater diagnostic_msgs
+  message_generation rosbag rosgraph_msgs)
+find_package(catkin REQUIRED COMPONENTS ${MCFLOW_CATKIN_COMPONENTS})
+
+add_message_files(DIRECTORY msg FILES MotionSegment.msg SegmentArray.msg)
+generate_messages(DEPENDENCIES std_msgs geometry_msgs)
+
+# The .cfg reads names, types, defaults and descriptions from the core's config.h (one source of truth).
+generate_dynamic_reconfigure_options(cfg/McFlow.cfg)
+# Regenerate the parameters whenever the core Config changes.
+add_custom_command(OUTPUT ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_INCLUDE_DESTINATION}/McFlowConfig.h APPEND
+  DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/include/mc_flow/core/config.h)
+
+catkin_package(
+  INCLUDE_DIRS include
+  LIBRARIES mc_flow_nodelet
+  CATKIN_DEPENDS roscpp nodelet message_filters image_transport cv_bridge sensor_msgs geometry_msgs std_msgs
+    visualization_msgs tf2_ros dynamic_reconfigure diagnostic_updater message_runtime)

@@ -1,0 +1,120 @@
+/**
+ * @file conversions.h
+ * @brief ROS messages <-> core types: camera images to mc_flow::RgbdFrame, mc_flow::Result to the
+ * nodelet's output messages. No node needed (unit-tested in test/ros/test_conversions.cpp).
+ *
+ * Frames (REP 103): everything stays in the input camera's optical frame (x right, y down, z forward).
+ * Output images are at the processing resolution (the input resolution divided by the downsample factor).
+ */
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <std_msgs/Header.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include "mc_flow/SegmentArray.h"
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/image.h"
+#include "mc_flow/core/solver.h"
+
+namespace mc_flow_ros {
+
+/// @brief What was wrong with an input frame (the nodelet throttles its warnings per kind).
+enum class InputProblem { Encoding, Size, Depth, Intrinsics };
+
+/// @brief Thrown by the input conversions; the message names the offending value.
+struct FrameInputError : mc_flow::InputError {
+  FrameInputError(InputProblem kind, const std::string& message) : mc_flow::InputError(message), problem(kind) {}
+  InputProblem problem;
+};
+
+/// @brief One synchronised RGB-D frame, converted and resized to the processing resolution.
+struct FrameInput {
+  mc_flow::RgbdFrame frame;   ///< intensity [0, 1], depth [m] (0 = invalid)
+  cv::Mat colour;             ///< CV_8UC3 RGB at the processing resolution (for display outputs)
+  mc_flow::Intrinsics K;      ///< [px] at the processing resolution
+  std_msgs::Header header;    ///< stamp and frame_id of the RGB image
+  int downsample = 1;         ///< input pixels per processing pixel (per axis)
+  int input_width = 0, input_height = 0;  ///< RGB image size
+  int valid_depth = 0;        ///< pixels with valid depth at the processing resolution
+};
+
+/// @brief Resolves the downsample factor: `requested` > 0 is used as is; 0 picks the factor that brings
+/// the width closest to 320 px (the paper's resolution; 640x480 -> 2, 320x240 -> 1, 1280x720 -> 4).
+int chooseDownsample(int requested, int width);
+
+/// @brief Colour encodings accepted: rgb8 bgr8 rgba8 bgra8 mono8 mono16.
+bool isSupportedColourEncoding(const std::string& encoding);
+/// @brief Depth encodings accepted: 16UC1 (millimetres, 0 = invalid) and 32FC1 (metres, NaN/0 = invalid).
+bool isSupportedDepthEncoding(const std::string& encoding);
+
+/// @brief Pinhole intrinsics of an image of `width` x `height` pixels from camera_info. Uses P (the
+/// rectified projection), falling back to K when P is all zero; rescales when camera_info describes a
+/// different size than the image. Throws FrameInputError (Intrinsics) for zero/non-finite focal lengths.
+mc_flow::Intrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info, int width, int height);
+
+/// @brief Converts and resizes one synchronised frame. Depth of a different size than the RGB image is
+/// resampled when both have the same aspect ratio. Throws FrameInputError naming the bad value for an
+/// unsupported encoding, an empty image, a size/aspect mismatch, all-invalid depth or zero intrinsics.
+FrameInput toFrameInput(const sensor_msgs::Image& rgb, const sensor_msgs::Image& depth,
+                        const sensor_msgs::CameraInfo& info, int downsample_request);
+
+/// @brief Camera info of the processing resolution (outputs can be projected with it).
+sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input);
+
+/// @brief Everything the output builders need besides the Result.
+struct PairContext {
+  std_msgs::Header header;       ///< stamp of the current frame, input frame_id
+  ros::Time previous_stamp;      ///< stamp of the previous frame of the pair
+  std::vector<std::uint32_t> ids;  ///< persistent id of each segment (Result::segments order)
+  const FrameInput* previous = nullptr;  ///< the pair's first frame (points of the scene flow cloud)
+  const FrameInput* current = nullptr;   ///< the pair's second frame
+  double solve_time_ms = 0;
+  /// @brief Seconds between the frames (> 0).
+  double interval() const { return (header.stamp - previous_stamp).toSec(); }
+};
+
+/// @brief ~segments: ids, twists [m/s, rad/s], interval transforms, support, centroid, colour.
+mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const PairContext& pair);
+
+/// @brief ~soft_labels: one 32FC<n> image, n = segments + 1; channel i is segment i of ~segments, the
+/// last channel the outlier label; values exactly as the solver produced them (lossless, sum to 1).
+sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const PairContext& pair);
+/// @brief ~labels: mono16 argmax with persistent ids (0 = outlier or no depth).
+sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairContext& pair);
+/// @brief ~occlusion: mono8, 255 = occluded (or out of view) in the current frame.
+sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const PairContext& pair);
+/// @brief ~segmentation: rgb8, the previous frame's colour blended with the soft-label-weighted segment
+/// colours (`blend` = weight of the segment colours, 0..1).
+sensor_msgs::ImagePtr makeSegmentationImage(const mc_flow::Result& result, const PairContext& pair,
+                                            double blend = 0.6);
+
+/// @brief How the ~scene_flow cloud's rgb field is filled.
+enum class CloudColour { Segment, Image };
+
+/// @brief ~scene_flow: organized cloud (processing resolution) of the previous frame's points.
+/// Fields: x y z [m] (float32, the point at the previous stamp), rgb (float32-packed), vx vy vz [m over
+/// the interval] (float32), label (uint32 persistent id, 0 = outlier/no depth), occluded (uint8, 1 =
+/// occluded in the current frame). Invalid points have NaN in x y z vx vy vz.
+sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, const PairContext& pair,
+                                               CloudColour colour = CloudColour::Segment);
+
+/// @brief ~motion_markers: per segment an arrow from its centroid along its centroid's velocity
+/// (length = speed x `seconds_ahead`) and a text with id and speed; starts with a DELETEALL marker.
+visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result, const PairContext& pair,
+                                                  double seconds_ahead = 1.0);
+
+/// @brief Velocity of a segment's centroid [m/s] over the pair interval.
+Eigen::Vector3d centroidVelocity(const mc_flow::Segment& segment, double interval);
+
+/// @brief The segmentation picture as a cv::Mat (CV_8UC3 RGB), shared by the image message and save_dir.
+cv::Mat segmentationPicture(const mc_flow::Result& result, const PairContext& pair, double blend);
+
+}  // namespace mc_flow_ros

@@ -1,0 +1,151 @@
+/**
+ * @file mc_flow_nodelet.h
+ * @brief mc_flow/MCFlowNodelet: synchronised RGB-D in; segments, soft labels, occlusion, scene flow out.
+ *
+ * Thin wrapper around mc_flow::Solver. The synchroniser callback only hands the newest frame to a
+ * worker thread (frames arriving while a pair is being solved replace the waiting one and are counted
+ * as dropped), so the camera's nodelet manager is never blocked by a solve. Each solved frame is paired
+ * with the previously solved one. Inputs are subscribed only while an output has a listener.
+ */
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
+#include <image_transport/image_transport.h>
+#include <image_transport/subscriber_filter.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/approximate_time.h>
+#include <message_filters/sync_policies/exact_time.h>
+#include <message_filters/synchronizer.h>
+#include <nodelet/nodelet.h>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <tf2_ros/transform_broadcaster.h>
+
+#include "mc_flow/McFlowConfig.h"
+#include "mc_flow/core/solver.h"
+#include "mc_flow/ros/conversions.h"
+#include "mc_flow/ros/segment_tracker.h"
+
+namespace mc_flow_ros {
+
+class MCFlowNodelet : public nodelet::Nodelet {
+ public:
+  MCFlowNodelet() = default;
+  ~MCFlowNodelet() override;
+
+ private:
+  using Image = sensor_msgs::Image;
+  using CameraInfo = sensor_msgs::CameraInfo;
+  using ApproximatePolicy = message_filters::sync_policies::ApproximateTime<Image, Image, CameraInfo>;
+  using ExactPolicy = message_filters::sync_policies::ExactTime<Image, Image, CameraInfo>;
+
+  /// A synchronised triple waiting for the worker.
+  struct SyncedInput {
+    sensor_msgs::ImageConstPtr rgb, depth;
+    sensor_msgs::CameraInfoConstPtr info;
+  };
+
+  void onInit() override;
+  void readParameters();
+  /// (Re)creates the synchroniser of the three inputs (approximate or exact time).
+  void createSynchroniser();
+  /// Counts arrivals per topic (0 rgb, 1 depth, 2 camera_info) and restarts the synchroniser when a
+  /// topic's stamps repeat or go back.
+  void checkInputStamp(int topic, const ros::Time& stamp);
+  void logStartup();
+  /// Subscribes the inputs while any output has a listener (or a demo option needs results).
+  void connectCb();
+  void syncCb(const sensor_msgs::ImageConstPtr& rgb, const sensor_msgs::ImageConstPtr& depth,
+              const sensor_msgs::CameraInfoConstPtr& info);
+  void reconfigureCb(mc_flow::McFlowConfig& parameters, uint32_t level);
+  void workerLoop();
+  void process(const SyncedInput& input);
+  void publish(const mc_flow::Result& result, const PairContext& pair);
+  void publishTf(const mc_flow::Result& result, const PairContext& pair);
+  void saveAndSummarise(const mc_flow::Result& result, const PairContext& pair, const cv::Mat& segmentation);
+  void resetSequence(const std::string& key, const std::string& why);
+  void timerCb(const ros::WallTimerEvent& event);
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  /// Warns at most every `period` seconds per key (one key per kind of problem), remembers the text.
+  void warnThrottled(const std::string& key, const std::string& text, double period = 5.0);
+  bool anyListener() const;
+
+  // ---- parameters (private namespace; see logStartup and the README for units) ----
+  int queue_size_ = 5;
+  bool approximate_sync_ = true;
+  double approximate_sync_max_interval_ = 0.0;  // [s], 0 = no limit
+  int downsample_ = 0;                          // 0 = automatic (towards 320 px wide)
+  double max_stamp_difference_ = 0.02;          // [s] between RGB and depth stamps before warning
+  double max_pair_interval_ = 1.0;              // [s] a longer gap starts a new sequence
+  double no_input_warning_after_ = 5.0;         // [s]
+  bool publish_tf_ = false;
+  std::string segment_frame_prefix_ = "mc_flow_segment_";
+  CloudColour cloud_colour_ = CloudColour::Segment;
+  double marker_seconds_ahead_ = 1.0;  // [s]
+  double segmentation_blend_ = 0.6;
+  double tracker_min_overlap_ = 0.3;
+  bool print_summary_ = false;
+  std::string save_dir_;
+
+  // ---- ROS interfaces ----
+  ros::NodeHandle nh_, pnh_;
+  std::unique_ptr<image_transport::ImageTransport> it_in_, it_out_;
+  image_transport::SubscriberFilter rgb_sub_, depth_sub_;
+  message_filters::Subscriber<CameraInfo> info_sub_;
+  std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_ptr_;
+  std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_ptr_;
+  image_transport::Publisher soft_labels_pub_, labels_pub_, segmentation_pub_, occlusion_pub_;
+  ros::Publisher segments_pub_, cloud_pub_, markers_pub_, info_pub_;
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  std::unique_ptr<dynamic_reconfigure::Server<mc_flow::McFlowConfig>> reconfigure_server_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<diagnostic_updater::Updater> updater_;
+  ros::WallTimer timer_, resync_timer_;
+  bool resync_pending_ = false;  // touched only by this nodelet's (serialised) callbacks
+  std::mutex connect_mutex_;
+  std::atomic<bool> subscribed_{false};
+  std::string rgb_topic_, depth_topic_, info_topic_;
+
+  // ---- worker hand-over ----
+  std::thread worker_;
+  std::mutex pending_mutex_;
+  std::condition_variable pending_cv_;
+  std::optional<SyncedInput> pending_;
+  bool stop_ = false;
+  std::optional<mc_flow::Config> pending_config_;  // guarded by pending_mutex_
+
+  // ---- worker state (worker thread only) ----
+  std::unique_ptr<mc_flow::Solver> solver_;
+  std::optional<FrameInput> previous_;
+  SegmentTracker tracker_;
+  std::map<std::uint32_t, Eigen::Quaterniond> segment_orientation_;  // accumulated, for TF
+  bool backend_reported_ = false;
+  long pair_index_ = 0;
+
+  // ---- statistics (stats_mutex_) ----
+  mutable std::mutex stats_mutex_;
+  std::deque<ros::WallTime> sync_times_;   // arrivals of synchronised frames (last 10 s)
+  ros::WallTime last_sync_time_, subscribed_since_;
+  long frames_synced_ = 0, frames_dropped_ = 0, frames_skipped_ = 0, pairs_solved_ = 0, sequence_resets_ = 0;
+  long rgb_count_ = 0, depth_count_ = 0, info_count_ = 0;
+  ros::Time last_input_stamp_[3];
+  long sync_counts_[3] = {0, 0, 0};  // per-topic arrivals at the last synchronised frame
+  mc_flow::StageTimings last_timings_;
+  double total_solve_ms_ = 0;
+  std::string backend_, backend_note_, last_problem_;
+  std::map<std::string, ros::WallTime> last_warning_;
+};
+
+}  // namespace mc_flow_ros

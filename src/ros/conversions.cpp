@@ -1,0 +1,482 @@
+#include "mc_flow/ros/conversions.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <sstream>
+
+#include <boost/make_shared.hpp>
+#include <cv_bridge/cv_bridge.h>
+#include <opencv2/imgproc.hpp>
+#include <sensor_msgs/image_encodings.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+
+#include "mc_flow/core/se3.h"
+#include "mc_flow/ros/segment_tracker.h"
+
+namespace enc = sensor_msgs::image_encodings;
+
+namespace mc_flow_ros {
+
+namespace {
+
+/// Depth samples of one downsampling block further than this behind the block's nearest sample belong
+/// to another surface and are not averaged in (averaging across an edge invents points in mid-air).
+constexpr float kDepthBlockRange = 0.05f;  // [m]
+
+std::string sizeText(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+
+cv::Mat colourToRgb8(const cv_bridge::CvImageConstPtr& image, const std::string& encoding) {
+  cv::Mat rgb;
+  if (encoding == enc::RGB8) {
+    rgb = image->image;
+  } else if (encoding == enc::BGR8) {
+    cv::cvtColor(image->image, rgb, cv::COLOR_BGR2RGB);
+  } else if (encoding == enc::RGBA8) {
+    cv::cvtColor(image->image, rgb, cv::COLOR_RGBA2RGB);
+  } else if (encoding == enc::BGRA8) {
+    cv::cvtColor(image->image, rgb, cv::COLOR_BGRA2RGB);
+  } else if (encoding == enc::MONO8) {
+    cv::cvtColor(image->image, rgb, cv::COLOR_GRAY2RGB);
+  } else {  // mono16
+    cv::Mat grey8;
+    image->image.convertTo(grey8, CV_8U, 1.0 / 256.0);
+    cv::cvtColor(grey8, rgb, cv::COLOR_GRAY2RGB);
+  }
+  return rgb;
+}
+
+/// Intensity in [0, 1] at the input resolution (16-bit grey keeps its precision).
+cv::Mat colourToIntensity(const cv_bridge::CvImageConstPtr& image, const std::string& encoding, const cv::Mat& rgb8) {
+  cv::Mat intensity;
+  if (encoding == enc::MONO16) {
+    image->image.convertTo(intensity, CV_32F, 1.0 / 65535.0);
+  } else if (encoding == enc::MONO8) {
+    image->image.convertTo(intensity, CV_32F, 1.0 / 255.0);
+  } else {
+    cv::Mat grey;
+    cv::cvtColor(rgb8, grey, cv::COLOR_RGB2GRAY);
+    grey.convertTo(intensity, CV_32F, 1.0 / 255.0);
+  }
+  return intensity;
+}
+
+/// Depth in metres (0 = invalid) at the input resolution.
+cv::Mat depthToMetres(const cv_bridge::CvImageConstPtr& image, const std::string& encoding) {
+  cv::Mat metres(image->image.size(), CV_32F);
+  if (encoding == enc::TYPE_16UC1) {
+    image->image.convertTo(metres, CV_32F, 0.001);
+  } else {
+    image->image.copyTo(metres);
+    for (int y = 0; y < metres.rows; ++y) {
+      float* row = metres.ptr<float>(y);
+      for (int x = 0; x < metres.cols; ++x) {
+        if (!mc_flow::isValidDepth(row[x])) row[x] = 0.f;
+      }
+    }
+  }
+  return metres;
+}
+
+/// Block average of the nearest surface in each factor x factor block (0 where the block has no depth).
+cv::Mat downsampleDepth(const cv::Mat& depth, int factor, int out_w, int out_h) {
+  cv::Mat out(out_h, out_w, CV_32F, cv::Scalar(0));
+  for (int y = 0; y < out_h; ++y) {
+    for (int x = 0; x < out_w; ++x) {
+      float nearest = std::numeric_limits<float>::infinity();
+      for (int dy = 0; dy < factor; ++dy) {
+        const float* row = depth.ptr<float>(y * factor + dy) + x * factor;
+        for (int dx = 0; dx < factor; ++dx) {
+          if (row[dx] > 0.f) nearest = std::min(nearest, row[dx]);
+        }
+      }
+      if (!std::isfinite(nearest)) continue;
+      double sum = 0;
+      int count = 0;
+      for (int dy = 0; dy < factor; ++dy) {
+        const float* row = depth.ptr<float>(y * factor + dy) + x * factor;
+        for (int dx = 0; dx < factor; ++dx) {
+          if (row[dx] > 0.f && row[dx] <= nearest + kDepthBlockRange) {
+            sum += row[dx];
+            ++count;
+          }
+        }
+      }
+      out.at<float>(y, x) = float(sum / count);
+    }
+  }
+  return out;
+}
+
+mc_flow::ImageF toImageF(const cv::Mat& m) {
+  mc_flow::ImageF image(m.cols, m.rows, 1);
+  for (int y = 0; y < m.rows; ++y) std::memcpy(&image(0, y), m.ptr<float>(y), sizeof(float) * std::size_t(m.cols));
+  return image;
+}
+
+sensor_msgs::ImagePtr emptyImage(const PairContext& pair, int w, int h, const std::string& encoding, int bytes_per_pixel) {
+  auto msg = boost::make_shared<sensor_msgs::Image>();
+  msg->header = pair.header;
+  msg->width = std::uint32_t(w);
+  msg->height = std::uint32_t(h);
+  msg->encoding = encoding;
+  msg->is_bigendian = false;
+  msg->step = std::uint32_t(w * bytes_per_pixel);
+  msg->data.resize(std::size_t(msg->step) * std::size_t(h));
+  return msg;
+}
+
+std::uint32_t idOf(const PairContext& pair, int label) {
+  if (label <= 0 || label > int(pair.ids.size())) return 0;
+  return pair.ids[std::size_t(label - 1)];
+}
+
+}  // namespace
+
+int chooseDownsample(int requested, int width) {
+  if (requested > 0) return requested;
+  int best = 1;
+  for (int factor = 1; factor <= 16; factor *= 2) {
+    if (std::abs(width / factor - 320) < std::abs(width / best - 320)) best = factor;
+  }
+  return best;
+}
+
+bool isSupportedColourEncoding(const std::string& e) {
+  return e == enc::RGB8 || e == enc::BGR8 || e == enc::RGBA8 || e == enc::BGRA8 || e == enc::MONO8 || e == enc::MONO16;
+}
+
+bool isSupportedDepthEncoding(const std::string& e) { return e == enc::TYPE_16UC1 || e == enc::TYPE_32FC1; }
+
+mc_flow::Intrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info, int width, int height) {
+  double fx = info.P[0], fy = info.P[5], cx = info.P[2], cy = info.P[6];
+  const bool p_empty = fx == 0 && fy == 0 && cx == 0 && cy == 0;
+  if (p_empty) {
+    fx = info.K[0];
+    fy = info.K[4];
+    cx = info.K[2];
+    cy = info.K[5];
+  }
+  if (!(fx > 0) || !(fy > 0) || !std::isfinite(fx) || !std::isfinite(fy) || !std::isfinite(cx) || !std::isfinite(cy)) {
+    std::ostringstream s;
+    s << "camera_info has unusable intrinsics (fx=" << fx << ", fy=" << fy << ", cx=" << cx << ", cy=" << cy
+      << " from " << (p_empty ? "K, P being all zero" : "P") << "): is the camera calibrated?";
+    throw FrameInputError(InputProblem::Intrinsics, s.str());
+  }
+  // camera_info may describe the full sensor while the image is binned or scaled: rescale.
+  const double sx = info.width > 0 ? double(width) / double(info.width) : 1.0;
+  const double sy = info.height > 0 ? double(height) / double(info.height) : 1.0;
+  return {fx * sx, fy * sy, (cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5};
+}
+
+FrameInput toFrameInput(const sensor_msgs::Image& rgb, const sensor_msgs::Image& depth,
+                        const sensor_msgs::CameraInfo& info, int downsample_request) {
+  if (!isSupportedColourEncoding(rgb.encoding)) {
+    throw FrameInputError(InputProblem::Encoding, "unsupported colour encoding '" + rgb.encoding +
+                                                      "' (accepted: rgb8 bgr8 rgba8 bgra8 mono8 mono16)");
+  }
+  if (!isSupportedDepthEncoding(depth.encoding)) {
+    throw FrameInputError(InputProblem::Encoding, "unsupported depth encoding '" + depth.encoding +
+                                                      "' (accepted: 16UC1 in mm, 32FC1 in m)");
+  }
+  const int w = int(rgb.width), h = int(rgb.height), dw = int(depth.width), dh = int(depth.height);
+  if (w <= 0 || h <= 0 || dw <= 0 || dh <= 0) {
+    throw FrameInputError(InputProblem::Size, "empty image: RGB " + sizeText(w, h) + ", depth " + sizeText(dw, dh));
+  }
+  // Same aspect ratio within one pixel of the larger image, else the images do not show the same view.
+  if (std::abs(double(w) * dh - double(h) * dw) > double(std::max(w, dw)) + double(std::max(h, dh))) {
+    throw FrameInputError(InputProblem::Size, "RGB " + sizeText(w, h) + " and depth " + sizeText(dw, dh) +
+                                                  " have different aspect ratios (is the depth registered to the colour camera?)");
+  }
+  const int factor = chooseDownsample(downsample_request, w);
+  const int out_w = w / factor, out_h = h / factor;
+  if (out_w < 16 || out_h < 16) {
+    throw FrameInputError(InputProblem::Size, "processing size " + sizeText(out_w, out_h) + " (RGB " + sizeText(w, h) +
+                                                  " / downsample " + std::to_string(factor) + ") is too small");
+  }
+
+  cv_bridge::CvImageConstPtr rgb_cv, depth_cv;
+  try {
+    // The messages outlive these views (they are only read inside this function): no copy needed.
+    rgb_cv = cv_bridge::toCvShare(rgb, boost::shared_ptr<void const>());
+    depth_cv = cv_bridge::toCvShare(depth, boost::shared_ptr<void const>());
+  } catch (const cv_bridge::Exception& e) {
+    throw FrameInputError(InputProblem::Encoding, std::string("cv_bridge could not read the images: ") + e.what());
+  }
+
+  FrameInput out;
+  out.header = rgb.header;
+  out.downsample = factor;
+  out.input_width = w;
+  out.input_height = h;
+  out.K = intrinsicsFromCameraInfo(info, w, h).scaled(1.0 / factor);
+
+  const cv::Mat rgb8 = colourToRgb8(rgb_cv, rgb.encoding);
+  const cv::Mat intensity = colourToIntensity(rgb_cv, rgb.encoding, rgb8);
+  cv::Mat metres = depthToMetres(depth_cv, depth.encoding);
+  if (dw != w || dh != h) {  // registered depth of another resolution: nearest keeps real measurements
+    cv::Mat resized;
+    cv::resize(metres, resized, cv::Size(w, h), 0, 0, cv::INTER_NEAREST);
+    metres = resized;
+  }
+  // Crop to a multiple of the factor at the right/bottom: the principal point needs no change then.
+  const cv::Rect crop(0, 0, out_w * factor, out_h * factor);
+  cv::Mat colour_small, intensity_small;
+  if (factor == 1) {
+    colour_small = rgb8(crop).clone();
+    intensity_small = intensity(crop).clone();
+  } else {
+    cv::resize(rgb8(crop), colour_small, cv::Size(out_w, out_h), 0, 0, cv::INTER_AREA);
+    cv::resize(intensity(crop), intensity_small, cv::Size(out_w, out_h), 0, 0, cv::INTER_AREA);
+  }
+  const cv::Mat depth_small = factor == 1 ? metres(crop).clone() : downsampleDepth(metres, factor, out_w, out_h);
+
+  out.colour = colour_small;
+  out.frame.intensity = toImageF(intensity_small);
+  out.frame.depth = toImageF(depth_small);
+  for (float z : out.frame.depth.data) out.valid_depth += mc_flow::isValidDepth(z) ? 1 : 0;
+  if (out.valid_depth == 0) {
+    throw FrameInputError(InputProblem::Depth, "depth image (" + depth.encoding + ", " + sizeText(dw, dh) +
+                                                   ") has no valid pixel: all zero or NaN");
+  }
+  return out;
+}
+
+sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input) {
+  sensor_msgs::CameraInfo info;
+  info.header = input.header;
+  info.width = std::uint32_t(input.frame.width());
+  info.height = std::uint32_t(input.frame.height());
+  info.distortion_model = "plumb_bob";
+  info.D.assign(5, 0.0);  // the inputs are rectified
+  info.K = {input.K.fx, 0, input.K.cx, 0, input.K.fy, input.K.cy, 0, 0, 1};
+  info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  info.P = {input.K.fx, 0, input.K.cx, 0, 0, input.K.fy, input.K.cy, 0, 0, 0, 1, 0};
+  return info;
+}
+
+Eigen::Vector3d centroidVelocity(const mc_flow::Segment& segment, double interval) {
+  const Eigen::Vector3d moved = segment.transform.topLeftCorner<3, 3>() * segment.centroid + segment.transform.topRightCorner<3, 1>();
+  return (moved - segment.centroid) / interval;
+}
+
+mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const PairContext& pair) {
+  mc_flow::SegmentArray msg;
+  msg.header = pair.header;
+  msg.previous_stamp = pair.previous_stamp;
+  msg.width = std::uint32_t(result.width);
+  msg.height = std::uint32_t(result.height);
+  msg.backend = result.backend;
+  msg.solve_time_ms = pair.solve_time_ms;
+  const double dt = pair.interval();
+  for (std::size_t i = 0; i < result.segments.size(); ++i) {
+    const mc_flow::Segment& s = result.segments[i];
+    mc_flow::MotionSegment out;
+    out.id = i < pair.ids.size() ? pair.ids[i] : 0;
+    out.twist.linear.x = s.twist(0) / dt;
+    out.twist.linear.y = s.twist(1) / dt;
+    out.twist.linear.z = s.twist(2) / dt;
+    out.twist.angular.x = s.twist(3) / dt;
+    out.twist.angular.y = s.twist(4) / dt;
+    out.twist.angular.z = s.twist(5) / dt;
+    const Eigen::Quaterniond q(Eigen::Matrix3d(s.transform.topLeftCorner<3, 3>()));
+    out.transform.translation.x = s.transform(0, 3);
+    out.transform.translation.y = s.transform(1, 3);
+    out.transform.translation.z = s.transform(2, 3);
+    out.transform.rotation.x = q.x();
+    out.transform.rotation.y = q.y();
+    out.transform.rotation.z = q.z();
+    out.transform.rotation.w = q.w();
+    out.support = s.support;
+    out.centroid.x = s.centroid.x();
+    out.centroid.y = s.centroid.y();
+    out.centroid.z = s.centroid.z();
+    const Rgb8 c = colourForId(out.id);
+    out.color.r = c.r / 255.f;
+    out.color.g = c.g / 255.f;
+    out.color.b = c.b / 255.f;
+    out.color.a = 1.f;
+    msg.segments.push_back(out);
+  }
+  long outliers = 0;
+  for (std::int32_t label : result.labels.data) outliers += label <= 0 ? 1 : 0;
+  msg.outlier_support = double(outliers);
+  return msg;
+}
+
+sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const PairContext& pair) {
+  const mc_flow::SoftLabels& u = result.soft_labels;
+  const int n = std::max(u.count, 1);
+  auto msg = emptyImage(pair, u.width, u.height, "32FC" + std::to_string(n), int(sizeof(float)) * n);
+  auto* out = reinterpret_cast<float*>(msg->data.data());
+  const std::size_t plane = u.planeSize();
+  for (std::size_t p = 0; p < plane; ++p) {
+    for (int c = 0; c < u.count; ++c) out[p * std::size_t(n) + std::size_t(c)] = u.plane(c)[p];
+  }
+  return msg;
+}
+
+sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairContext& pair) {
+  auto msg = emptyImage(pair, result.labels.width, result.labels.height, enc::MONO16, 2);
+  auto* out = reinterpret_cast<std::uint16_t*>(msg->data.data());
+  for (std::size_t i = 0; i < result.labels.pixelCount(); ++i) {
+    out[i] = std::uint16_t(std::min<std::uint32_t>(idOf(pair, result.labels.data[i]), 65535u));
+  }
+  return msg;
+}
+
+sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const PairContext& pair) {
+  auto msg = emptyImage(pair, result.occlusion.width, result.occlusion.height, enc::MONO8, 1);
+  std::copy(result.occlusion.data.begin(), result.occlusion.data.end(), msg->data.begin());
+  return msg;
+}
+
+cv::Mat segmentationPicture(const mc_flow::Result& result, const PairContext& pair, double blend) {
+  const mc_flow::SoftLabels& u = result.soft_labels;
+  cv::Mat picture(u.height, u.width, CV_8UC3, cv::Scalar(0, 0, 0));
+  std::vector<Rgb8> colours;
+  for (int c = 0; c < u.count; ++c) colours.push_back(colourForId(c < u.count - 1 ? idOf(pair, c + 1) : 0));
+  const cv::Mat* background = (pair.previous && pair.previous->colour.cols == u.width && pair.previous->colour.rows == u.height)
+                                  ? &pair.previous->colour
+                                  : nullptr;
+  for (int y = 0; y < u.height; ++y) {
+    auto* row = picture.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < u.width; ++x) {
+      double r = 0, g = 0, b = 0;
+      for (int c = 0; c < u.count; ++c) {
+        const double weight = u.at(c, x, y);
+        r += weight * colours[std::size_t(c)].r;
+        g += weight * colours[std::size_t(c)].g;
+        b += weight * colours[std::size_t(c)].b;
+      }
+      double grey = 128;
+      if (background) {
+        const cv::Vec3b& p = background->at<cv::Vec3b>(y, x);
+        grey = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2];
+      }
+      auto mix = [&](double colour) { return cv::saturate_cast<std::uint8_t>(blend * colour + (1 - blend) * grey); };
+      row[x] = cv::Vec3b(mix(r), mix(g), mix(b));
+    }
+  }
+  return picture;
+}
+
+sensor_msgs::ImagePtr makeSegmentationImage(const mc_flow::Result& result, const PairContext& pair, double blend) {
+  const cv::Mat picture = segmentationPicture(result, pair, blend);
+  return cv_bridge::CvImage(pair.header, enc::RGB8, picture).toImageMsg();
+}
+
+sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, const PairContext& pair, CloudColour colour) {
+  auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
+  cloud->header = pair.header;
+  cloud->height = std::uint32_t(result.height);
+  cloud->width = std::uint32_t(result.width);
+  sensor_msgs::PointCloud2Modifier modifier(*cloud);
+  modifier.setPointCloud2Fields(9, "x", 1, sensor_msgs::PointField::FLOAT32, "y", 1, sensor_msgs::PointField::FLOAT32,
+                                "z", 1, sensor_msgs::PointField::FLOAT32, "rgb", 1, sensor_msgs::PointField::FLOAT32,
+                                "vx", 1, sensor_msgs::PointField::FLOAT32, "vy", 1, sensor_msgs::PointField::FLOAT32,
+                                "vz", 1, sensor_msgs::PointField::FLOAT32, "label", 1, sensor_msgs::PointField::UINT32,
+                                "occluded", 1, sensor_msgs::PointField::UINT8);
+  modifier.resize(std::size_t(result.width) * std::size_t(result.height));
+  // resize() flattens the cloud to one row: make it organized again (one point per pixel).
+  cloud->height = std::uint32_t(result.height);
+  cloud->width = std::uint32_t(result.width);
+  cloud->row_step = cloud->width * cloud->point_step;
+  cloud->is_dense = false;
+
+  const FrameInput* first = pair.previous;
+  const bool have_depth = first && first->frame.depth.sameSize(result.width, result.height);
+  const bool have_colour = first && first->colour.cols == result.width && first->colour.rows == result.height;
+  const mc_flow::Intrinsics K = first ? first->K : result.intrinsics;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+
+  sensor_msgs::PointCloud2Iterator<float> it_x(*cloud, "x"), it_rgb(*cloud, "rgb"), it_v(*cloud, "vx");
+  sensor_msgs::PointCloud2Iterator<std::uint32_t> it_label(*cloud, "label");
+  sensor_msgs::PointCloud2Iterator<std::uint8_t> it_occ(*cloud, "occluded");
+  for (int y = 0; y < result.height; ++y) {
+    for (int x = 0; x < result.width; ++x, ++it_x, ++it_rgb, ++it_v, ++it_label, ++it_occ) {
+      const float z = have_depth ? first->frame.depth(x, y) : nan;
+      const bool valid = mc_flow::isValidDepth(z);
+      it_x[0] = valid ? float((x - K.cx) / K.fx * z) : nan;
+      it_x[1] = valid ? float((y - K.cy) / K.fy * z) : nan;
+      it_x[2] = valid ? z : nan;
+      const bool flow_ok = valid && result.scene_flow.sameSize(result.width, result.height) && result.scene_flow.channels >= 3;
+      for (int c = 0; c < 3; ++c) it_v[c] = flow_ok ? result.scene_flow(x, y, c) : nan;
+      const std::uint32_t id = idOf(pair, result.labels.empty() ? 0 : result.labels(x, y));
+      *it_label = id;
+      *it_occ = (!result.occlusion.empty() && result.occlusion(x, y) > 0) ? 1 : 0;
+      std::uint8_t r = 0, g = 0, b = 0;
+      if (colour == CloudColour::Image && have_colour) {
+        const cv::Vec3b& p = first->colour.at<cv::Vec3b>(y, x);
+        r = p[0];
+        g = p[1];
+        b = p[2];
+      } else {
+        const Rgb8 c = colourForId(id);
+        r = c.r;
+        g = c.g;
+        b = c.b;
+      }
+      const std::uint32_t packed = (std::uint32_t(r) << 16) | (std::uint32_t(g) << 8) | std::uint32_t(b);
+      std::memcpy(&it_rgb[0], &packed, sizeof(float));
+    }
+  }
+  return cloud;
+}
+
+visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result, const PairContext& pair, double seconds_ahead) {
+  visualization_msgs::MarkerArray markers;
+  visualization_msgs::Marker clear;
+  clear.header = pair.header;
+  clear.action = visualization_msgs::Marker::DELETEALL;
+  markers.markers.push_back(clear);
+  const double dt = pair.interval();
+  for (std::size_t i = 0; i < result.segments.size(); ++i) {
+    const mc_flow::Segment& s = result.segments[i];
+    const std::uint32_t id = i < pair.ids.size() ? pair.ids[i] : 0;
+    const Rgb8 c = colourForId(id);
+    const Eigen::Vector3d velocity = centroidVelocity(s, dt);
+    const Eigen::Vector3d tip = s.centroid + velocity * seconds_ahead;
+
+    visualization_msgs::Marker arrow;
+    arrow.header = pair.header;
+    arrow.ns = "motion";
+    arrow.id = int(id);
+    arrow.type = visualization_msgs::Marker::ARROW;
+    arrow.action = visualization_msgs::Marker::ADD;
+    arrow.pose.orientation.w = 1.0;
+    geometry_msgs::Point start, end;
+    start.x = s.centroid.x();
+    start.y = s.centroid.y();
+    start.z = s.centroid.z();
+    end.x = tip.x();
+    end.y = tip.y();
+    end.z = tip.z();
+    arrow.points = {start, end};
+    arrow.scale.x = 0.01;  // shaft diameter [m]
+    arrow.scale.y = 0.02;  // head diameter [m]
+    arrow.scale.z = 0.03;  // head length [m]
+    arrow.color.r = c.r / 255.f;
+    arrow.color.g = c.g / 255.f;
+    arrow.color.b = c.b / 255.f;
+    arrow.color.a = 1.f;
+    markers.markers.push_back(arrow);
+
+    visualization_msgs::Marker text = arrow;
+    text.ns = "label";
+    text.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
+    text.points.clear();
+    text.pose.position = start;
+    text.pose.position.y -= 0.05;  // above the centroid (y points down in the optical frame)
+    text.scale.x = text.scale.y = 0;
+    text.scale.z = 0.05;  // text height [m]
+    char buffer[64];
+    std::snprintf(buffer, sizeof(buffer), "%u: %.2f m/s", id, velocity.norm());
+    text.text = buffer;
+    markers.markers.push_back(text);
+  }
+  return markers;
+}
+
+}  // namespace mc_flow_ros

@@ -1,0 +1,634 @@
+#include "mc_flow/ros/mc_flow_nodelet.h"
+
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <iomanip>
+#include <sstream>
+#include <utility>
+
+#include <cv_bridge/cv_bridge.h>
+
+#include <geometry_msgs/TransformStamped.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <pluginlib/class_list_macros.hpp>
+#include <visualization_msgs/MarkerArray.h>
+
+#include "mc_flow/SegmentArray.h"
+#include "mc_flow/core/error.h"
+#include "mc_flow/ros/reconfigure.h"
+
+namespace mc_flow_ros {
+
+namespace {
+
+std::string problemKey(InputProblem p) {
+  switch (p) {
+    case InputProblem::Encoding: return "encoding";
+    case InputProblem::Size: return "size";
+    case InputProblem::Depth: return "depth";
+    case InputProblem::Intrinsics: return "intrinsics";
+  }
+  return "input";
+}
+
+std::string stampText(const ros::Time& t) {
+  char buffer[48];
+  std::snprintf(buffer, sizeof(buffer), "%u.%09u", t.sec, t.nsec);
+  return buffer;
+}
+
+bool makeDirectories(const std::string& path) {
+  std::string partial;
+  std::stringstream parts(path);
+  std::string part;
+  if (!path.empty() && path[0] == '/') partial = "/";
+  while (std::getline(parts, part, '/')) {
+    if (part.empty()) continue;
+    partial += part + "/";
+    mkdir(partial.c_str(), 0755);
+  }
+  struct stat info {};
+  return stat(path.c_str(), &info) == 0 && S_ISDIR(info.st_mode);
+}
+
+}  // namespace
+
+MCFlowNodelet::~MCFlowNodelet() {
+  timer_.stop();
+  {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    rgb_sub_.unsubscribe();
+    depth_sub_.unsubscribe();
+    info_sub_.unsubscribe();
+  }
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    stop_ = true;
+  }
+  pending_cv_.notify_all();
+  if (worker_.joinable()) worker_.join();
+}
+
+void MCFlowNodelet::onInit() {
+  nh_ = getNodeHandle();
+  pnh_ = getPrivateNodeHandle();
+  readParameters();
+  tracker_ = SegmentTracker(SegmentTracker::Options{tracker_min_overlap_});
+
+  it_in_ = std::make_unique<image_transport::ImageTransport>(nh_);
+  it_out_ = std::make_unique<image_transport::ImageTransport>(pnh_);
+  rgb_topic_ = nh_.resolveName("rgb/image_rect_color");
+  depth_topic_ = nh_.resolveName("depth_registered/image_rect");
+  info_topic_ = nh_.resolveName("rgb/camera_info");
+
+  createSynchroniser();
+  // Per-topic arrival counts make the "no synchronised input" warning say which topic is silent.
+  // They also watch each topic's stamps: see checkInputStamp.
+  rgb_sub_.registerCallback(boost::function<void(const sensor_msgs::ImageConstPtr&)>(
+      [this](const sensor_msgs::ImageConstPtr& m) { checkInputStamp(0, m->header.stamp); }));
+  depth_sub_.registerCallback(boost::function<void(const sensor_msgs::ImageConstPtr&)>(
+      [this](const sensor_msgs::ImageConstPtr& m) { checkInputStamp(1, m->header.stamp); }));
+  info_sub_.registerCallback(boost::function<void(const sensor_msgs::CameraInfoConstPtr&)>(
+      [this](const sensor_msgs::CameraInfoConstPtr& m) { checkInputStamp(2, m->header.stamp); }));
+
+  // The solver config comes from dynamic_reconfigure (initial values: private parameters or the core's
+  // defaults, see cfg/McFlow.cfg); the first callback happens inside the server's constructor path.
+  reconfigure_server_ = std::make_unique<dynamic_reconfigure::Server<mc_flow::McFlowConfig>>(reconfigure_mutex_, pnh_);
+  reconfigure_server_->setCallback(boost::bind(&MCFlowNodelet::reconfigureCb, this, boost::placeholders::_1, boost::placeholders::_2));
+
+  updater_ = std::make_unique<diagnostic_updater::Updater>(nh_, pnh_, getName());
+  updater_->setHardwareID("mc_flow:" + rgb_topic_);
+  updater_->add("MC-Flow", this, &MCFlowNodelet::diagnose);
+
+  if (publish_tf_) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+
+  worker_ = std::thread(&MCFlowNodelet::workerLoop, this);
+
+  {
+    // Hold the lock while advertising: a connect callback must not subscribe before everything exists.
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    auto image_connect = boost::bind(&MCFlowNodelet::connectCb, this);
+    auto connect = [this](const ros::SingleSubscriberPublisher&) { connectCb(); };
+    soft_labels_pub_ = it_out_->advertise("soft_labels", 1, image_connect, image_connect);
+    labels_pub_ = it_out_->advertise("labels", 1, image_connect, image_connect);
+    segmentation_pub_ = it_out_->advertise("segmentation", 1, image_connect, image_connect);
+    occlusion_pub_ = it_out_->advertise("occlusion", 1, image_connect, image_connect);
+    segments_pub_ = pnh_.advertise<mc_flow::SegmentArray>("segments", 5, connect, connect);
+    cloud_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("scene_flow", 1, connect, connect);
+    markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("motion_markers", 1, connect, connect);
+    info_pub_ = pnh_.advertise<sensor_msgs::CameraInfo>("camera_info", 1, connect, connect);
+  }
+  logStartup();
+  connectCb();  // demo options (print_summary, save_dir, publish_tf) need results without listeners
+  timer_ = nh_.createWallTimer(ros::WallDuration(1.0), &MCFlowNodelet::timerCb, this);
+}
+
+void MCFlowNodelet::createSynchroniser() {
+  approximate_sync_ptr_.reset();
+  exact_sync_ptr_.reset();
+  if (approximate_sync_) {
+    ApproximatePolicy policy(queue_size_);
+    policy.setReset(true);  // a bag restarting under /clock clears the queues instead of stalling them
+    approximate_sync_ptr_ = std::make_unique<message_filters::Synchronizer<ApproximatePolicy>>(
+        std::as_const(policy), rgb_sub_, depth_sub_, info_sub_);
+    if (approximate_sync_max_interval_ > 0) {
+      approximate_sync_ptr_->setMaxIntervalDuration(ros::Duration(approximate_sync_max_interval_));
+    }
+    approximate_sync_ptr_->registerCallback(boost::bind(&MCFlowNodelet::syncCb, this, boost::placeholders::_1, boost::placeholders::_2, boost::placeholders::_3));
+  } else {
+    ExactPolicy policy(queue_size_);
+    policy.setReset(true);
+    exact_sync_ptr_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(std::as_const(policy), rgb_sub_, depth_sub_, info_sub_);
+    exact_sync_ptr_->registerCallback(boost::bind(&MCFlowNodelet::syncCb, this, boost::placeholders::_1, boost::placeholders::_2, boost::placeholders::_3));
+  }
+}
+
+void MCFlowNodelet::checkInputStamp(int topic, const ros::Time& stamp) {
+  const std::string& name = topic == 0 ? rgb_topic_ : topic == 1 ? depth_topic_ : info_topic_;
+  ros::Time last;
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++(topic == 0 ? rgb_count_ : topic == 1 ? depth_count_ : info_count_);
+    last = last_input_stamp_[topic];
+    last_input_stamp_[topic] = stamp;
+  }
+  if (last.isZero() || stamp > last) return;
+  // A synchroniser fed stamps that repeat or go back (driver restart, bag replayed without /clock) can
+  // stall for good: start it afresh, after this callback (all callbacks of this nodelet are serialised).
+  warnThrottled("input_stamp:" + name, name + ": stamp " + stampText(stamp) +
+                                           (stamp == last ? " repeats the previous message's" : " went back from " + stampText(last)) +
+                                           ": restarting the synchroniser");
+  if (!resync_pending_) {
+    resync_pending_ = true;
+    resync_timer_ = nh_.createWallTimer(ros::WallDuration(0.001), [this](const ros::WallTimerEvent&) {
+      createSynchroniser();
+      resync_pending_ = false;
+    }, true);
+  }
+}
+
+void MCFlowNodelet::readParameters() {
+  pnh_.param("queue_size", queue_size_, queue_size_);
+  pnh_.param("approximate_sync", approximate_sync_, approximate_sync_);
+  pnh_.param("approximate_sync_max_interval", approximate_sync_max_interval_, approximate_sync_max_interval_);
+  pnh_.param("downsample", downsample_, downsample_);
+  pnh_.param("max_stamp_difference", max_stamp_difference_, max_stamp_difference_);
+  pnh_.param("max_pair_interval", max_pair_interval_, max_pair_interval_);
+  pnh_.param("no_input_warning_after", no_input_warning_after_, no_input_warning_after_);
+  pnh_.param("publish_tf", publish_tf_, publish_tf_);
+  pnh_.param("segment_frame_prefix", segment_frame_prefix_, segment_frame_prefix_);
+  std::string cloud_colour = "segment";
+  pnh_.param("cloud_colour", cloud_colour, cloud_colour);
+  pnh_.param("marker_seconds_ahead", marker_seconds_ahead_, marker_seconds_ahead_);
+  pnh_.param("segmentation_blend", segmentation_blend_, segmentation_blend_);
+  pnh_.param("tracker_min_overlap", tracker_min_overlap_, tracker_min_overlap_);
+  pnh_.param("print_summary", print_summary_, print_summary_);
+  pnh_.param("save_dir", save_dir_, save_dir_);
+
+  if (queue_size_ < 1) {
+    NODELET_WARN("queue_size %d is below 1; using 1", queue_size_);
+    queue_size_ = 1;
+  }
+  if (downsample_ < 0) {
+    NODELET_WARN("downsample %d is negative; using 0 (automatic)", downsample_);
+    downsample_ = 0;
+  }
+  if (cloud_colour == "image") {
+    cloud_colour_ = CloudColour::Image;
+  } else if (cloud_colour != "segment") {
+    NODELET_WARN("cloud_colour '%s' is neither 'segment' nor 'image'; using 'segment'", cloud_colour.c_str());
+  }
+  segmentation_blend_ = std::min(std::max(segmentation_blend_, 0.0), 1.0);
+  if (!save_dir_.empty() && !makeDirectories(save_dir_)) {
+    NODELET_ERROR("save_dir '%s' cannot be created; pictures will not be saved", save_dir_.c_str());
+    save_dir_.clear();
+  }
+}
+
+void MCFlowNodelet::logStartup() {
+  std::ostringstream s;
+  s << "MC-Flow nodelet " << getName() << " started.\n"
+    << "  inputs (synchronised, " << (approximate_sync_ ? "approximate" : "exact") << " time): " << rgb_topic_
+    << ", " << depth_topic_ << ", " << info_topic_ << " (image_transport, parameter image_transport selects the transport)\n"
+    << "  outputs: " << segments_pub_.getTopic() << ", " << soft_labels_pub_.getTopic() << ", " << labels_pub_.getTopic()
+    << ", " << segmentation_pub_.getTopic() << ", " << occlusion_pub_.getTopic() << ", " << cloud_pub_.getTopic()
+    << ", " << markers_pub_.getTopic() << ", " << info_pub_.getTopic() << (publish_tf_ ? ", /tf" : "") << "\n"
+    << "  node parameters: queue_size=" << queue_size_ << " approximate_sync=" << approximate_sync_
+    << " approximate_sync_max_interval=" << approximate_sync_max_interval_ << " s downsample=" << downsample_
+    << (downsample_ == 0 ? " (automatic)" : "") << " max_stamp_difference=" << max_stamp_difference_
+    << " s max_pair_interval=" << max_pair_interval_ << " s no_input_warning_after=" << no_input_warning_after_
+    << " s publish_tf=" << publish_tf_ << " segment_frame_prefix=" << segment_frame_prefix_
+    << " cloud_colour=" << (cloud_colour_ == CloudColour::Image ? "image" : "segment")
+    << " marker_seconds_ahead=" << marker_seconds_ahead_ << " s segmentation_blend=" << segmentation_blend_
+    << " tracker_min_overlap=" << tracker_min_overlap_ << " print_summary=" << print_summary_ << " save_dir='"
+    << save_dir_ << "'\n  solver parameters (dynamic_reconfigure):";
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    const mc_flow::Config config = pending_config_ ? *pending_config_ : mc_flow::Config();
+    for (const auto& [name, value] : config.fields()) s << " " << name << "=" << value;
+  }
+  NODELET_INFO_STREAM(s.str());
+}
+
+bool MCFlowNodelet::anyListener() const {
+  return soft_labels_pub_.getNumSubscribers() > 0 || labels_pub_.getNumSubscribers() > 0 ||
+         segmentation_pub_.getNumSubscribers() > 0 || occlusion_pub_.getNumSubscribers() > 0 ||
+         segments_pub_.getNumSubscribers() > 0 || cloud_pub_.getNumSubscribers() > 0 ||
+         markers_pub_.getNumSubscribers() > 0 || info_pub_.getNumSubscribers() > 0;
+}
+
+void MCFlowNodelet::connectCb() {
+  std::lock_guard<std::mutex> lock(connect_mutex_);
+  const bool needed = anyListener() || print_summary_ || !save_dir_.empty() || publish_tf_;
+  if (needed && !subscribed_) {
+    const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh_);
+    rgb_sub_.subscribe(*it_in_, "rgb/image_rect_color", 2, hints);
+    depth_sub_.subscribe(*it_in_, "depth_registered/image_rect", 2, hints);
+    info_sub_.subscribe(nh_, "rgb/camera_info", 2);
+    subscribed_ = true;
+    std::lock_guard<std::mutex> stats(stats_mutex_);
+    subscribed_since_ = ros::WallTime::now();
+    NODELET_DEBUG("an output has a listener: subscribed to the inputs");
+  } else if (!needed && subscribed_) {
+    rgb_sub_.unsubscribe();
+    depth_sub_.unsubscribe();
+    info_sub_.unsubscribe();
+    subscribed_ = false;
+    NODELET_DEBUG("no output has a listener: unsubscribed from the inputs");
+    // The next frame after a pause must not be paired with one from before it.
+    std::lock_guard<std::mutex> pending(pending_mutex_);
+    pending_.reset();
+  }
+}
+
+void MCFlowNodelet::syncCb(const sensor_msgs::ImageConstPtr& rgb, const sensor_msgs::ImageConstPtr& depth,
+                           const sensor_msgs::CameraInfoConstPtr& info) {
+  const ros::WallTime now = ros::WallTime::now();
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++frames_synced_;
+    last_sync_time_ = now;
+    sync_counts_[0] = rgb_count_;
+    sync_counts_[1] = depth_count_;
+    sync_counts_[2] = info_count_;
+    sync_times_.push_back(now);
+    while (!sync_times_.empty() && (now - sync_times_.front()).toSec() > 10.0) sync_times_.pop_front();
+  }
+  const double stamp_difference = std::abs((rgb->header.stamp - depth->header.stamp).toSec());
+  if (stamp_difference > max_stamp_difference_) {
+    warnThrottled("stamps", "RGB stamp " + stampText(rgb->header.stamp) + " and depth stamp " +
+                                stampText(depth->header.stamp) + " differ by " + std::to_string(stamp_difference) +
+                                " s (> max_stamp_difference " + std::to_string(max_stamp_difference_) +
+                                " s): motion between them biases the result; check the camera's sync settings");
+  }
+  bool dropped = false;
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    dropped = pending_.has_value();  // the worker is still busy: the waiting frame is replaced by this one
+    pending_ = SyncedInput{rgb, depth, info};
+  }
+  if (dropped) {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++frames_dropped_;
+  }
+  pending_cv_.notify_one();
+}
+
+void MCFlowNodelet::reconfigureCb(mc_flow::McFlowConfig& parameters, uint32_t /*level*/) {
+  try {
+    mc_flow::Config config = toCoreConfig(parameters);
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    pending_config_ = config;
+  } catch (const std::exception& e) {
+    NODELET_ERROR("rejected solver parameters, keeping the previous ones: %s", e.what());
+  }
+}
+
+void MCFlowNodelet::workerLoop() {
+  while (true) {
+    SyncedInput input;
+    {
+      std::unique_lock<std::mutex> lock(pending_mutex_);
+      pending_cv_.wait(lock, [this] { return stop_ || pending_.has_value(); });
+      if (stop_) return;
+      input = *pending_;
+      pending_.reset();
+      if (pending_config_) {
+        const mc_flow::Config config = *pending_config_;
+        pending_config_.reset();
+        lock.unlock();
+        try {
+          solver_ = std::make_unique<mc_flow::Solver>(config);
+          backend_reported_ = false;
+        } catch (const std::exception& e) {
+          NODELET_ERROR("cannot create the solver with these parameters (%s); %s", e.what(),
+                        solver_ ? "keeping the previous solver" : "no frame is processed until they are fixed");
+        }
+      }
+    }
+    try {
+      process(input);
+    } catch (const std::exception& e) {
+      // Nothing may end the worker: report and go on with the next frame.
+      warnThrottled("unexpected", std::string("frame skipped after an unexpected error: ") + e.what());
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++frames_skipped_;
+    }
+  }
+}
+
+void MCFlowNodelet::resetSequence(const std::string& key, const std::string& why) {
+  warnThrottled(key, why);
+  previous_.reset();
+  tracker_.reset();
+  segment_orientation_.clear();
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  ++sequence_resets_;
+}
+
+void MCFlowNodelet::process(const SyncedInput& input) {
+  if (!solver_) return;
+  FrameInput current;
+  try {
+    current = toFrameInput(*input.rgb, *input.depth, *input.info, downsample_);
+  } catch (const FrameInputError& e) {
+    // Throttled per distinct problem (digits removed: the same fault in every frame is one key).
+    std::string key = problemKey(e.problem) + ":" + e.what();
+    key.erase(std::remove_if(key.begin(), key.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); }),
+              key.end());
+    warnThrottled(key, std::string("frame ") + stampText(input.rgb->header.stamp) + " skipped: " + e.what());
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++frames_skipped_;
+    return;
+  }
+
+  if (previous_) {
+    const double dt = (current.header.stamp - previous_->header.stamp).toSec();
+    if (dt == 0.0) {
+      warnThrottled("stamp", "frame skipped: stamp " + stampText(current.header.stamp) +
+                                 " repeats the previous frame's (is a driver or bag publishing duplicates?)");
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++frames_skipped_;
+      return;
+    }
+    if (dt < 0.0) {
+      resetSequence("reset:back", "stamp went back from " + stampText(previous_->header.stamp) + " to " +
+                    stampText(current.header.stamp) + " (stream reset or bag loop): starting a new sequence");
+    } else if (dt > max_pair_interval_) {
+      resetSequence("reset:gap", "gap of " + std::to_string(dt) + " s before stamp " + stampText(current.header.stamp) +
+                    " exceeds max_pair_interval " + std::to_string(max_pair_interval_) + " s: starting a new sequence");
+    } else if (!current.frame.intensity.sameSize(previous_->frame.intensity) ||
+               current.header.frame_id != previous_->header.frame_id) {
+      resetSequence("reset:input", "the input changed from " + previous_->header.frame_id + " " +
+                    std::to_string(previous_->input_width) + "x" + std::to_string(previous_->input_height) + " to " +
+                    current.header.frame_id + " " + std::to_string(current.input_width) + "x" +
+                    std::to_string(current.input_height) + ": starting a new sequence");
+    }
+  }
+  if (!previous_) {
+    previous_ = std::move(current);
+    return;
+  }
+
+  mc_flow::Result result;
+  const ros::WallTime start = ros::WallTime::now();
+  try {
+    result = solver_->solve(previous_->frame, current.frame, previous_->K);
+  } catch (const mc_flow::InputError& e) {
+    warnThrottled("solver", "pair " + stampText(previous_->header.stamp) + " -> " + stampText(current.header.stamp) +
+                                " skipped: " + e.what());
+    previous_ = std::move(current);
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++frames_skipped_;
+    return;
+  }
+  const double solve_ms = (ros::WallTime::now() - start).toSec() * 1e3;
+
+  if (!backend_reported_) {
+    backend_reported_ = true;
+    if (result.backend != "cuda" && solver_->config().backend != mc_flow::Backend::Cpu) {
+      NODELET_WARN("CUDA is not usable, running on the CPU: %s", result.backend_note.c_str());
+    } else {
+      NODELET_INFO("solver backend: %s (%s)", result.backend.c_str(), result.backend_note.c_str());
+    }
+  }
+
+  PairContext pair;
+  pair.header = current.header;
+  pair.previous_stamp = previous_->header.stamp;
+  pair.previous = &*previous_;
+  pair.current = &current;
+  pair.solve_time_ms = solve_ms;
+  pair.ids = tracker_.update(result.labels, int(result.segments.size()), result.optical_flow);
+
+  publish(result, pair);
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++pairs_solved_;
+    last_timings_ = result.timings;
+    total_solve_ms_ += solve_ms;
+    backend_ = result.backend;
+    backend_note_ = result.backend_note;
+  }
+  ++pair_index_;
+  previous_ = std::move(current);
+}
+
+void MCFlowNodelet::publish(const mc_flow::Result& result, const PairContext& pair) {
+  if (segments_pub_.getNumSubscribers() > 0) segments_pub_.publish(makeSegmentArray(result, pair));
+  if (soft_labels_pub_.getNumSubscribers() > 0) soft_labels_pub_.publish(makeSoftLabelsImage(result, pair));
+  if (labels_pub_.getNumSubscribers() > 0) labels_pub_.publish(makeLabelsImage(result, pair));
+  if (occlusion_pub_.getNumSubscribers() > 0) occlusion_pub_.publish(makeOcclusionImage(result, pair));
+  cv::Mat segmentation;
+  if (segmentation_pub_.getNumSubscribers() > 0 || !save_dir_.empty()) {
+    segmentation = segmentationPicture(result, pair, segmentation_blend_);
+  }
+  if (segmentation_pub_.getNumSubscribers() > 0) {
+    segmentation_pub_.publish(cv_bridge::CvImage(pair.header, "rgb8", segmentation).toImageMsg());
+  }
+  if (cloud_pub_.getNumSubscribers() > 0) cloud_pub_.publish(makeSceneFlowCloud(result, pair, cloud_colour_));
+  if (markers_pub_.getNumSubscribers() > 0) {
+    markers_pub_.publish(makeMotionMarkers(result, pair, marker_seconds_ahead_));
+  }
+  if (info_pub_.getNumSubscribers() > 0) {
+    sensor_msgs::CameraInfo info = processingCameraInfo(*pair.current);
+    info_pub_.publish(info);
+  }
+  if (publish_tf_) publishTf(result, pair);
+  if (print_summary_ || !save_dir_.empty()) saveAndSummarise(result, pair, segmentation);
+}
+
+void MCFlowNodelet::publishTf(const mc_flow::Result& result, const PairContext& pair) {
+  // Child frame per segment: origin at the segment's centroid at the current stamp, orientation = the
+  // segment's rotation accumulated since it first appeared (identity then).
+  std::vector<geometry_msgs::TransformStamped> transforms;
+  std::map<std::uint32_t, Eigen::Quaterniond> orientations;
+  for (std::size_t i = 0; i < result.segments.size() && i < pair.ids.size(); ++i) {
+    const mc_flow::Segment& s = result.segments[i];
+    const std::uint32_t id = pair.ids[i];
+    const Eigen::Quaterniond step(Eigen::Matrix3d(s.transform.topLeftCorner<3, 3>()));
+    const auto known = segment_orientation_.find(id);
+    const Eigen::Quaterniond orientation =
+        known == segment_orientation_.end() ? Eigen::Quaterniond::Identity() : (step * known->second).normalized();
+    orientations[id] = orientation;
+    const Eigen::Vector3d origin = s.transform.topLeftCorner<3, 3>() * s.centroid + s.transform.topRightCorner<3, 1>();
+    geometry_msgs::TransformStamped t;
+    t.header = pair.header;
+    t.child_frame_id = segment_frame_prefix_ + std::to_string(id);
+    t.transform.translation.x = origin.x();
+    t.transform.translation.y = origin.y();
+    t.transform.translation.z = origin.z();
+    t.transform.rotation.x = orientation.x();
+    t.transform.rotation.y = orientation.y();
+    t.transform.rotation.z = orientation.z();
+    t.transform.rotation.w = orientation.w();
+    transforms.push_back(t);
+  }
+  segment_orientation_ = orientations;
+  tf_broadcaster_->sendTransform(transforms);
+}
+
+void MCFlowNodelet::saveAndSummarise(const mc_flow::Result& result, const PairContext& pair, const cv::Mat& segmentation) {
+  if (print_summary_) {
+    const double dt = pair.interval();
+    std::ostringstream s;
+    s.setf(std::ios::fixed);
+    s.precision(3);
+    s << "pair " << pair_index_ << " [" << stampText(pair.header.stamp) << ", dt " << dt << " s]: "
+      << result.segments.size() << " segments";
+    for (std::size_t i = 0; i < result.segments.size(); ++i) {
+      const mc_flow::Segment& seg = result.segments[i];
+      const double speed = centroidVelocity(seg, dt).norm();
+      const double turn = seg.twist.tail<3>().norm() / dt * 180.0 / M_PI;
+      s << " | id " << (i < pair.ids.size() ? pair.ids[i] : 0) << ": " << speed << " m/s " << std::setprecision(1)
+        << turn << " deg/s, " << std::setprecision(0) << seg.support << " px" << std::setprecision(3);
+    }
+    long dropped = 0;
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      dropped = frames_dropped_;
+    }
+    s << " | solve " << std::setprecision(0) << pair.solve_time_ms << " ms (" << result.backend << "), dropped "
+      << dropped;
+    NODELET_INFO_STREAM(s.str());
+  }
+  if (!save_dir_.empty()) {
+    char name[64];
+    cv::Mat bgr;
+    cv::cvtColor(segmentation, bgr, cv::COLOR_RGB2BGR);
+    std::snprintf(name, sizeof(name), "/segmentation_%06ld.png", pair_index_);
+    cv::imwrite(save_dir_ + name, bgr);
+    cv::Mat occlusion(result.occlusion.height, result.occlusion.width, CV_8UC1,
+                      const_cast<std::uint8_t*>(result.occlusion.ptr()));
+    std::snprintf(name, sizeof(name), "/occlusion_%06ld.png", pair_index_);
+    cv::imwrite(save_dir_ + name, occlusion);
+    cv::cvtColor(pair.previous->colour, bgr, cv::COLOR_RGB2BGR);  // the pixels the labels belong to
+    std::snprintf(name, sizeof(name), "/colour_%06ld.png", pair_index_);
+    cv::imwrite(save_dir_ + name, bgr);
+  }
+}
+
+void MCFlowNodelet::warnThrottled(const std::string& key, const std::string& text, double period) {
+  const ros::WallTime now = ros::WallTime::now();
+  bool emit = false;
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    last_problem_ = text;
+    auto it = last_warning_.find(key);
+    if (it == last_warning_.end() || (now - it->second).toSec() >= period) {
+      last_warning_[key] = now;
+      emit = true;
+    }
+  }
+  if (emit) NODELET_WARN("%s", text.c_str());
+}
+
+void MCFlowNodelet::timerCb(const ros::WallTimerEvent&) {
+  bool subscribed = false;
+  {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    subscribed = subscribed_;
+  }
+  if (subscribed) {
+    double silent = 0;
+    long rgb = 0, depth = 0, info = 0;
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      const ros::WallTime since = std::max(last_sync_time_, subscribed_since_);
+      silent = (ros::WallTime::now() - since).toSec();
+      rgb = rgb_count_;
+      depth = depth_count_;
+      info = info_count_;
+    }
+    if (silent > no_input_warning_after_ && rgb > sync_counts_[0] && depth > sync_counts_[1] && info > sync_counts_[2]) {
+      // Every topic delivers but nothing synchronises: a synchroniser confused by an irregular stream
+      // (dropped or skewed messages) can stay stuck; start it afresh and say what the stamps are.
+      ros::Time stamps[3];
+      {
+        std::lock_guard<std::mutex> lock(stats_mutex_);
+        for (int i = 0; i < 3; ++i) stamps[i] = last_input_stamp_[i];
+        sync_counts_[0] = rgb;
+        sync_counts_[1] = depth;
+        sync_counts_[2] = info;
+      }
+      warnThrottled("resync", "messages arrive on all inputs but none were synchronised for " + std::to_string(int(silent)) +
+                                  " s (latest stamps: rgb " + stampText(stamps[0]) + ", depth " + stampText(stamps[1]) +
+                                  ", camera_info " + stampText(stamps[2]) + "): restarting the synchroniser");
+      createSynchroniser();
+    } else if (silent > no_input_warning_after_) {
+      std::ostringstream s;
+      s << "no synchronised input for " << int(silent) << " s. Waiting for " << rgb_topic_ << " (" << rgb
+        << " received), " << depth_topic_ << " (" << depth << " received) and " << info_topic_ << " (" << info
+        << " received): check that all three are published and stamped alike; a missing camera_info is the "
+        << "most common cause";
+      warnThrottled("no_input", s.str(), std::max(no_input_warning_after_, 15.0));
+    }
+  }
+  updater_->update();
+}
+
+void MCFlowNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  const ros::WallTime now = ros::WallTime::now();
+  while (!sync_times_.empty() && (now - sync_times_.front()).toSec() > 10.0) sync_times_.pop_front();
+  double rate = 0;
+  if (sync_times_.size() >= 2) {
+    rate = double(sync_times_.size() - 1) / std::max((sync_times_.back() - sync_times_.front()).toSec(), 1e-6);
+  }
+  const bool silent = subscribed_ && (now - std::max(last_sync_time_, subscribed_since_)).toSec() > no_input_warning_after_;
+  if (!subscribed_) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "idle: no listener on any output");
+  } else if (silent) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no synchronised input");
+  } else {
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "running");
+  }
+  status.add("input rate [Hz]", rate);
+  status.add("frames synchronised", frames_synced_);
+  status.add("pairs solved", pairs_solved_);
+  status.add("frames dropped (arrived while solving)", frames_dropped_);
+  status.add("frames skipped (bad input)", frames_skipped_);
+  status.add("sequence resets", sequence_resets_);
+  status.add("received rgb / depth / camera_info", std::to_string(rgb_count_) + " / " + std::to_string(depth_count_) +
+                                                      " / " + std::to_string(info_count_));
+  status.add("solve time mean [ms]", pairs_solved_ > 0 ? total_solve_ms_ / double(pairs_solved_) : 0.0);
+  status.add("solve time last [ms]", last_timings_.total);
+  status.add("stage preprocessing [ms]", last_timings_.preprocessing);
+  status.add("stage initialisation [ms]", last_timings_.initialisation);
+  status.add("stage motion [ms]", last_timings_.motion);
+  status.add("stage labels [ms]", last_timings_.labels);
+  status.add("stage adaptation [ms]", last_timings_.adaptation);
+  status.add("stage occlusion [ms]", last_timings_.occlusion);
+  status.add("stage outputs [ms]", last_timings_.outputs);
+  status.add("backend", backend_.empty() ? std::string("(no pair solved yet)") : backend_ + ": " + backend_note_);
+  status.add("last problem", last_problem_.empty() ? std::string("none") : last_problem_);
+}
+
+}  // namespace mc_flow_ros
+
+PLUGINLIB_EXPORT_CLASS(mc_flow_ros::MCFlowNodelet, nodelet::Nodelet)
