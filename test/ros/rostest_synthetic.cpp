@@ -233,12 +233,11 @@ TEST_F(SyntheticSequence, TwistsMatchTheKnownMotions) {
     std::printf("segment %u -> part %d (%s): |d_gt| %.4f m, error %.4f m, rotation %.3f deg, rotation error %.3f deg\n",
                 segment.id, part, gt->name.c_str(), d_gt.norm(), error, gt->twist.tail<3>().norm() * 180 / M_PI,
                 angle_error * 180 / M_PI);
-    // This checks the ROS layer (units, interval, frames, id <-> label mapping): a mistake there is as large
-    // as the motion itself (2-4 cm, 3-4 deg per interval). The solver's own accuracy is tested in test/core;
-    // here a static part must come out static and a moving one within a quarter of its motion.
-    const double gt_angle = gt->twist.tail<3>().norm();
-    EXPECT_LT(error, 0.003 + 0.25 * d_gt.norm()) << "segment " << segment.id << " on part " << gt->name;
-    EXPECT_LT(angle_error, 0.3 * M_PI / 180 + 0.4 * gt_angle) << "segment " << segment.id << " on part " << gt->name;
+    // Checks the ROS layer (units, interval, frames, id <-> label mapping; a mistake there is as large as the
+    // motion itself, 2-4 cm and 3-4 deg per interval) and that the solver's accuracy survives it: measured
+    // 0.5-1.3 mm and 0.16-0.45 deg on this pair (test/core covers the solver on every variant).
+    EXPECT_LT(error, 0.005) << "segment " << segment.id << " on part " << gt->name;
+    EXPECT_LT(angle_error, 1.0 * M_PI / 180) << "segment " << segment.id << " on part " << gt->name;
     // The published twist is the interval twist divided by the interval.
     const mc_flow::Vector6d xi = mc_flow::se3Log(T_est);
     EXPECT_NEAR(segment.twist.linear.x * dt, xi(0), 1e-6);

@@ -51,7 +51,9 @@ struct Config {
   // ---- motion step (Cauchy IRLS, eqs. 8-10, interpolation model eq. 2) ----
   int motion_iterations_per_level = 6;  ///< IRLS iterations at each pyramid level (first outer iteration)
   int motion_iterations_refine = 3;     ///< IRLS iterations per level in later outer iterations (warm start)
-  int motion_coarse_levels_after_first = 2;  ///< later outer iterations start this many levels above the finest
+  int motion_coarse_levels_after_first = 0;  ///< later outer iterations start this many levels above the finest:
+                                             ///< warm-started twists need no coarse levels, and coarse levels blur
+                                             ///< small parts into their surroundings (biased motions)
   double alpha = 2.0;             ///< weight of the geometric (depth) cost against the photometric one
   double cauchy_c_intensity = 0.04;  ///< [intensity, 0..1] Cauchy scale of photometric residuals
   double cauchy_c_depth = 0.03;      ///< [m] Cauchy scale of geometric residuals
