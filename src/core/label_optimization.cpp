@@ -79,9 +79,9 @@ void computeDataCosts(const PyramidLevel& frame1, const PyramidLevel& frame2, co
         const Eigen::Vector3f P2 = transforms[std::size_t(i)] * P.homogeneous();
         float cost = out_of_view;
         if (P2.z() > 1e-3f) {
-          const float u = fx * P2.x() / P2.z() + cx, v = fy * P2.y() / P2.z() + cy;
+          float u = fx * P2.x() / P2.z() + cx, v = fy * P2.y() / P2.z() + cy;
           float I2, Z2;
-          if (sampleBilinear(frame2.intensity, u, v, 0, I2)) {
+          if (clampIntoView(W, H, u, v) && sampleBilinear(frame2.intensity, u, v, 0, I2)) {
             const float rI = (I1 - I2) / cI;
             cost = std::log1p(rI * rI);
             if (sampleDepthBilinear(frame2.depth, u, v, Z2)) {

@@ -43,7 +43,6 @@ struct Accumulator {
 // A pixel warped out of view (or behind the camera) costs as much as a residual of 10 Cauchy scales in
 // both kinds: otherwise a label could lower its cost by pushing its pixels out of the image.
 constexpr double kOutOfViewResidualScales = 10.0;
-constexpr float kBorderMargin = 2.f;  // [px]
 constexpr float kDepthEdgeJump = 0.1f;  // [m] depth samples straddling a larger jump carry no geometric residual
 // A step is undone only when it raised its label's cost by more than this fraction: rounding and the
 // first-order twist update make tiny rises near the optimum that are not divergence.
@@ -111,7 +110,9 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
       Accumulator& acc = accumulators[std::size_t(thread)];
       std::vector<int> active(static_cast<std::size_t>(motion_labels));
       std::vector<float> weights(static_cast<std::size_t>(motion_labels));
-#pragma omp for schedule(dynamic, 4)
+// Static schedule: each thread always sums the same rows, and the per-thread sums are added in thread
+// order below, so the result is the same from run to run for a given thread count.
+#pragma omp for schedule(static)
       for (int y = 0; y < H; ++y) {
         for (int x = 0; x < W; ++x) {
           const std::size_t idx = std::size_t(y) * W + x;
@@ -149,12 +150,8 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
             P2 = transforms[std::size_t(active[0])] * P.homogeneous();
           }
           const float inv_z = 1.f / std::max(P2.z(), 1e-3f);
-          const float u_raw = fx * P2.x() * inv_z + cx, v_raw = fy * P2.y() * inv_z + cy;
-          // Warps up to kBorderMargin px beyond the last pixel centre sample the border (clamped): otherwise a
-          // sub-pixel step would flip whole border columns between "seen" and the out-of-view penalty.
-          const bool in_view = P2.z() >= 1e-3f && u_raw >= -kBorderMargin && v_raw >= -kBorderMargin &&
-                               u_raw <= float(W - 1) + kBorderMargin && v_raw <= float(H - 1) + kBorderMargin;
-          const float u = std::min(std::max(u_raw, 0.f), float(W - 1)), v = std::min(std::max(v_raw, 0.f), float(H - 1));
+          float u = fx * P2.x() * inv_z + cx, v = fy * P2.y() * inv_z + cy;
+          const bool in_view = P2.z() >= 1e-3f && clampIntoView(W, H, u, v);
           float I2, gIx = 0.f, gIy = 0.f;
           if (!in_view || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
             for (int a = 0; a < n_active; ++a)

@@ -92,14 +92,16 @@ SoftLabels upsampleLabels(const SoftLabels& u, int out_width, int out_height) {
   SoftLabels out(out_width, out_height, u.count);
   const int w = u.width, h = u.height;
 
-  // Pixel-centre alignment: fine centre x_f maps to coarse coordinate (x_f + 0.5) * w / W - 0.5.
+  // Pixel-centre alignment: fine centre x_f maps to coarse coordinate (x_f + 0.5) / s - 0.5, with s the
+  // power of two nearest to the size ratio: pyramid levels halve with integer division (an odd last
+  // column/row is dropped), so the exact scale between levels is 2^k, not the ratio of the sizes.
   struct Tap {
     int i0, i1;
     float a;
   };
   auto taps = [](int fine, int coarse) {
     std::vector<Tap> t(static_cast<std::size_t>(fine));
-    const double ratio = double(coarse) / double(fine);
+    const double ratio = 1.0 / std::exp2(std::round(std::log2(double(fine) / double(coarse))));
     for (int x = 0; x < fine; ++x) {
       const double c = std::clamp((x + 0.5) * ratio - 0.5, 0.0, double(coarse - 1));
       const int i0 = int(c);

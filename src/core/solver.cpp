@@ -3,6 +3,7 @@
 // at the input resolution.
 #include "mc_flow/core/solver.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -29,19 +30,44 @@ double elapsedMs(Clock::time_point since) {
   return std::chrono::duration<double, std::milli>(Clock::now() - since).count();
 }
 
-// Nearest-pixel resampling of a mask to another pyramid level (pixel-centre aligned).
+// Nearest-pixel resampling of a mask to another pyramid level (pixel-centre aligned). Levels differ by a
+// power of two (integer halving drops an odd last column/row), so the scale is 2^k, not the size ratio.
 ImageU8 resampleMask(const ImageU8& mask, int width, int height) {
   if (mask.sameSize(width, height)) return mask;
   ImageU8 out(width, height, 1, 0);
+  const double scale = std::exp2(std::round(std::log2(double(mask.width) / double(width))));  // source px per target px
   for (int y = 0; y < height; ++y) {
-    const int sy = std::min(mask.height - 1, int((y + 0.5) * mask.height / height));
+    const int sy = std::clamp(int(std::floor((y + 0.5) * scale)), 0, mask.height - 1);
     for (int x = 0; x < width; ++x) {
-      const int sx = std::min(mask.width - 1, int((x + 0.5) * mask.width / width));
+      const int sx = std::clamp(int(std::floor((x + 0.5) * scale)), 0, mask.width - 1);
       out(x, y) = mask(sx, sy);
     }
   }
   return out;
 }
+
+// Config::threads for the duration of one solve; the caller's OpenMP setting is restored afterwards.
+class ThreadCountScope {
+ public:
+  explicit ThreadCountScope(int threads) {
+#ifdef _OPENMP
+    previous_ = omp_get_max_threads();
+    if (threads > 0) omp_set_num_threads(threads);
+#else
+    (void)threads;
+#endif
+  }
+  ~ThreadCountScope() {
+#ifdef _OPENMP
+    omp_set_num_threads(previous_);
+#endif
+  }
+  ThreadCountScope(const ThreadCountScope&) = delete;
+  ThreadCountScope& operator=(const ThreadCountScope&) = delete;
+
+ private:
+  int previous_ = 1;
+};
 
 // Labels of the label level carried to another pyramid level.
 SoftLabels labelsAtLevel(const SoftLabels& u, int from_level, int to_level, const Pyramid& pyramid) {
@@ -90,9 +116,7 @@ std::string Solver::backendName() const { return impl_->optimizer->name(); }
 Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K) {
   const Config& config = impl_->config;
   const auto start = Clock::now();
-#ifdef _OPENMP
-  if (config.threads > 0) omp_set_num_threads(config.threads);
-#endif
+  const ThreadCountScope thread_scope(config.threads);
   K.validate();
   frame1.validate("frame1");
   frame2.validate("frame2");
@@ -231,13 +255,14 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
     if (k > 0 && as.merged + as.removed == 0 && stats.label_change < config.outer_convergence) break;
   }
 
-  // ---- final label step at the processing level
-  SoftLabels u_final = u;
+  // ---- final label step at the processing level (also when that is the label level: labels removed in the
+  // last update handed their pixels to the outlier label, and only a label step gives them back)
+  SoftLabels u_final;
   ImageU8 occlusion_final = occlusion;
-  if (finest != label_level) {
+  {
     const PyramidLevel& F1 = pyr1[finest];
     t = Clock::now();
-    u_final = upsampleLabels(u, F1.points.width, F1.points.height);
+    u_final = labelsAtLevel(u, label_level, finest, pyr1);
     if (config.detect_occlusions)
       occlusion_final = detectOcclusions(warpPoints(F1.points, u_final, twists), pyr2[finest].depth, F1.intrinsics, config);
     result.timings.occlusion += elapsedMs(t);

@@ -10,20 +10,15 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
+#include "mc_flow/io/text.h"
 
 namespace mc_flow {
 namespace io {
 namespace {
 
-std::string trim(const std::string& s) {
-  const std::size_t b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string::npos) return "";
-  const std::size_t e = s.find_last_not_of(" \t\r\n");
-  return s.substr(b, e - b + 1);
-}
 
 bool parseNumber(const std::string& text, double& value) {
-  const std::string t = trim(text);
+  const std::string t = trimWhitespace(text);
   if (t.empty()) return false;
   char* end = nullptr;
   value = std::strtod(t.c_str(), &end);
@@ -126,7 +121,7 @@ Intrinsics parseIntrinsics(const std::string& text) {
     double v;
     if (!parseNumber(item, v))
       throw InputError(what + ": malformed; expected four comma-separated numbers FX,FY,CX,CY (bad item '" +
-                       trim(item) + "')");
+                       trimWhitespace(item) + "')");
     values.push_back(v);
   }
   if (values.size() != 4)

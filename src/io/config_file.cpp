@@ -7,17 +7,12 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
+#include "mc_flow/io/text.h"
 
 namespace mc_flow {
 namespace io {
 namespace {
 
-std::string trim(const std::string& s) {
-  const std::size_t b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string::npos) return "";
-  const std::size_t e = s.find_last_not_of(" \t\r\n");
-  return s.substr(b, e - b + 1);
-}
 
 // yaml-cpp marks count lines from 0; people count from 1.
 std::string lineOf(const YAML::Mark& mark) { return "line " + std::to_string(mark.line + 1); }
@@ -71,7 +66,7 @@ void applyConfigAssignment(const std::string& assignment, Config& config) {
   if (eq == std::string::npos || eq == 0)
     throw ConfigError("--set '" + assignment + "': expected name=value");
   try {
-    config.set(trim(assignment.substr(0, eq)), trim(assignment.substr(eq + 1)));
+    config.set(trimWhitespace(assignment.substr(0, eq)), trimWhitespace(assignment.substr(eq + 1)));
   } catch (const std::exception& e) {
     throw ConfigError("--set '" + assignment + "': " + e.what());
   }

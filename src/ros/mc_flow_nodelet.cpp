@@ -260,9 +260,11 @@ void MCFlowNodelet::connectCb() {
     info_sub_.unsubscribe();
     subscribed_ = false;
     NODELET_DEBUG("no output has a listener: unsubscribed from the inputs");
-    // The next frame after a pause must not be paired with one from before it.
+    // The next frame after a pause must not be paired with one from before it: the worker starts a new
+    // sequence (it owns previous_, so it is told through a flag).
     std::lock_guard<std::mutex> pending(pending_mutex_);
     pending_.reset();
+    sequence_break_ = true;
   }
 }
 
@@ -318,6 +320,12 @@ void MCFlowNodelet::workerLoop() {
       if (stop_) return;
       input = *pending_;
       pending_.reset();
+      if (sequence_break_) {
+        sequence_break_ = false;
+        previous_.reset();
+        tracker_.reset();
+        segment_orientation_.clear();
+      }
       if (pending_config_) {
         const mc_flow::Config config = *pending_config_;
         pending_config_.reset();
@@ -399,7 +407,19 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   const ros::WallTime start = ros::WallTime::now();
   try {
     result = solver_->solve(previous_->frame, current.frame, previous_->K);
-  } catch (const mc_flow::InputError& e) {
+  } catch (const mc_flow::BackendError& e) {
+    // The GPU failed at run time: continue on the CPU (said once), skip this pair.
+    NODELET_WARN("the %s backend failed (%s): continuing on the CPU", solver_->backendName().c_str(), e.what());
+    mc_flow::Config cpu = solver_->config();
+    cpu.backend = mc_flow::Backend::Cpu;
+    solver_ = std::make_unique<mc_flow::Solver>(cpu);
+    previous_ = std::move(current);
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++frames_skipped_;
+    return;
+  } catch (const std::exception& e) {
+    // Bad input (InputError) or parameters that do not fit this input (ConfigError, e.g. processing_level
+    // deeper than the pyramid): skip the pair, keep the sequence going with the newer frame.
     warnThrottled("solver", "pair " + stampText(previous_->header.stamp) + " -> " + stampText(current.header.stamp) +
                                 " skipped: " + e.what());
     previous_ = std::move(current);

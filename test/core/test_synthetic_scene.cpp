@@ -162,15 +162,6 @@ TEST(SyntheticScene, InvalidOptionsThrow) {
   EXPECT_THROW(renderSyntheticFrame(o, -1, f, c, K), InputError);
 }
 
-TEST(SyntheticScene, RendersWellUnderASecond) {
-  const auto start = std::chrono::steady_clock::now();
-  const SyntheticPair p = renderSyntheticPair(optionsFor(1));
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::printf("320x240 pair rendered in %.1f ms\n", 1e3 * seconds);
-  EXPECT_LT(seconds, 1.0);
-  EXPECT_FALSE(p.frame1.intensity.empty());
-}
-
 TEST(SyntheticScene, BackgroundTwist) {
   EXPECT_TRUE(partById(renderSyntheticPair(optionsFor(0)), 0).twist.isZero(0.0));
   EXPECT_TRUE(partById(renderSyntheticPair(optionsFor(1)), 0).twist.isZero(0.0));

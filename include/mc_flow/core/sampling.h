@@ -10,6 +10,22 @@
 
 namespace mc_flow {
 
+/// @brief How far [px] beyond the outermost pixel centres a warp still counts as in view (sampled at the
+/// clamped position). Shared by the motion and label steps so both price a warp near the border alike; a
+/// zero margin would flip whole border columns between "seen" and "out of view" on sub-pixel steps.
+constexpr float kBorderMargin = 2.f;
+
+/// @brief Clamps (x, y) into the image when it lies within kBorderMargin of it; false when farther out
+/// (out of view) or not finite.
+inline bool clampIntoView(int width, int height, float& x, float& y) {
+  if (!(x >= -kBorderMargin && y >= -kBorderMargin && x <= float(width - 1) + kBorderMargin &&
+        y <= float(height - 1) + kBorderMargin))
+    return false;
+  x = x < 0.f ? 0.f : (x > float(width - 1) ? float(width - 1) : x);
+  y = y < 0.f ? 0.f : (y > float(height - 1) ? float(height - 1) : y);
+  return true;
+}
+
 /// @brief Bilinear sample of channel c at (x, y); false when outside [0, w-1] x [0, h-1].
 inline bool sampleBilinear(const ImageF& im, float x, float y, int c, float& out) {
   if (!(x >= 0.f && y >= 0.f && x <= float(im.width - 1) && y <= float(im.height - 1))) return false;

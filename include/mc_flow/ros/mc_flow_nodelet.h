@@ -125,6 +125,7 @@ class MCFlowNodelet : public nodelet::Nodelet {
   std::optional<SyncedInput> pending_;
   bool stop_ = false;
   std::optional<mc_flow::Config> pending_config_;  // guarded by pending_mutex_
+  bool sequence_break_ = false;                     // guarded by pending_mutex_: inputs were unsubscribed
 
   // ---- worker state (worker thread only) ----
   std::unique_ptr<mc_flow::Solver> solver_;
