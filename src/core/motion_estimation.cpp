@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include "mc_flow/core/sampling.h"
@@ -22,23 +24,6 @@ namespace mc_flow {
 namespace {
 
 using Vector6f = Eigen::Matrix<float, 6, 1>;
-
-struct Accumulator {
-  Eigen::MatrixXd H;
-  Eigen::VectorXd g;
-  Eigen::VectorXd label_cost;    // robust cost shared out to the labels by their interpolation weights
-  Eigen::VectorXd label_pixels;  // weighted pixel count per label
-  double cost = 0;
-  int pixels = 0;
-  void reset(int labels) {
-    H.setZero(6 * labels, 6 * labels);
-    g.setZero(6 * labels);
-    label_cost.setZero(labels);
-    label_pixels.setZero(labels);
-    cost = 0;
-    pixels = 0;
-  }
-};
 
 // A pixel warped out of view (or behind the camera) costs as much as a residual of 10 Cauchy scales in
 // both kinds: otherwise a label could lower its cost by pushing its pixels out of the image.
@@ -63,27 +48,220 @@ inline void pointJacobian(const Eigen::Vector3f& P2, const Eigen::RowVector3f& r
   out(5) = row(1) * P2.x() - row(0) * P2.y();
 }
 
+class CpuMotionAccumulator final : public MotionAccumulator {
+ public:
+  std::string name() const override { return "cpu"; }
+
+  void setLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
+                const ImageU8* occluded, const Config& config) override {
+    frame1_ = &frame1;
+    frame2_ = &frame2;
+    labels_ = &labels;
+    occluded_ = occluded;
+    config_ = config;
+  }
+
+  void accumulate(const std::vector<Vector6d>& twists, MotionNormalEquations& total) override {
+    const PyramidLevel& frame1 = *frame1_;
+    const PyramidLevel& frame2 = *frame2_;
+    const SoftLabels& labels = *labels_;
+    const ImageU8* occluded = occluded_;
+    const int W = frame1.points.width, H = frame1.points.height;
+    const int motion_labels = labels.count - 1;
+    const std::size_t plane = std::size_t(W) * H;
+    const Intrinsics& K = frame2.intrinsics;
+    const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
+    const float cI = float(config_.cauchy_c_intensity), cZ = float(config_.cauchy_c_depth);
+    const float alpha = float(config_.alpha), min_weight = float(config_.min_label_weight);
+    const double out_of_view_cost = motionOutOfViewCost(config_);
+    int threads = 1;
+#ifdef _OPENMP
+    threads = omp_get_max_threads();
+#endif
+    accumulators_.resize(static_cast<std::size_t>(threads));
+
+    std::vector<Eigen::Matrix<float, 3, 4>> transforms(static_cast<std::size_t>(motion_labels));
+    // Additive twist increments act on the warp through the left Jacobian: exp(xi + d) = exp(J_l d) exp(xi).
+    std::vector<Eigen::Matrix<float, 6, 6>> left_jacobians(static_cast<std::size_t>(motion_labels));
+    for (int i = 0; i < motion_labels; ++i) {
+      transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
+      left_jacobians[std::size_t(i)] = se3LeftJacobian(twists[std::size_t(i)]).cast<float>();
+    }
+    for (auto& a : accumulators_) a.reset(motion_labels);
+
+#pragma omp parallel
+      {
+        int thread = 0;
+#ifdef _OPENMP
+        thread = omp_get_thread_num();
+#endif
+        MotionNormalEquations& acc = accumulators_[std::size_t(thread)];
+        std::vector<int> active(static_cast<std::size_t>(motion_labels));
+        std::vector<float> weights(static_cast<std::size_t>(motion_labels));
+  // Static schedule: each thread always sums the same rows, and the per-thread sums are added in thread
+  // order below, so the result is the same from run to run for a given thread count.
+#pragma omp for schedule(static)
+        for (int y = 0; y < H; ++y) {
+          for (int x = 0; x < W; ++x) {
+            const std::size_t idx = std::size_t(y) * W + x;
+            const Eigen::Vector3f P(frame1.points(x, y, 0), frame1.points(x, y, 1), frame1.points(x, y, 2));
+            if (!std::isfinite(P.z())) continue;
+            if (occluded && occluded->data[idx]) continue;
+            // Interpolation weights over the motion labels; the outlier share scales the pixel down.
+            float mass = 0.f;
+            for (int i = 0; i < motion_labels; ++i) mass += labels.data[i * plane + idx];
+            if (mass < 0.05f) continue;
+            int n_active = 0;
+            float active_mass = 0.f;
+            for (int i = 0; i < motion_labels; ++i) {
+              const float w = labels.data[i * plane + idx] / mass;
+              if (w >= min_weight) {
+                active[std::size_t(n_active)] = i;
+                weights[std::size_t(n_active)] = w;
+                active_mass += w;
+                ++n_active;
+              }
+            }
+            if (n_active == 0) continue;
+            for (int k = 0; k < n_active; ++k) weights[std::size_t(k)] /= active_mass;
+
+            Eigen::Vector3f P2;
+            Eigen::Matrix<float, 6, 6> blended_jacobian;
+            const Eigen::Matrix<float, 6, 6>* left_jacobian = &left_jacobians[std::size_t(active[0])];
+            if (n_active > 1) {
+              Vector6d xi_bar = Vector6d::Zero();
+              for (int k = 0; k < n_active; ++k) xi_bar += double(weights[std::size_t(k)]) * twists[std::size_t(active[std::size_t(k)])];
+              P2 = se3Exp(xi_bar).topRows<3>().cast<float>() * P.homogeneous();
+              blended_jacobian = se3LeftJacobian(xi_bar).cast<float>();
+              left_jacobian = &blended_jacobian;
+            } else {
+              P2 = transforms[std::size_t(active[0])] * P.homogeneous();
+            }
+            const float inv_z = 1.f / std::max(P2.z(), 1e-3f);
+            float u = fx * P2.x() * inv_z + cx, v = fy * P2.y() * inv_z + cy;
+            const bool in_view = P2.z() >= 1e-3f && clampIntoView(W, H, u, v);
+            float I2, gIx = 0.f, gIy = 0.f;
+            if (!in_view || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
+              for (int a = 0; a < n_active; ++a)
+                acc.label_cost(active[std::size_t(a)]) += mass * weights[std::size_t(a)] * out_of_view_cost;
+              acc.cost += mass * out_of_view_cost;
+              continue;
+            }
+            sampleBilinear(frame2.intensity_grad, u, v, 0, gIx);
+            sampleBilinear(frame2.intensity_grad, u, v, 1, gIy);
+            // d(pixel)/dP2
+            const float du_dX = fx * inv_z, du_dZ = -fx * P2.x() * inv_z * inv_z;
+            const float dv_dY = fy * inv_z, dv_dZ = -fy * P2.y() * inv_z * inv_z;
+
+            const float rI = frame1.intensity(x, y) - I2;
+            Vector6f JI;
+            pointJacobian(P2, Eigen::RowVector3f(-gIx * du_dX, -gIy * dv_dY, -(gIx * du_dZ + gIy * dv_dZ)), JI);
+            // IRLS weight of the normalised Cauchy cost ln(1 + (r/c)^2): 1 / (c^2 + r^2).
+            const float wI = 1.f / (cI * cI + rI * rI);
+            JI = left_jacobian->transpose() * JI;
+            Eigen::Matrix<float, 6, 6> Hp = wI * JI * JI.transpose();
+            Vector6f gp = wI * rI * JI;
+            double cost = std::log1p(rI * rI / (cI * cI));
+
+            float Z2;
+            if (sampleDepthBilinearSmooth(frame2.depth, u, v, kDepthEdgeJump, Z2)) {
+              float gZx = 0.f, gZy = 0.f;
+              sampleBilinear(frame2.depth_grad, u, v, 0, gZx);
+              sampleBilinear(frame2.depth_grad, u, v, 1, gZy);
+              const float rZ = P2.z() - Z2;
+              Vector6f JZ;
+              pointJacobian(P2, Eigen::RowVector3f(-gZx * du_dX, -gZy * dv_dY, 1.f - (gZx * du_dZ + gZy * dv_dZ)), JZ);
+              JZ = left_jacobian->transpose() * JZ;
+              const float wZ = alpha / (cZ * cZ + rZ * rZ);
+              Hp += wZ * JZ * JZ.transpose();
+              gp += wZ * rZ * JZ;
+              cost += alpha * std::log1p(rZ * rZ / (cZ * cZ));
+            } else {
+              cost += alpha * std::log(2.0);  // no depth evidence: a constant, so costs stay comparable
+            }
+            const Eigen::Matrix<double, 6, 6> Hd = (mass * Hp).cast<double>();
+            const Vector6d gd = (mass * gp).cast<double>();
+            for (int a = 0; a < n_active; ++a) {
+              const int ia = active[std::size_t(a)];
+              const double wa = weights[std::size_t(a)];
+              acc.g.segment<6>(6 * ia) += wa * gd;
+              acc.label_cost(ia) += wa * mass * cost;
+              acc.label_pixels(ia) += wa * mass;
+              for (int b = 0; b < n_active; ++b) {
+                const int ib = active[std::size_t(b)];
+                acc.H.block<6, 6>(6 * ia, 6 * ib) += (wa * weights[std::size_t(b)]) * Hd;
+              }
+            }
+            acc.cost += mass * cost;
+            ++acc.pixels;
+          }
+        }
+      }
+    total = accumulators_[0];
+    for (std::size_t t = 1; t < accumulators_.size(); ++t) total.add(accumulators_[t]);
+  }
+
+ private:
+  const PyramidLevel* frame1_ = nullptr;
+  const PyramidLevel* frame2_ = nullptr;
+  const SoftLabels* labels_ = nullptr;
+  const ImageU8* occluded_ = nullptr;
+  Config config_;
+  std::vector<MotionNormalEquations> accumulators_;  // one per OpenMP thread, reused across iterations
+};
+
 }  // namespace
 
+void MotionNormalEquations::reset(int labels) {
+  H.setZero(6 * labels, 6 * labels);
+  g.setZero(6 * labels);
+  label_cost.setZero(labels);
+  label_pixels.setZero(labels);
+  cost = 0;
+  pixels = 0;
+}
+
+void MotionNormalEquations::add(const MotionNormalEquations& other) {
+  H += other.H;
+  g += other.g;
+  label_cost += other.label_cost;
+  label_pixels += other.label_pixels;
+  cost += other.cost;
+  pixels += other.pixels;
+}
+
+double motionOutOfViewCost(const Config& config) {
+  return (1.0 + config.alpha) * std::log1p(kOutOfViewResidualScales * kOutOfViewResidualScales);
+}
+
+std::unique_ptr<MotionAccumulator> makeCpuMotionAccumulator() { return std::make_unique<CpuMotionAccumulator>(); }
+
+#ifdef MCFLOW_HAVE_CUDA_MOTION
+std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator();  // cuda/motion_estimation.cu
+#endif
+
+std::unique_ptr<MotionAccumulator> makeMotionAccumulator(Backend resolved_backend) {
+#ifdef MCFLOW_HAVE_CUDA_MOTION
+  if (resolved_backend == Backend::Cuda) return makeCudaMotionAccumulator();
+#else
+  (void)resolved_backend;
+#endif
+  return makeCpuMotionAccumulator();
+}
+
 MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
-                                        const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config) {
+                                        const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
+                                        MotionAccumulator* accumulator) {
   MotionLevelStats stats;
-  const int W = frame1.points.width, H = frame1.points.height;
   const int motion_labels = labels.count - 1;
   if (motion_labels <= 0 || int(twists.size()) != motion_labels) return stats;
-  const std::size_t plane = std::size_t(W) * H;
-  const Intrinsics& K = frame2.intrinsics;
-  const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
-  const float cI = float(config.cauchy_c_intensity), cZ = float(config.cauchy_c_depth);
-  const float alpha = float(config.alpha), min_weight = float(config.min_label_weight);
-
-  int threads = 1;
-#ifdef _OPENMP
-  threads = omp_get_max_threads();
-#endif
-  std::vector<Accumulator> accumulators(static_cast<std::size_t>(threads));
-  const double out_of_view_cost =
-      (1.0 + alpha) * std::log1p(kOutOfViewResidualScales * kOutOfViewResidualScales);
+  std::unique_ptr<MotionAccumulator> own;
+  if (!accumulator) {
+    own = makeCpuMotionAccumulator();
+    accumulator = own.get();
+  }
+  accumulator->setLevel(frame1, frame2, labels, occluded, config);
+  MotionNormalEquations total;
 
   // Per-label Levenberg-Marquardt with backtracking: a label whose cost rose after its last update goes back
   // half way and is damped harder; labels are nearly decoupled (most pixels have one label), so each gets its own trust region.
@@ -92,132 +270,7 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
   std::vector<Vector6d> accepted_twist = twists;
 
   for (int iteration = 0; iteration < config.motion_iterations_per_level; ++iteration) {
-    std::vector<Eigen::Matrix<float, 3, 4>> transforms(static_cast<std::size_t>(motion_labels));
-    // Additive twist increments act on the warp through the left Jacobian: exp(xi + d) = exp(J_l d) exp(xi).
-    std::vector<Eigen::Matrix<float, 6, 6>> left_jacobians(static_cast<std::size_t>(motion_labels));
-    for (int i = 0; i < motion_labels; ++i) {
-      transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
-      left_jacobians[std::size_t(i)] = se3LeftJacobian(twists[std::size_t(i)]).cast<float>();
-    }
-    for (auto& a : accumulators) a.reset(motion_labels);
-
-#pragma omp parallel
-    {
-      int thread = 0;
-#ifdef _OPENMP
-      thread = omp_get_thread_num();
-#endif
-      Accumulator& acc = accumulators[std::size_t(thread)];
-      std::vector<int> active(static_cast<std::size_t>(motion_labels));
-      std::vector<float> weights(static_cast<std::size_t>(motion_labels));
-// Static schedule: each thread always sums the same rows, and the per-thread sums are added in thread
-// order below, so the result is the same from run to run for a given thread count.
-#pragma omp for schedule(static)
-      for (int y = 0; y < H; ++y) {
-        for (int x = 0; x < W; ++x) {
-          const std::size_t idx = std::size_t(y) * W + x;
-          const Eigen::Vector3f P(frame1.points(x, y, 0), frame1.points(x, y, 1), frame1.points(x, y, 2));
-          if (!std::isfinite(P.z())) continue;
-          if (occluded && occluded->data[idx]) continue;
-          // Interpolation weights over the motion labels; the outlier share scales the pixel down.
-          float mass = 0.f;
-          for (int i = 0; i < motion_labels; ++i) mass += labels.data[i * plane + idx];
-          if (mass < 0.05f) continue;
-          int n_active = 0;
-          float active_mass = 0.f;
-          for (int i = 0; i < motion_labels; ++i) {
-            const float w = labels.data[i * plane + idx] / mass;
-            if (w >= min_weight) {
-              active[std::size_t(n_active)] = i;
-              weights[std::size_t(n_active)] = w;
-              active_mass += w;
-              ++n_active;
-            }
-          }
-          if (n_active == 0) continue;
-          for (int k = 0; k < n_active; ++k) weights[std::size_t(k)] /= active_mass;
-
-          Eigen::Vector3f P2;
-          Eigen::Matrix<float, 6, 6> blended_jacobian;
-          const Eigen::Matrix<float, 6, 6>* left_jacobian = &left_jacobians[std::size_t(active[0])];
-          if (n_active > 1) {
-            Vector6d xi_bar = Vector6d::Zero();
-            for (int k = 0; k < n_active; ++k) xi_bar += double(weights[std::size_t(k)]) * twists[std::size_t(active[std::size_t(k)])];
-            P2 = se3Exp(xi_bar).topRows<3>().cast<float>() * P.homogeneous();
-            blended_jacobian = se3LeftJacobian(xi_bar).cast<float>();
-            left_jacobian = &blended_jacobian;
-          } else {
-            P2 = transforms[std::size_t(active[0])] * P.homogeneous();
-          }
-          const float inv_z = 1.f / std::max(P2.z(), 1e-3f);
-          float u = fx * P2.x() * inv_z + cx, v = fy * P2.y() * inv_z + cy;
-          const bool in_view = P2.z() >= 1e-3f && clampIntoView(W, H, u, v);
-          float I2, gIx = 0.f, gIy = 0.f;
-          if (!in_view || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
-            for (int a = 0; a < n_active; ++a)
-              acc.label_cost(active[std::size_t(a)]) += mass * weights[std::size_t(a)] * out_of_view_cost;
-            acc.cost += mass * out_of_view_cost;
-            continue;
-          }
-          sampleBilinear(frame2.intensity_grad, u, v, 0, gIx);
-          sampleBilinear(frame2.intensity_grad, u, v, 1, gIy);
-          // d(pixel)/dP2
-          const float du_dX = fx * inv_z, du_dZ = -fx * P2.x() * inv_z * inv_z;
-          const float dv_dY = fy * inv_z, dv_dZ = -fy * P2.y() * inv_z * inv_z;
-
-          const float rI = frame1.intensity(x, y) - I2;
-          Vector6f JI;
-          pointJacobian(P2, Eigen::RowVector3f(-gIx * du_dX, -gIy * dv_dY, -(gIx * du_dZ + gIy * dv_dZ)), JI);
-          // IRLS weight of the normalised Cauchy cost ln(1 + (r/c)^2): 1 / (c^2 + r^2).
-          const float wI = 1.f / (cI * cI + rI * rI);
-          JI = left_jacobian->transpose() * JI;
-          Eigen::Matrix<float, 6, 6> Hp = wI * JI * JI.transpose();
-          Vector6f gp = wI * rI * JI;
-          double cost = std::log1p(rI * rI / (cI * cI));
-
-          float Z2;
-          if (sampleDepthBilinearSmooth(frame2.depth, u, v, kDepthEdgeJump, Z2)) {
-            float gZx = 0.f, gZy = 0.f;
-            sampleBilinear(frame2.depth_grad, u, v, 0, gZx);
-            sampleBilinear(frame2.depth_grad, u, v, 1, gZy);
-            const float rZ = P2.z() - Z2;
-            Vector6f JZ;
-            pointJacobian(P2, Eigen::RowVector3f(-gZx * du_dX, -gZy * dv_dY, 1.f - (gZx * du_dZ + gZy * dv_dZ)), JZ);
-            JZ = left_jacobian->transpose() * JZ;
-            const float wZ = alpha / (cZ * cZ + rZ * rZ);
-            Hp += wZ * JZ * JZ.transpose();
-            gp += wZ * rZ * JZ;
-            cost += alpha * std::log1p(rZ * rZ / (cZ * cZ));
-          } else {
-            cost += alpha * std::log(2.0);  // no depth evidence: a constant, so costs stay comparable
-          }
-          const Eigen::Matrix<double, 6, 6> Hd = (mass * Hp).cast<double>();
-          const Vector6d gd = (mass * gp).cast<double>();
-          for (int a = 0; a < n_active; ++a) {
-            const int ia = active[std::size_t(a)];
-            const double wa = weights[std::size_t(a)];
-            acc.g.segment<6>(6 * ia) += wa * gd;
-            acc.label_cost(ia) += wa * mass * cost;
-            acc.label_pixels(ia) += wa * mass;
-            for (int b = 0; b < n_active; ++b) {
-              const int ib = active[std::size_t(b)];
-              acc.H.block<6, 6>(6 * ia, 6 * ib) += (wa * weights[std::size_t(b)]) * Hd;
-            }
-          }
-          acc.cost += mass * cost;
-          ++acc.pixels;
-        }
-      }
-    }
-    Accumulator& total = accumulators[0];
-    for (std::size_t t = 1; t < accumulators.size(); ++t) {
-      total.H += accumulators[t].H;
-      total.g += accumulators[t].g;
-      total.label_cost += accumulators[t].label_cost;
-      total.label_pixels += accumulators[t].label_pixels;
-      total.cost += accumulators[t].cost;
-      total.pixels += accumulators[t].pixels;
-    }
+    accumulator->accumulate(twists, total);
     if (iteration == 0) stats.cost_before = total.cost;
     stats.cost_after = total.cost;
     stats.pixels_used = total.pixels;

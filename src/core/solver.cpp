@@ -91,6 +91,7 @@ double meanAbsoluteChange(const SoftLabels& a, const SoftLabels& b) {
 struct Solver::Impl {
   Config config;
   std::unique_ptr<LabelOptimizer> optimizer;
+  std::unique_ptr<MotionAccumulator> motion;
   std::string backend_note;
 
   template <typename... Args>
@@ -106,6 +107,7 @@ Solver::Solver(const Config& config) : impl_(std::make_unique<Impl>()) {
   config.validate();
   impl_->config = config;
   impl_->optimizer = makeLabelOptimizer(config.backend, &impl_->backend_note);
+  impl_->motion = makeMotionAccumulator(impl_->optimizer->name() == "cuda" ? Backend::Cuda : Backend::Cpu);
 }
 
 Solver::~Solver() = default;
@@ -179,7 +181,7 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
       SoftLabels one(P.points.width, P.points.height, 2, 0.f);
       for (std::size_t k = 0; k < one.planeSize(); ++k) (std::isfinite(P.points.data[k * 3 + 2]) ? one.plane(0) : one.plane(1))[k] = 1.f;
       std::vector<Vector6d> single{dominant};
-      estimateMotionsAtLevel(P, pyr2[level], one, nullptr, single, config);
+      estimateMotionsAtLevel(P, pyr2[level], one, nullptr, single, config, impl_->motion.get());
       dominant = single[0];
     }
   }
@@ -208,7 +210,7 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
       const ImageU8 occ_level = resampleMask(occlusion, pyr1[level].points.width, pyr1[level].points.height);
       const MotionLevelStats ms = estimateMotionsAtLevel(pyr1[level], pyr2[level], u_level,
                                                          config.detect_occlusions ? &occ_level : nullptr, twists,
-                                                         motion_config);
+                                                         motion_config, impl_->motion.get());
       stats.motion_iterations += ms.iterations;
     }
     result.timings.motion += elapsedMs(t);

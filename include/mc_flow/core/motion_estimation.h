@@ -5,7 +5,10 @@
  */
 #pragma once
 
+#include <Eigen/Core>
 #include <cmath>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include "mc_flow/core/config.h"
@@ -23,10 +26,47 @@ struct MotionLevelStats {
   double cost_after = 0;   ///< at the last iteration
 };
 
+/// @brief The normal equations of one IRLS linearisation over all motion labels (6 unknowns per label).
+struct MotionNormalEquations {
+  Eigen::MatrixXd H;             ///< 6n x 6n, sum over pixels of m w_i w_j sum_kinds w(r) J^T J
+  Eigen::VectorXd g;             ///< 6n, sum over pixels of m w_i sum_kinds w(r) J^T r
+  Eigen::VectorXd label_cost;    ///< robust cost shared out to the labels by their interpolation weights
+  Eigen::VectorXd label_pixels;  ///< weighted pixel count per label
+  double cost = 0;               ///< total robust cost (out-of-view pixels included)
+  int pixels = 0;                ///< pixels that contributed residuals
+  void reset(int labels);
+  void add(const MotionNormalEquations& other);
+};
+
+/// @brief Builds the normal equations at given twists (the expensive, per-pixel part of the motion step).
+/// The CPU and CUDA implementations compute the same sums; the solve and the per-label step control stay in
+/// estimateMotionsAtLevel.
+class MotionAccumulator {
+ public:
+  virtual ~MotionAccumulator() = default;
+  /// @brief Fixes the level's images, labels and occlusion mask for the following accumulate() calls
+  /// (they must outlive them).
+  virtual void setLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
+                        const ImageU8* occluded, const Config& config) = 0;
+  /// @brief Linearises at `twists` (one per motion label) and writes the sums into `out`.
+  virtual void accumulate(const std::vector<Vector6d>& twists, MotionNormalEquations& out) = 0;
+  virtual std::string name() const = 0;
+};
+
+/// @brief The CPU implementation (OpenMP, static schedule: deterministic for a given thread count).
+std::unique_ptr<MotionAccumulator> makeCpuMotionAccumulator();
+/// @brief The accumulator that goes with a label-step backend: CUDA when the label step runs on CUDA and
+/// this build has the CUDA motion kernels, otherwise the CPU one.
+std::unique_ptr<MotionAccumulator> makeMotionAccumulator(Backend resolved_backend);
+/// @brief Cost charged to a pixel whose warp leaves the view (as if both residuals were 10 Cauchy scales).
+double motionOutOfViewCost(const Config& config);
+
 /// @brief IRLS at one level. `labels` has the level's size; `occluded` (may be null) excludes pixels.
-/// `twists` holds one twist per motion label (labels.count - 1) and is updated in place.
+/// `twists` holds one twist per motion label (labels.count - 1) and is updated in place. `accumulator`
+/// builds the normal equations (null: a CPU one).
 MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
-                                        const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config);
+                                        const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
+                                        MotionAccumulator* accumulator = nullptr);
 
 /// @brief Robust per-pixel data cost of one residual pair (normalised Cauchy, used by both steps):
 /// ln(1 + (rI/cI)^2) + alpha * ln(1 + (rZ/cZ)^2).
