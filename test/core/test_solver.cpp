@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <algorithm>
 #include <map>
 
@@ -76,6 +77,8 @@ TEST_P(SolverOnSyntheticScenes, RecoversFlowSegmentsAndOcclusions) {
     ASSERT_NE(best, votes.end()) << "part " << part.name << " has no segment";
     const Eigen::Matrix4d D = se3Exp(r.segments[std::size_t(best->first - 1)].twist).inverse() * se3Exp(part.twist);
     const double rotation_error_deg = Eigen::AngleAxisd(Eigen::Matrix3d(D.topLeftCorner<3, 3>())).angle() * 180 / M_PI;
+    std::printf("variant %d %s: rotation error %.2f deg of %.2f deg\n", variant, part.name.c_str(), rotation_error_deg,
+                part.twist.tail<3>().norm() * 180 / M_PI);
     EXPECT_LT(rotation_error_deg, 2.0) << "part " << part.name << " (true rotation "
                                        << part.twist.tail<3>().norm() * 180 / M_PI << " deg)";
   }
