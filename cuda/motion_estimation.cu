@@ -1,0 +1,703 @@
+// Motion step's normal equations on the GPU: the per-pixel part of CpuMotionAccumulator
+// (src/core/motion_estimation.cpp, the reference), one thread per pixel, sums in double.
+//
+// Arithmetic. Warping, projection, the in-view test, the bilinear samples and the residuals use explicitly
+// rounded float intrinsics in the CPU's order (cuda/sampling_device.cuh), so every discrete decision (in view,
+// depth jump, active labels) is the CPU's. The Jacobians and the per-pixel 6x6 products may be contracted into
+// FMAs (a few float ulps per pixel) and the sums run in another order than the CPU's, so the results agree
+// with the CPU to a relative ~1e-7, not bit for bit (test/cuda/test_motion_estimation_cuda.cpp states the
+// tolerances).
+//
+// Reduction (deterministic: the same sums in the same order on every run, as the CPU's static schedule
+// gives; the Solver's results must not depend on scheduling). A pixel adds to the diagonal block, the
+// gradient, the cost and the weighted pixel count of each of its active labels (29 values per label, the
+// upper triangle of the symmetric 6x6 block only), and, when it has several active labels, to the
+// off-diagonal blocks of each label pair (symmetric too: 21 values).
+//  - Per label: each warp walks the labels present in it in ascending order and reduces the contributions
+//    of the lanes holding the current label with shuffles; the warps of a block add their sums into shared
+//    memory one warp after the other; each block writes its sums to its own slot, and a second kernel adds
+//    the slots in block order (one warp per value, fixed lane partition, shuffle tree).
+//  - Label pairs (blended pixels only): the per-pixel kernel stores the mass-weighted 6x6 upper triangle of
+//    the blended pixels; a pair kernel (one block per pair) sums w_a w_b times it over the image in a fixed
+//    order.
+#include <cuda_runtime.h>
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cuda_check.h"
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/motion_estimation.h"
+#include "sampling_device.cuh"
+
+namespace mc_flow {
+
+namespace {
+
+using cuda_detail::addRn;
+using cuda_detail::DeviceBuffer;
+using cuda_detail::DeviceImage;
+using cuda_detail::divRn;
+using cuda_detail::mulRn;
+using cuda_detail::subRn;
+
+constexpr int kMaxMotionLabels = 128;  // the label step's limit
+constexpr int kThreads = 256;          // one pixel per thread; warps span consecutive pixels of a row
+constexpr int kWarps = kThreads / 32;
+constexpr float kDepthEdgeJump = 0.1f;  // [m] as in src/core/motion_estimation.cpp
+constexpr float kMinMass = 0.05f;       // pixels with less motion-label mass are skipped (as on the CPU)
+
+// Per-label sums: the 21 upper-triangle values of the diagonal H block (row-major, r <= c), g (6),
+// label_cost, label_pixels.
+constexpr int kUpper = 21;
+constexpr int kLabelStride = kUpper + 6 + 2;
+constexpr int kLabelCost = kUpper + 6, kLabelPixels = kUpper + 7;
+
+/// One motion label's linearisation point as the CPU uses it: the transform and left Jacobian in float
+/// (row-major), the twist in double (blended pixels mix twists before their exp).
+struct LabelMotion {
+  float transform[12];
+  float left_jacobian[36];
+  double twist[6];
+};
+
+struct KernelParams {
+  DeviceImage points1, intensity1, intensity2, depth2, intensity_grad2, depth_grad2;
+  const float* labels = nullptr;           // n + 1 planes, the last one the outlier label
+  const std::uint8_t* occluded = nullptr;  // may be null
+  const LabelMotion* motions = nullptr;
+  int width = 0, height = 0, motion_labels = 0;
+  float fx = 0, fy = 0, cx = 0, cy = 0;
+  float c_intensity = 0, c_depth = 0, alpha = 0, min_weight = 0;
+  double out_of_view_cost = 0;
+  double* block_partials = nullptr;  // per block: motion_labels * kLabelStride label sums, then cost, pixels
+  std::uint8_t* blended = nullptr;   // per pixel: 1 when in view with several active labels
+  float* blended_hessian = nullptr;  // kUpper planes: mass * Hp of the blended pixels
+  float* active_mass = nullptr;      // per pixel: sum of the active labels' weights (blended pixels)
+  float* mass = nullptr;             // per pixel: motion-label mass (blended pixels)
+};
+
+// ----------------------------------------------------------------- SE(3) in double (as src/core/se3.cpp)
+__device__ void skew3(const double w[3], double S[9]) {
+  S[0] = 0; S[1] = -w[2]; S[2] = w[1];
+  S[3] = w[2]; S[4] = 0; S[5] = -w[0];
+  S[6] = -w[1]; S[7] = w[0]; S[8] = 0;
+}
+
+__device__ void mul3(const double A[9], const double B[9], double C[9]) {
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) C[r * 3 + c] = A[r * 3] * B[c] + A[r * 3 + 1] * B[3 + c] + A[r * 3 + 2] * B[6 + c];
+}
+
+// Rows 0..2 of exp(xi), cast to float (row-major 3x4).
+__device__ void se3ExpDevice(const double xi[6], float T[12]) {
+  const double* v = xi;
+  const double* w = xi + 3;
+  const double theta2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2], theta = sqrt(theta2);
+  double W[9], W2[9];
+  skew3(w, W);
+  mul3(W, W, W2);
+  double a, b, c;
+  if (theta < 1e-8) {
+    a = 1.0 - theta2 / 6.0;
+    b = 0.5 - theta2 / 24.0;
+    c = 1.0 / 6.0 - theta2 / 120.0;
+  } else {
+    a = sin(theta) / theta;
+    b = (1.0 - cos(theta)) / theta2;
+    c = (theta - sin(theta)) / (theta2 * theta);
+  }
+  for (int r = 0; r < 3; ++r) {
+    double t = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double identity = r == k ? 1.0 : 0.0;
+      T[r * 4 + k] = float(identity + a * W[r * 3 + k] + b * W2[r * 3 + k]);
+      t += (identity + b * W[r * 3 + k] + c * W2[r * 3 + k]) * v[k];
+    }
+    T[r * 4 + 3] = float(t);
+  }
+}
+
+// Left Jacobian of SE(3) (Barfoot eqs. 7.83, 7.86), cast to float (row-major 6x6).
+__device__ void se3LeftJacobianDevice(const double xi[6], float J[36]) {
+  const double* rho = xi;
+  const double* phi = xi + 3;
+  const double t2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2], t = sqrt(t2);
+  double F[9], F2[9], P[9];
+  skew3(phi, F);
+  mul3(F, F, F2);
+  skew3(rho, P);
+  double a, b, c, d;
+  if (t < 1e-3) {
+    a = 0.5 - t2 / 24.0;
+    b = 1.0 / 6.0 - t2 / 120.0;
+    c = 1.0 / 24.0 - t2 / 720.0;
+    d = 1.0 / 120.0 - t2 / 2520.0;
+  } else {
+    const double s = sin(t), co = cos(t);
+    a = (1.0 - co) / t2;
+    b = (t - s) / (t2 * t);
+    c = (t2 + 2.0 * co - 2.0) / (2.0 * t2 * t2);
+    d = (2.0 * t - 3.0 * s + t * co) / (2.0 * t2 * t2 * t);
+  }
+  double FP[9], PF[9], FPF[9], F2P[9], PF2[9], FPF2[9], F2PF[9];
+  mul3(F, P, FP);
+  mul3(P, F, PF);
+  mul3(FP, F, FPF);
+  mul3(F2, P, F2P);
+  mul3(P, F2, PF2);
+  mul3(FP, F2, FPF2);
+  mul3(F2P, F, F2PF);
+  for (int k = 0; k < 36; ++k) J[k] = 0.f;
+  for (int r = 0; r < 3; ++r) {
+    for (int col = 0; col < 3; ++col) {
+      const int e = r * 3 + col;
+      const float so3 = float((r == col ? 1.0 : 0.0) + a * F[e] + b * F2[e]);
+      const double q = 0.5 * P[e] + b * (FP[e] + PF[e] + FPF[e]) + c * (F2P[e] + PF2[e] - 3.0 * FPF[e]) +
+                       d * (FPF2[e] + F2PF[e]);
+      J[r * 6 + col] = so3;
+      J[(r + 3) * 6 + col + 3] = so3;
+      J[r * 6 + col + 3] = float(q);
+    }
+  }
+}
+
+// ----------------------------------------------------------------- per-pixel linearisation
+// d(P2)/d(eps) for a left increment: row * [I | -skew(P2)] (pointJacobian of the CPU code), then through the
+// transposed left Jacobian.
+__device__ __forceinline__ void residualJacobian(const float P2[3], float r0, float r1, float r2, const float* J,
+                                                 float out[6]) {
+  const float point[6] = {r0, r1, r2, r2 * P2[1] - r1 * P2[2], r0 * P2[2] - r2 * P2[0], r1 * P2[0] - r0 * P2[1]};
+#pragma unroll
+  for (int i = 0; i < 6; ++i) {
+    float s = 0.f;
+#pragma unroll
+    for (int r = 0; r < 6; ++r) s += J[r * 6 + i] * point[r];
+    out[i] = s;
+  }
+}
+
+// Motion-label weight of label i at a pixel: u_i / mass, kept when >= min_weight (the CPU's first pass).
+__device__ __forceinline__ float rawWeight(const KernelParams& p, std::size_t plane, std::size_t idx, int i,
+                                           float mass) {
+  return divRn(__ldg(p.labels + i * plane + idx), mass);
+}
+
+// Next active label at or after `from` (n when none).
+__device__ __forceinline__ int nextActive(const KernelParams& p, std::size_t plane, std::size_t idx, int from,
+                                          float mass) {
+  for (int i = from; i < p.motion_labels; ++i)
+    if (rawWeight(p, plane, idx, i, mass) >= p.min_weight) return i;
+  return p.motion_labels;
+}
+
+__device__ __forceinline__ double warpSum(double v) {
+#pragma unroll
+  for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_down_sync(0xffffffffu, v, offset);
+  return v;
+}
+
+__device__ __forceinline__ int warpMin(int v) {
+#pragma unroll
+  for (int offset = 16; offset > 0; offset >>= 1) v = min(v, __shfl_xor_sync(0xffffffffu, v, offset));
+  return v;
+}
+
+__global__ void __launch_bounds__(kThreads) accumulateNormalEquations(const KernelParams p) {
+  extern __shared__ double block_sums[];  // motion_labels * kLabelStride, then cost, pixels
+  const int n = p.motion_labels;
+  const int block_values = n * kLabelStride + 2;
+  for (int k = threadIdx.x; k < block_values; k += blockDim.x) block_sums[k] = 0.0;
+  __syncthreads();
+
+  const std::size_t plane = std::size_t(p.width) * p.height;
+  const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  const int lane = threadIdx.x & 31;
+
+  // Per-pixel state; a lane without a usable pixel keeps valid = false and joins the warp reductions with zeros.
+  bool valid = false, in_view = false;
+  float mass = 0.f, active_mass = 0.f;
+  int first = n, n_active = 0;
+  float Hm[kUpper];  // mass * Hp, upper triangle
+  float gm[6];       // mass * gp
+  double cost = 0.0;
+#pragma unroll
+  for (int k = 0; k < kUpper; ++k) Hm[k] = 0.f;
+#pragma unroll
+  for (int k = 0; k < 6; ++k) gm[k] = 0.f;
+
+  if (idx < plane) {
+    const int x = int(idx % std::size_t(p.width)), y = int(idx / std::size_t(p.width));
+    const float P[3] = {p.points1.at(x, y, 0), p.points1.at(x, y, 1), p.points1.at(x, y, 2)};
+    const bool occluded = p.occluded && p.occluded[idx];
+    if (isfinite(P[2]) && !occluded) {
+      for (int i = 0; i < n; ++i) mass = addRn(mass, __ldg(p.labels + i * plane + idx));
+      if (mass >= kMinMass) {
+        for (int i = 0; i < n; ++i) {
+          const float w = rawWeight(p, plane, idx, i, mass);
+          if (w >= p.min_weight) {
+            if (n_active == 0) first = i;
+            active_mass = addRn(active_mass, w);
+            ++n_active;
+          }
+        }
+      }
+    }
+    if (n_active > 0) {
+      valid = true;
+      float T[12];
+      float J[36];
+      const float* transform = T;
+      const float* left_jacobian = J;
+      if (n_active > 1) {
+        double xi_bar[6] = {0, 0, 0, 0, 0, 0};
+        for (int i = first; i < n; i = nextActive(p, plane, idx, i + 1, mass)) {
+          const double w = double(divRn(rawWeight(p, plane, idx, i, mass), active_mass));
+          for (int k = 0; k < 6; ++k) xi_bar[k] += w * p.motions[i].twist[k];
+        }
+        se3ExpDevice(xi_bar, T);
+        se3LeftJacobianDevice(xi_bar, J);
+      } else {
+        transform = p.motions[first].transform;
+        left_jacobian = p.motions[first].left_jacobian;
+      }
+      // P2 = R P + t with Eigen's order for a 3x3 * 3 product: a0 x + (a1 y + a2 z).
+      float P2[3];
+#pragma unroll
+      for (int r = 0; r < 3; ++r) {
+        const float* row = transform + 4 * r;
+        P2[r] = addRn(addRn(mulRn(row[0], P[0]), addRn(mulRn(row[1], P[1]), mulRn(row[2], P[2]))), row[3]);
+      }
+      const float inv_z = divRn(1.f, fmaxf(P2[2], 1e-3f));
+      float u = addRn(mulRn(mulRn(p.fx, P2[0]), inv_z), p.cx);
+      float v = addRn(mulRn(mulRn(p.fy, P2[1]), inv_z), p.cy);
+      float I2 = 0.f;
+      in_view = P2[2] >= 1e-3f && cuda_detail::clampIntoViewDevice(p.width, p.height, u, v) &&
+                cuda_detail::sampleBilinearDevice(p.intensity2, u, v, 0, I2);
+      if (in_view) {
+        float gIx = 0.f, gIy = 0.f;
+        cuda_detail::sampleBilinearDevice(p.intensity_grad2, u, v, 0, gIx);
+        cuda_detail::sampleBilinearDevice(p.intensity_grad2, u, v, 1, gIy);
+        const float du_dX = mulRn(p.fx, inv_z), du_dZ = mulRn(mulRn(mulRn(-p.fx, P2[0]), inv_z), inv_z);
+        const float dv_dY = mulRn(p.fy, inv_z), dv_dZ = mulRn(mulRn(mulRn(-p.fy, P2[1]), inv_z), inv_z);
+        const float rI = subRn(p.intensity1.at(x, y, 0), I2);
+        const float cI2 = mulRn(p.c_intensity, p.c_intensity);
+        float JI[6];
+        residualJacobian(P2, -gIx * du_dX, -gIy * dv_dY, -(gIx * du_dZ + gIy * dv_dZ), left_jacobian, JI);
+        const float wI = divRn(1.f, addRn(cI2, mulRn(rI, rI)));
+        const float wrI = wI * rI;
+        float wJI[6];
+#pragma unroll
+        for (int i = 0; i < 6; ++i) {
+          wJI[i] = wI * JI[i];
+          gm[i] = wrI * JI[i];
+        }
+        {
+          int k = 0;
+#pragma unroll
+          for (int r = 0; r < 6; ++r)
+#pragma unroll
+            for (int c = r; c < 6; ++c) Hm[k++] = wJI[r] * JI[c];
+        }
+        cost = log1p(double(divRn(mulRn(rI, rI), cI2)));
+
+        float Z2 = 0.f;
+        if (cuda_detail::sampleDepthBilinearSmoothDevice(p.depth2, u, v, kDepthEdgeJump, Z2)) {
+          float gZx = 0.f, gZy = 0.f;
+          cuda_detail::sampleBilinearDevice(p.depth_grad2, u, v, 0, gZx);
+          cuda_detail::sampleBilinearDevice(p.depth_grad2, u, v, 1, gZy);
+          const float rZ = subRn(P2[2], Z2);
+          const float cZ2 = mulRn(p.c_depth, p.c_depth);
+          float JZ[6];
+          residualJacobian(P2, -gZx * du_dX, -gZy * dv_dY, 1.f - (gZx * du_dZ + gZy * dv_dZ), left_jacobian, JZ);
+          const float wZ = divRn(p.alpha, addRn(cZ2, mulRn(rZ, rZ)));
+          const float wrZ = wZ * rZ;
+          float wJZ[6];
+#pragma unroll
+          for (int i = 0; i < 6; ++i) {
+            wJZ[i] = wZ * JZ[i];
+            gm[i] += wrZ * JZ[i];
+          }
+          int k = 0;
+#pragma unroll
+          for (int r = 0; r < 6; ++r)
+#pragma unroll
+            for (int c = r; c < 6; ++c) Hm[k++] += wJZ[r] * JZ[c];
+          cost += double(p.alpha) * log1p(double(divRn(mulRn(rZ, rZ), cZ2)));
+        } else {
+          cost += double(p.alpha) * log(2.0);  // no depth evidence: the CPU's constant
+        }
+#pragma unroll
+        for (int k = 0; k < kUpper; ++k) Hm[k] = mulRn(mass, Hm[k]);
+#pragma unroll
+        for (int k = 0; k < 6; ++k) gm[k] = mulRn(mass, gm[k]);
+
+        // Off-diagonal blocks of the label pairs: summed by accumulatePairs from these.
+        if (n_active > 1) {
+#pragma unroll
+          for (int k = 0; k < kUpper; ++k) p.blended_hessian[k * plane + idx] = Hm[k];
+          p.active_mass[idx] = active_mass;
+          p.mass[idx] = mass;
+        }
+      }
+    }
+    p.blended[idx] = in_view && n_active > 1 ? 1 : 0;
+  }
+
+  // Pixel totals (every lane takes part in the shuffles).
+  const double total_cost =
+      warpSum(!valid ? 0.0 : in_view ? double(mass) * cost : double(mass) * p.out_of_view_cost);
+  const double total_pixels = warpSum(in_view ? 1.0 : 0.0);
+
+  // Per-label sums: the warps take turns (a fixed order of the shared-memory additions); a warp visits the
+  // labels its lanes hold, in ascending order.
+  const int warp = threadIdx.x >> 5;
+  for (int turn = 0; turn < kWarps; ++turn) {
+    if (warp == turn) {  // warp-uniform: whole warps enter, so the shuffles see all 32 lanes
+      if (lane == 0) {
+        block_sums[n * kLabelStride] += total_cost;
+        block_sums[n * kLabelStride + 1] += total_pixels;
+      }
+      int cursor = valid ? first : n;
+      for (int label = warpMin(cursor); label < n; label = warpMin(cursor)) {
+        const bool mine = cursor == label;
+        double w = 0.0;
+        float w_float = 0.f;
+        if (mine) {
+          w_float = divRn(rawWeight(p, plane, idx, label, mass), active_mass);
+          w = double(w_float);
+        }
+        double* sums = block_sums + label * kLabelStride;
+        const double ww = w * w;
+#pragma unroll
+        for (int k = 0; k < kUpper; ++k) {
+          const double s = warpSum(in_view ? ww * double(Hm[k]) : 0.0);
+          if (lane == 0) sums[k] += s;
+        }
+#pragma unroll
+        for (int k = 0; k < 6; ++k) {
+          const double s = warpSum(in_view ? w * double(gm[k]) : 0.0);
+          if (lane == 0) sums[kUpper + k] += s;
+        }
+        const double label_cost =
+            !mine ? 0.0 : in_view ? w * double(mass) * cost : double(mulRn(mass, w_float)) * p.out_of_view_cost;
+        const double s_cost = warpSum(label_cost);
+        const double s_pixels = warpSum(mine && in_view ? w * double(mass) : 0.0);
+        if (lane == 0) {
+          sums[kLabelCost] += s_cost;
+          sums[kLabelPixels] += s_pixels;
+        }
+        if (mine) cursor = nextActive(p, plane, idx, label + 1, mass);
+      }
+    }
+    __syncthreads();
+  }
+  double* partial = p.block_partials + std::size_t(blockIdx.x) * block_values;
+  for (int k = threadIdx.x; k < block_values; k += blockDim.x) partial[k] = block_sums[k];
+}
+
+// Adds the blocks' partial sums in block order: one warp per value, lane l takes blocks l, l + 32, ...
+__global__ void reduceBlockPartials(const double* __restrict__ partials, int blocks, int values,
+                                    double* __restrict__ sums) {
+  const int value = int((std::size_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5);
+  const int lane = threadIdx.x & 31;
+  if (value >= values) return;  // whole warps leave together (value is warp-uniform)
+  double s = 0.0;
+  for (int b = lane; b < blocks; b += 32) s += partials[std::size_t(b) * values + value];
+  s = warpSum(s);
+  if (lane == 0) sums[value] = s;
+}
+
+// Off-diagonal block of the label pair (a, b), a < b: sum over the blended pixels of w_a w_b mass Hp
+// (the CPU adds (w_a w_b) Hd to blocks (a, b) and (b, a)). One block per pair; fixed order.
+__global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p, double* __restrict__ pair_sums) {
+  __shared__ double warp_sums[kWarps][kUpper];
+  const int n = p.motion_labels;
+  int a = 0, pair = int(blockIdx.x);
+  while (pair >= n - 1 - a) {  // pair index -> (a, b), row-major over the upper triangle
+    pair -= n - 1 - a;
+    ++a;
+  }
+  const int b = a + 1 + pair;
+  const std::size_t plane = std::size_t(p.width) * p.height;
+  double acc[kUpper];
+#pragma unroll
+  for (int k = 0; k < kUpper; ++k) acc[k] = 0.0;
+  for (std::size_t idx = threadIdx.x; idx < plane; idx += blockDim.x) {
+    if (!p.blended[idx]) continue;
+    const float mass = p.mass[idx];
+    const float wa_raw = rawWeight(p, plane, idx, a, mass), wb_raw = rawWeight(p, plane, idx, b, mass);
+    if (!(wa_raw >= p.min_weight && wb_raw >= p.min_weight)) continue;
+    const float active_mass = p.active_mass[idx];
+    const double wab = double(divRn(wa_raw, active_mass)) * double(divRn(wb_raw, active_mass));
+#pragma unroll
+    for (int k = 0; k < kUpper; ++k) acc[k] += wab * double(p.blended_hessian[k * plane + idx]);
+  }
+  const int lane = threadIdx.x & 31, warp = threadIdx.x >> 5;
+#pragma unroll
+  for (int k = 0; k < kUpper; ++k) {
+    const double s = warpSum(acc[k]);
+    if (lane == 0) warp_sums[warp][k] = s;
+  }
+  __syncthreads();
+  if (threadIdx.x < kUpper) {
+    double s = 0.0;
+    for (int w = 0; w < kWarps; ++w) s += warp_sums[w][threadIdx.x];
+    pair_sums[std::size_t(blockIdx.x) * kUpper + threadIdx.x] = s;
+  }
+}
+
+// ----------------------------------------------------------------- host side
+struct StreamHolder {
+  cudaStream_t stream = nullptr;
+  StreamHolder() { MCFLOW_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking)); }
+  ~StreamHolder() {
+    if (stream) cudaStreamDestroy(stream);
+  }
+  StreamHolder(const StreamHolder&) = delete;
+  StreamHolder& operator=(const StreamHolder&) = delete;
+};
+
+/// Page-locked host memory that only grows (the per-call upload of the motions and download of the sums).
+template <typename T>
+class PinnedBuffer {
+ public:
+  PinnedBuffer() = default;
+  PinnedBuffer(const PinnedBuffer&) = delete;
+  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
+  ~PinnedBuffer() {
+    if (data_) cudaFreeHost(data_);
+  }
+  void reserve(std::size_t count) {
+    if (count <= capacity_) return;
+    if (data_) MCFLOW_CUDA_CHECK(cudaFreeHost(data_));
+    data_ = nullptr;
+    capacity_ = 0;
+    MCFLOW_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&data_), count * sizeof(T)));
+    capacity_ = count;
+  }
+  T* get() { return data_; }
+
+ private:
+  T* data_ = nullptr;
+  std::size_t capacity_ = 0;
+};
+
+std::string sizeText(int w, int h, int c) {
+  return std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(c);
+}
+
+void requireImage(const char* name, const ImageF& image, int width, int height, int channels) {
+  if (image.width != width || image.height != height || image.channels != channels ||
+      image.data.size() != std::size_t(width) * height * channels)
+    throw InputError(std::string("CUDA motion step: ") + name + " is " +
+                     sizeText(image.width, image.height, image.channels) + " with " +
+                     std::to_string(image.data.size()) + " values, expected " + sizeText(width, height, channels));
+}
+
+class CudaMotionAccumulator final : public MotionAccumulator {
+ public:
+  std::string name() const override { return "cuda"; }
+
+  void setLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
+                const ImageU8* occluded, const Config& config) override {
+    const int W = frame1.points.width, H = frame1.points.height;
+    if (W <= 0 || H <= 0) throw InputError("CUDA motion step: empty level " + sizeText(W, H, 3));
+    requireImage("frame-1 points", frame1.points, W, H, 3);
+    requireImage("frame-1 intensity", frame1.intensity, W, H, 1);
+    requireImage("frame-2 intensity", frame2.intensity, W, H, 1);
+    requireImage("frame-2 depth", frame2.depth, W, H, 1);
+    requireImage("frame-2 intensity gradient", frame2.intensity_grad, W, H, 2);
+    requireImage("frame-2 depth gradient", frame2.depth_grad, W, H, 2);
+    const std::size_t plane = std::size_t(W) * H;
+    if (labels.width != W || labels.height != H || labels.count < 1 ||
+        labels.data.size() != plane * std::size_t(labels.count))
+      throw InputError("CUDA motion step: labels are " + sizeText(labels.width, labels.height, labels.count) +
+                       " with " + std::to_string(labels.data.size()) + " values, the level is " +
+                       std::to_string(W) + "x" + std::to_string(H));
+    if (labels.count - 1 > kMaxMotionLabels)
+      throw InputError("CUDA motion step: " + std::to_string(labels.count - 1) + " motion labels, at most " +
+                       std::to_string(kMaxMotionLabels));
+    if (occluded && (occluded->width != W || occluded->height != H || occluded->data.size() != plane))
+      throw InputError("CUDA motion step: occlusion mask is " + sizeText(occluded->width, occluded->height, 1) +
+                       ", the level is " + std::to_string(W) + "x" + std::to_string(H));
+
+    width_ = W;
+    height_ = H;
+    motion_labels_ = labels.count - 1;
+    config_ = config;
+    intrinsics_ = frame2.intrinsics;
+    has_occlusion_ = occluded != nullptr;
+
+    points1_.reserve(plane * 3);
+    intensity1_.reserve(plane);
+    intensity2_.reserve(plane);
+    depth2_.reserve(plane);
+    intensity_grad2_.reserve(plane * 2);
+    depth_grad2_.reserve(plane * 2);
+    labels_.reserve(std::max<std::size_t>(plane * std::size_t(labels.count), 1));
+    occluded_.reserve(plane);
+    blended_.reserve(plane);
+    blended_hessian_.reserve(plane * kUpper);
+    active_mass_.reserve(plane);
+    mass_.reserve(plane);
+    upload(points1_.get(), frame1.points.ptr(), plane * 3);
+    upload(intensity1_.get(), frame1.intensity.ptr(), plane);
+    upload(intensity2_.get(), frame2.intensity.ptr(), plane);
+    upload(depth2_.get(), frame2.depth.ptr(), plane);
+    upload(intensity_grad2_.get(), frame2.intensity_grad.ptr(), plane * 2);
+    upload(depth_grad2_.get(), frame2.depth_grad.ptr(), plane * 2);
+    upload(labels_.get(), labels.data.data(), plane * std::size_t(labels.count));
+    if (occluded) upload(occluded_.get(), occluded->ptr(), plane);
+    // The caller's images may change after this call returns: wait until the copies are done.
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
+  }
+
+  void accumulate(const std::vector<Vector6d>& twists, MotionNormalEquations& out) override {
+    if (width_ <= 0) throw InputError("CUDA motion step: accumulate() called before setLevel()");
+    const int n = motion_labels_;
+    if (int(twists.size()) != n)
+      throw InputError("CUDA motion step: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
+                       " motion labels");
+    out.reset(n);
+    if (n == 0) return;
+    cudaStream_t s = stream_.stream;
+
+    const std::size_t pairs = std::size_t(n) * (n - 1) / 2;
+    const std::size_t label_values = std::size_t(n) * kLabelStride, pair_values = pairs * kUpper;
+    // Layout of the sums: per-label values, cost, pixels (block_values, as in the per-block partials), pairs.
+    const std::size_t block_values = label_values + 2;
+    const std::size_t sum_values = block_values + pair_values;
+    const std::size_t plane = std::size_t(width_) * height_;
+    const unsigned blocks = unsigned((plane + kThreads - 1) / kThreads);
+    motions_.reserve(std::size_t(n));
+    host_motions_.reserve(std::size_t(n));
+    sums_.reserve(sum_values);
+    host_sums_.reserve(sum_values);
+    partials_.reserve(std::size_t(blocks) * block_values);
+
+    // Linearisation points in float, as the CPU computes them.
+    LabelMotion* motions = host_motions_.get();
+    for (int i = 0; i < n; ++i) {
+      const Vector6d& xi = twists[std::size_t(i)];
+      const Eigen::Matrix<float, 3, 4> T = se3Exp(xi).topRows<3>().cast<float>();
+      const Eigen::Matrix<float, 6, 6> J = se3LeftJacobian(xi).cast<float>();
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 4; ++c) motions[i].transform[r * 4 + c] = T(r, c);
+      for (int r = 0; r < 6; ++r)
+        for (int c = 0; c < 6; ++c) motions[i].left_jacobian[r * 6 + c] = J(r, c);
+      for (int k = 0; k < 6; ++k) motions[i].twist[k] = xi(k);
+    }
+    upload(motions_.get(), motions, std::size_t(n));
+
+    KernelParams p;
+    p.points1 = {points1_.get(), width_, height_, 3};
+    p.intensity1 = {intensity1_.get(), width_, height_, 1};
+    p.intensity2 = {intensity2_.get(), width_, height_, 1};
+    p.depth2 = {depth2_.get(), width_, height_, 1};
+    p.intensity_grad2 = {intensity_grad2_.get(), width_, height_, 2};
+    p.depth_grad2 = {depth_grad2_.get(), width_, height_, 2};
+    p.labels = labels_.get();
+    p.occluded = has_occlusion_ ? occluded_.get() : nullptr;
+    p.motions = motions_.get();
+    p.width = width_;
+    p.height = height_;
+    p.motion_labels = n;
+    p.fx = float(intrinsics_.fx);
+    p.fy = float(intrinsics_.fy);
+    p.cx = float(intrinsics_.cx);
+    p.cy = float(intrinsics_.cy);
+    p.c_intensity = float(config_.cauchy_c_intensity);
+    p.c_depth = float(config_.cauchy_c_depth);
+    p.alpha = float(config_.alpha);
+    p.min_weight = float(config_.min_label_weight);
+    p.out_of_view_cost = motionOutOfViewCost(config_);
+    p.block_partials = partials_.get();
+    p.blended = blended_.get();
+    p.blended_hessian = blended_hessian_.get();
+    p.active_mass = active_mass_.get();
+    p.mass = mass_.get();
+
+    const std::size_t shared_bytes = block_values * sizeof(double);
+    accumulateNormalEquations<<<blocks, kThreads, shared_bytes, s>>>(p);
+    MCFLOW_CUDA_CHECK_LAUNCH("accumulateNormalEquations");
+    const unsigned reduce_blocks = unsigned((block_values * 32 + kThreads - 1) / kThreads);
+    reduceBlockPartials<<<reduce_blocks, kThreads, 0, s>>>(partials_.get(), int(blocks), int(block_values),
+                                                          sums_.get());
+    MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
+    if (pairs > 0) {
+      accumulatePairs<<<unsigned(pairs), kThreads, 0, s>>>(p, sums_.get() + block_values);
+      MCFLOW_CUDA_CHECK_LAUNCH("accumulatePairs");
+    }
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(host_sums_.get(), sums_.get(), sum_values * sizeof(double), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+
+    // Unpack: symmetric diagonal blocks from their upper triangles, pair blocks into (a,b) and (b,a).
+    const double* sums = host_sums_.get();
+    auto fillSymmetric = [&out](const double* upper, int row0, int col0, bool mirror_block) {
+      int k = 0;
+      for (int r = 0; r < 6; ++r)
+        for (int c = r; c < 6; ++c, ++k) {
+          out.H(row0 + r, col0 + c) = upper[k];
+          out.H(row0 + c, col0 + r) = upper[k];
+          if (mirror_block) {
+            out.H(col0 + r, row0 + c) = upper[k];
+            out.H(col0 + c, row0 + r) = upper[k];
+          }
+        }
+    };
+    for (int i = 0; i < n; ++i) {
+      const double* label = sums + std::size_t(i) * kLabelStride;
+      fillSymmetric(label, 6 * i, 6 * i, false);
+      for (int k = 0; k < 6; ++k) out.g(6 * i + k) = label[kUpper + k];
+      out.label_cost(i) = label[kLabelCost];
+      out.label_pixels(i) = label[kLabelPixels];
+    }
+    for (int a = 0; a < n; ++a)
+      for (int b = a + 1; b < n; ++b) {
+        const std::size_t pair = std::size_t(a) * n - std::size_t(a) * (a + 1) / 2 + std::size_t(b - a - 1);
+        fillSymmetric(sums + block_values + pair * kUpper, 6 * a, 6 * b, true);
+      }
+    out.cost = sums[label_values];
+    out.pixels = int(std::llround(sums[label_values + 1]));
+  }
+
+ private:
+  template <typename T>
+  void upload(T* device, const T* host, std::size_t count) {
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(device, host, count * sizeof(T), cudaMemcpyHostToDevice, stream_.stream));
+  }
+
+  StreamHolder stream_;
+  int width_ = 0, height_ = 0, motion_labels_ = 0;
+  bool has_occlusion_ = false;
+  Config config_;
+  Intrinsics intrinsics_;
+  DeviceBuffer<float> points1_, intensity1_, intensity2_, depth2_, intensity_grad2_, depth_grad2_, labels_;
+  DeviceBuffer<float> blended_hessian_, active_mass_, mass_;  // blended pixels, for the pair kernel
+  DeviceBuffer<std::uint8_t> occluded_, blended_;
+  DeviceBuffer<LabelMotion> motions_;
+  DeviceBuffer<double> sums_, partials_;
+  PinnedBuffer<LabelMotion> host_motions_;
+  PinnedBuffer<double> host_sums_;
+};
+
+}  // namespace
+
+/// @brief The CUDA motion accumulator (selected by makeMotionAccumulator(Backend::Cuda)); throws BackendError
+/// when no usable CUDA device is present.
+std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator() {
+  std::string why;
+  if (!cudaBackendAvailable(&why)) throw BackendError("CUDA motion step requested but unavailable: " + why);
+  return std::make_unique<CudaMotionAccumulator>();
+}
+
+}  // namespace mc_flow
