@@ -57,3 +57,20 @@ class DeviceBuffer {
 /// Checks the launch of the kernel just enqueued (configuration errors, missing kernel image).
 #define MCFLOW_CUDA_CHECK_LAUNCH(kernel_name) \
   ::mc_flow::cuda_detail::check(cudaGetLastError(), "launch of " kernel_name, __FILE__, __LINE__)
+
+namespace mc_flow {
+namespace cuda_detail {
+
+/// Owns one non-blocking CUDA stream; destroyed without throwing.
+struct StreamHolder {
+  cudaStream_t stream = nullptr;
+  StreamHolder() { MCFLOW_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking)); }
+  ~StreamHolder() {
+    if (stream) cudaStreamDestroy(stream);
+  }
+  StreamHolder(const StreamHolder&) = delete;
+  StreamHolder& operator=(const StreamHolder&) = delete;
+};
+
+}  // namespace cuda_detail
+}  // namespace mc_flow

@@ -192,16 +192,6 @@ void validateProblem(const LabelProblem& problem, const SoftLabels& u) {
                problem.outlier_only.data.size());
 }
 
-// Owns a stream and a pinned host scratch area; freed without throwing.
-struct StreamHolder {
-  cudaStream_t stream = nullptr;
-  StreamHolder() { MCFLOW_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking)); }
-  ~StreamHolder() {
-    if (stream) cudaStreamDestroy(stream);
-  }
-  StreamHolder(const StreamHolder&) = delete;
-  StreamHolder& operator=(const StreamHolder&) = delete;
-};
 
 struct PinnedScalars {
   float max_change = 0.f;
@@ -424,7 +414,7 @@ class CudaLabelOptimizer final : public LabelOptimizer {
   }
 
   static constexpr int kPrimalBlockY = 4;
-  StreamHolder stream_;
+  cuda_detail::StreamHolder stream_;
   PinnedHolder pinned_;
   DeviceBuffer<float> data_cost_, u_, u_bar_, p_, rx_, ry_, sigma_rx_, sigma_ry_, shrink_x_, shrink_y_, tau_;
   DeviceBuffer<float> change_, max_change_;

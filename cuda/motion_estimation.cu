@@ -279,7 +279,7 @@ __global__ void __launch_bounds__(kThreads) accumulateNormalEquations(const Kern
       float u = addRn(mulRn(mulRn(p.fx, P2[0]), inv_z), p.cx);
       float v = addRn(mulRn(mulRn(p.fy, P2[1]), inv_z), p.cy);
       float I2 = 0.f;
-      in_view = P2[2] >= 1e-3f && cuda_detail::clampIntoViewDevice(p.width, p.height, u, v) &&
+      in_view = P2[2] >= 1e-3f && clampIntoView(p.width, p.height, u, v) &&
                 cuda_detail::sampleBilinearDevice(p.intensity2, u, v, 0, I2);
       if (in_view) {
         float gIx = 0.f, gIy = 0.f;
@@ -455,15 +455,6 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
 }
 
 // ----------------------------------------------------------------- host side
-struct StreamHolder {
-  cudaStream_t stream = nullptr;
-  StreamHolder() { MCFLOW_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking)); }
-  ~StreamHolder() {
-    if (stream) cudaStreamDestroy(stream);
-  }
-  StreamHolder(const StreamHolder&) = delete;
-  StreamHolder& operator=(const StreamHolder&) = delete;
-};
 
 /// Page-locked host memory that only grows (the per-call upload of the motions and download of the sums).
 template <typename T>
@@ -676,7 +667,7 @@ class CudaMotionAccumulator final : public MotionAccumulator {
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(device, host, count * sizeof(T), cudaMemcpyHostToDevice, stream_.stream));
   }
 
-  StreamHolder stream_;
+  cuda_detail::StreamHolder stream_;
   int width_ = 0, height_ = 0, motion_labels_ = 0;
   bool has_occlusion_ = false;
   Config config_;

@@ -27,16 +27,6 @@ struct DeviceImage {
   }
 };
 
-/// @brief clampIntoView of sampling.h (comparisons and selections only: exact).
-__device__ __forceinline__ bool clampIntoViewDevice(int width, int height, float& x, float& y) {
-  if (!(x >= -kBorderMargin && y >= -kBorderMargin && x <= float(width - 1) + kBorderMargin &&
-        y <= float(height - 1) + kBorderMargin))
-    return false;
-  x = x < 0.f ? 0.f : (x > float(width - 1) ? float(width - 1) : x);
-  y = y < 0.f ? 0.f : (y > float(height - 1) ? float(height - 1) : y);
-  return true;
-}
-
 /// @brief sampleBilinear of sampling.h.
 __device__ __forceinline__ bool sampleBilinearDevice(const DeviceImage& im, float x, float y, int c, float& out) {
   if (!(x >= 0.f && y >= 0.f && x <= float(im.width - 1) && y <= float(im.height - 1))) return false;

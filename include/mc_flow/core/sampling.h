@@ -6,6 +6,7 @@
 
 #include <cmath>
 
+#include "mc_flow/core/host_device.h"
 #include "mc_flow/core/image.h"
 
 namespace mc_flow {
@@ -17,7 +18,7 @@ constexpr float kBorderMargin = 2.f;
 
 /// @brief Clamps (x, y) into the image when it lies within kBorderMargin of it; false when farther out
 /// (out of view) or not finite.
-inline bool clampIntoView(int width, int height, float& x, float& y) {
+MCFLOW_HOST_DEVICE inline bool clampIntoView(int width, int height, float& x, float& y) {
   if (!(x >= -kBorderMargin && y >= -kBorderMargin && x <= float(width - 1) + kBorderMargin &&
         y <= float(height - 1) + kBorderMargin))
     return false;

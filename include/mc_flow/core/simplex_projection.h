@@ -5,11 +5,7 @@
  */
 #pragma once
 
-#if defined(__CUDACC__)
-#define MCFLOW_HOST_DEVICE __host__ __device__
-#else
-#define MCFLOW_HOST_DEVICE
-#endif
+#include "mc_flow/core/host_device.h"
 
 namespace mc_flow {
 
