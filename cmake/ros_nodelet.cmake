@@ -8,6 +8,7 @@ target_compile_options(mc_flow_tracker PRIVATE -Wall -Wextra)
 
 add_library(mc_flow_nodelet SHARED
   src/ros/conversions.cpp
+  src/ros/message_validation.cpp
   src/ros/reconfigure.cpp
   src/ros/mc_flow_nodelet.cpp)
 target_include_directories(mc_flow_nodelet PUBLIC
@@ -43,10 +44,33 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
   add_executable(test_ros_units
     test/ros/test_segment_tracker.cpp
     test/ros/test_conversions.cpp
+    test/ros/test_message_validation.cpp
     test/ros/test_reconfigure.cpp)
   target_link_libraries(test_ros_units PRIVATE mc_flow_nodelet GTest::gtest GTest::gtest_main)
   gtest_discover_tests(test_ros_units DISCOVERY_MODE PRE_TEST TEST_PREFIX "ros.")
   add_dependencies(tests test_ros_units)
+
+  # The message validation and the input conversions again, built with ASan+UBSan: a header that slips
+  # past the validation is caught reading out of bounds even where it would not crash. The core library
+  # it links is not instrumented (mixing is supported); the code under test is.
+  add_executable(test_message_validation_sanitized
+    test/ros/test_message_validation.cpp
+    src/ros/message_validation.cpp
+    src/ros/conversions.cpp
+    src/ros/segment_tracker.cpp
+    src/core/buffer_layout.cpp)
+  target_include_directories(test_message_validation_sanitized PRIVATE
+    ${CMAKE_CURRENT_SOURCE_DIR}/include ${catkin_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
+  target_compile_options(test_message_validation_sanitized PRIVATE
+    -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer -g -O1)
+  target_link_options(test_message_validation_sanitized PRIVATE -fsanitize=address,undefined)
+  target_link_libraries(test_message_validation_sanitized PRIVATE
+    mcflow_core ${catkin_LIBRARIES} ${OpenCV_LIBS} GTest::gtest GTest::gtest_main)
+  add_dependencies(test_message_validation_sanitized ${PROJECT_NAME}_generate_messages_cpp)
+  add_test(NAME ros.MessageValidationUnderAsanUbsan COMMAND test_message_validation_sanitized)
+  set_tests_properties(ros.MessageValidationUnderAsanUbsan PROPERTIES
+    ENVIRONMENT "ASAN_OPTIONS=detect_leaks=1:abort_on_error=1;UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1")
+  add_dependencies(tests test_message_validation_sanitized)
 
   # Node-level tests: rostest starts its own master on a free port, so ctest -j is safe.
   find_package(rostest REQUIRED)

@@ -1,11 +1,13 @@
 #include "mc_flow/io/flow_io.h"
 
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <limits>
 #include <sstream>
 
+#include "mc_flow/core/buffer_layout.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/io/image_io.h"
 
@@ -69,6 +71,28 @@ void readExactly(std::ifstream& in, void* dst, std::size_t bytes, const std::str
     throw InputError("'" + path + "' is truncated: expected " + std::to_string(bytes) + " more bytes");
 }
 
+// Bytes from the read position to the end of the file (the position is kept).
+std::uint64_t bytesLeft(std::ifstream& in) {
+  const std::streampos here = in.tellg();
+  in.seekg(0, std::ios::end);
+  const std::streampos end = in.tellg();
+  in.seekg(here);
+  return end > here ? std::uint64_t(end - here) : 0;
+}
+
+// Refuses a header whose payload is not in the file before anything is allocated for it.
+void checkPayload(std::ifstream& in, std::uint64_t width, std::uint64_t height, std::uint64_t channels,
+                  const std::string& what) {
+  BufferLayout layout;
+  layout.width = width;
+  layout.height = height;
+  layout.channels = channels;
+  layout.value_bytes = sizeof(float);
+  layout.available_bytes = bytesLeft(in);
+  layout.exact = false;
+  checkBufferLayout(layout, what);
+}
+
 // Reads one whitespace-delimited token of a PFM header.
 std::string headerToken(std::ifstream& in, const std::string& path) {
   std::string token;
@@ -107,8 +131,9 @@ ImageF readFlo(const std::string& path) {
     swapBytes4(size, 2);
   }
   if (magic != kFloMagic) throw InputError(".flo '" + path + "': bad magic (expected \"PIEH\")");
-  if (size[0] <= 0 || size[1] <= 0 || size[0] > 100000 || size[1] > 100000)
+  if (size[0] <= 0 || size[1] <= 0)
     throw InputError(".flo '" + path + "': implausible size " + std::to_string(size[0]) + "x" + std::to_string(size[1]));
+  checkPayload(in, std::uint64_t(size[0]), std::uint64_t(size[1]), 2, ".flo '" + path + "'");
   ImageF flow(size[0], size[1], 2);
   readExactly(in, flow.ptr(), flow.data.size() * sizeof(float), path);
   if (!hostIsLittleEndian()) swapBytes4(flow.ptr(), flow.data.size());
@@ -141,8 +166,10 @@ ImageF readPfm(const std::string& path) {
   } catch (const std::logic_error&) {
     throw InputError("PFM '" + path + "': malformed header");
   }
-  if (width <= 0 || height <= 0 || width > 100000 || height > 100000 || scale == 0.0)
-    throw InputError("PFM '" + path + "': bad header values " + std::to_string(width) + "x" + std::to_string(height));
+  if (width <= 0 || height <= 0 || scale == 0.0 || !std::isfinite(scale))
+    throw InputError("PFM '" + path + "': bad header values " + std::to_string(width) + "x" + std::to_string(height) +
+                     ", scale " + std::to_string(scale));
+  checkPayload(in, std::uint64_t(width), std::uint64_t(height), std::uint64_t(channels), "PFM '" + path + "'");
   const bool file_little_endian = scale < 0;
   ImageF image(width, height, channels);
   const std::size_t row_values = std::size_t(width) * channels;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <sstream>
 
 #include <boost/make_shared.hpp>
@@ -143,47 +144,33 @@ int chooseDownsample(int requested, int width) {
   return best;
 }
 
-bool isSupportedColourEncoding(const std::string& e) {
-  return e == enc::RGB8 || e == enc::BGR8 || e == enc::RGBA8 || e == enc::BGRA8 || e == enc::MONO8 || e == enc::MONO16;
-}
-
-bool isSupportedDepthEncoding(const std::string& e) { return e == enc::TYPE_16UC1 || e == enc::TYPE_32FC1; }
-
 mc_flow::Intrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info, int width, int height) {
-  double fx = info.P[0], fy = info.P[5], cx = info.P[2], cy = info.P[6];
-  const bool p_empty = fx == 0 && fy == 0 && cx == 0 && cy == 0;
-  if (p_empty) {
-    fx = info.K[0];
-    fy = info.K[4];
-    cx = info.K[2];
-    cy = info.K[5];
-  }
-  if (!(fx > 0) || !(fy > 0) || !std::isfinite(fx) || !std::isfinite(fy) || !std::isfinite(cx) || !std::isfinite(cy)) {
-    std::ostringstream s;
-    s << "camera_info has unusable intrinsics (fx=" << fx << ", fy=" << fy << ", cx=" << cx << ", cy=" << cy
-      << " from " << (p_empty ? "K, P being all zero" : "P") << "): is the camera calibrated?";
-    throw FrameInputError(InputProblem::Intrinsics, s.str());
-  }
+  validateCameraInfo(info);
+  const bool p_empty = info.P[0] == 0 && info.P[5] == 0 && info.P[2] == 0 && info.P[6] == 0;
+  const double fx = p_empty ? info.K[0] : info.P[0], fy = p_empty ? info.K[4] : info.P[5];
+  const double cx = p_empty ? info.K[2] : info.P[2], cy = p_empty ? info.K[5] : info.P[6];
   // camera_info may describe the full sensor while the image is binned or scaled: rescale.
   const double sx = info.width > 0 ? double(width) / double(info.width) : 1.0;
   const double sy = info.height > 0 ? double(height) / double(info.height) : 1.0;
   return {fx * sx, fy * sy, (cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5};
 }
 
-FrameInput toFrameInput(const sensor_msgs::Image& rgb, const sensor_msgs::Image& depth,
-                        const sensor_msgs::CameraInfo& info, int downsample_request) {
-  if (!isSupportedColourEncoding(rgb.encoding)) {
-    throw FrameInputError(InputProblem::Encoding, "unsupported colour encoding '" + rgb.encoding +
-                                                      "' (accepted: rgb8 bgr8 rgba8 bgra8 mono8 mono16)");
-  }
-  if (!isSupportedDepthEncoding(depth.encoding)) {
-    throw FrameInputError(InputProblem::Encoding, "unsupported depth encoding '" + depth.encoding +
-                                                      "' (accepted: 16UC1 in mm, 32FC1 in m)");
-  }
+FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs::Image& depth_message,
+                        const sensor_msgs::CameraInfo& info, int downsample_request, std::uint64_t max_pixels) {
+  // Nothing below (cv_bridge, OpenCV) may read a buffer whose header has not been checked in 64 bits.
+  validateImage(rgb_message, ImageRole::Colour, max_pixels);
+  validateImage(depth_message, ImageRole::Depth, max_pixels);
+  validateCameraInfo(info, max_pixels);
+  const EncodingLayout rgb_layout = encodingLayout(rgb_message.encoding, ImageRole::Colour);
+  const EncodingLayout depth_layout = encodingLayout(depth_message.encoding, ImageRole::Depth);
+  // Big-endian 16/32-bit values are swapped into a copy; host-order messages are read in place.
+  std::optional<sensor_msgs::Image> rgb_swapped, depth_swapped;
+  if (needsByteSwap(rgb_message, rgb_layout)) rgb_swapped = toHostByteOrder(rgb_message, rgb_layout);
+  if (needsByteSwap(depth_message, depth_layout)) depth_swapped = toHostByteOrder(depth_message, depth_layout);
+  const sensor_msgs::Image& rgb = rgb_swapped ? *rgb_swapped : rgb_message;
+  const sensor_msgs::Image& depth = depth_swapped ? *depth_swapped : depth_message;
+
   const int w = int(rgb.width), h = int(rgb.height), dw = int(depth.width), dh = int(depth.height);
-  if (w <= 0 || h <= 0 || dw <= 0 || dh <= 0) {
-    throw FrameInputError(InputProblem::Size, "empty image: RGB " + sizeText(w, h) + ", depth " + sizeText(dw, dh));
-  }
   // Same aspect ratio within one pixel of the larger image, else the images do not show the same view.
   if (std::abs(double(w) * dh - double(h) * dw) > double(std::max(w, dw)) + double(std::max(h, dh))) {
     throw FrameInputError(InputProblem::Size, "RGB " + sizeText(w, h) + " and depth " + sizeText(dw, dh) +

@@ -26,15 +26,9 @@ namespace mc_flow_ros {
 
 namespace {
 
-std::string problemKey(InputProblem p) {
-  switch (p) {
-    case InputProblem::Encoding: return "encoding";
-    case InputProblem::Size: return "size";
-    case InputProblem::Depth: return "depth";
-    case InputProblem::Intrinsics: return "intrinsics";
-  }
-  return "input";
-}
+/// A stream restarting (stamps jumping back) restarts the synchroniser at most this often; backward stamps
+/// in between are held back, so a storm of them cannot keep re-arming message_filters' warnings.
+constexpr double kMinSecondsBetweenRestarts = 5.0;
 
 std::string stampText(const ros::Time& t) {
   char buffer[48];
@@ -87,14 +81,14 @@ void MCFlowNodelet::onInit() {
   info_topic_ = nh_.resolveName("rgb/camera_info");
 
   createSynchroniser();
-  // Per-topic arrival counts make the "no synchronised input" warning say which topic is silent.
-  // They also watch each topic's stamps: see checkInputStamp.
+  // Every message passes admitInput() on its way to the synchroniser: per-topic arrival counts (the
+  // "no synchronised input" warning names the silent topic), losses, and stamps that repeat or go back.
   rgb_sub_.registerCallback(boost::function<void(const sensor_msgs::ImageConstPtr&)>(
-      [this](const sensor_msgs::ImageConstPtr& m) { checkInputStamp(0, m->header.stamp); }));
+      [this](const sensor_msgs::ImageConstPtr& m) { if (admitInput(0, m->header)) rgb_gate_.add(m); }));
   depth_sub_.registerCallback(boost::function<void(const sensor_msgs::ImageConstPtr&)>(
-      [this](const sensor_msgs::ImageConstPtr& m) { checkInputStamp(1, m->header.stamp); }));
+      [this](const sensor_msgs::ImageConstPtr& m) { if (admitInput(1, m->header)) depth_gate_.add(m); }));
   info_sub_.registerCallback(boost::function<void(const sensor_msgs::CameraInfoConstPtr&)>(
-      [this](const sensor_msgs::CameraInfoConstPtr& m) { checkInputStamp(2, m->header.stamp); }));
+      [this](const sensor_msgs::CameraInfoConstPtr& m) { if (admitInput(2, m->header)) info_gate_.add(m); }));
 
   // The solver config comes from dynamic_reconfigure (initial values: private parameters or the core's
   // defaults, see cfg/McFlow.cfg); the first callback happens inside the server's constructor path.
@@ -135,7 +129,7 @@ void MCFlowNodelet::createSynchroniser() {
     ApproximatePolicy policy(queue_size_);
     policy.setReset(true);  // a bag restarting under /clock clears the queues instead of stalling them
     approximate_sync_ptr_ = std::make_unique<message_filters::Synchronizer<ApproximatePolicy>>(
-        std::as_const(policy), rgb_sub_, depth_sub_, info_sub_);
+        std::as_const(policy), rgb_gate_, depth_gate_, info_gate_);
     if (approximate_sync_max_interval_ > 0) {
       approximate_sync_ptr_->setMaxIntervalDuration(ros::Duration(approximate_sync_max_interval_));
     }
@@ -143,37 +137,60 @@ void MCFlowNodelet::createSynchroniser() {
   } else {
     ExactPolicy policy(queue_size_);
     policy.setReset(true);
-    exact_sync_ptr_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(std::as_const(policy), rgb_sub_, depth_sub_, info_sub_);
+    exact_sync_ptr_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(std::as_const(policy), rgb_gate_, depth_gate_, info_gate_);
     exact_sync_ptr_->registerCallback(boost::bind(&MCFlowNodelet::syncCb, this, boost::placeholders::_1, boost::placeholders::_2, boost::placeholders::_3));
   }
 }
 
-void MCFlowNodelet::checkInputStamp(int topic, const ros::Time& stamp) {
+bool MCFlowNodelet::admitInput(int topic, const std_msgs::Header& header) {
   const std::string& name = topic == 0 ? rgb_topic_ : topic == 1 ? depth_topic_ : info_topic_;
+  const ros::Time& stamp = header.stamp;
   ros::Time last;
+  bool restart = false;
+  long held = 0;
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     ++(topic == 0 ? rgb_count_ : topic == 1 ? depth_count_ : info_count_);
+    // roscpp numbers each message of a publisher: a gap of a few is what the subscriber queue dropped;
+    // a large jump (publisher restarted, other publisher) is not counted.
+    const std::uint32_t previous_seq = last_input_seq_[topic];
+    if (previous_seq != 0 && header.seq > previous_seq + 1 && header.seq - previous_seq < 1000) {
+      lost_before_callback_[topic] += long(header.seq - previous_seq - 1);
+    }
+    last_input_seq_[topic] = header.seq;
     last = last_input_stamp_[topic];
-    last_input_stamp_[topic] = stamp;
+    if (last.isZero() || stamp > last) {
+      last_input_stamp_[topic] = stamp;
+      return true;
+    }
+    const ros::WallTime now = ros::WallTime::now();
+    restart = stamp < last && (last_restart_.isZero() || (now - last_restart_).toSec() >= kMinSecondsBetweenRestarts);
+    if (restart) {
+      last_restart_ = now;
+      ++synchroniser_restarts_;
+      for (ros::Time& t : last_input_stamp_) t = ros::Time();
+      last_input_stamp_[topic] = stamp;
+    } else {
+      held = ++held_back_[topic];
+    }
   }
-  if (last.isZero() || stamp > last) return;
-  // A synchroniser fed stamps that repeat or go back (driver restart, bag replayed without /clock) can
-  // stall for good: start it afresh, after this callback (all callbacks of this nodelet are serialised).
-  warnThrottled("input_stamp:" + name, name + ": stamp " + stampText(stamp) +
-                                           (stamp == last ? " repeats the previous message's" : " went back from " + stampText(last)) +
-                                           ": restarting the synchroniser");
-  if (!resync_pending_) {
-    resync_pending_ = true;
-    resync_timer_ = nh_.createWallTimer(ros::WallDuration(0.001), [this](const ros::WallTimerEvent&) {
-      createSynchroniser();
-      resync_pending_ = false;
-    }, true);
+  const std::string what = name + ": stamp " + stampText(stamp) +
+                           (stamp == last ? " repeats the previous message's" : " went back from " + stampText(last));
+  if (restart) {
+    // A driver restart or a bag replayed without /clock: the synchroniser's queues hold the old stream.
+    // All callbacks of this nodelet are serialised, so rebuilding it here is safe.
+    warnThrottled("input_stamp:restart " + name, what + ": restarting the synchroniser");
+    createSynchroniser();
+    return true;
   }
+  warnThrottled("input_stamp:" + name, what + ": message held back from the synchroniser (" + std::to_string(held) +
+                                           " on this topic so far)");
+  return false;
 }
 
 void MCFlowNodelet::readParameters() {
   pnh_.param("queue_size", queue_size_, queue_size_);
+  pnh_.param("max_input_pixels", max_input_pixels_, max_input_pixels_);
   pnh_.param("approximate_sync", approximate_sync_, approximate_sync_);
   pnh_.param("approximate_sync_max_interval", approximate_sync_max_interval_, approximate_sync_max_interval_);
   pnh_.param("downsample", downsample_, downsample_);
@@ -193,6 +210,10 @@ void MCFlowNodelet::readParameters() {
   if (queue_size_ < 1) {
     NODELET_WARN("queue_size %d is below 1; using 1", queue_size_);
     queue_size_ = 1;
+  }
+  if (max_input_pixels_ < 256) {
+    NODELET_WARN("max_input_pixels %d is below 256; using 256", max_input_pixels_);
+    max_input_pixels_ = 256;
   }
   if (downsample_ < 0) {
     NODELET_WARN("downsample %d is negative; using 0 (automatic)", downsample_);
@@ -218,7 +239,7 @@ void MCFlowNodelet::logStartup() {
     << "  outputs: " << segments_pub_.getTopic() << ", " << soft_labels_pub_.getTopic() << ", " << labels_pub_.getTopic()
     << ", " << segmentation_pub_.getTopic() << ", " << occlusion_pub_.getTopic() << ", " << cloud_pub_.getTopic()
     << ", " << markers_pub_.getTopic() << ", " << info_pub_.getTopic() << (publish_tf_ ? ", /tf" : "") << "\n"
-    << "  node parameters: queue_size=" << queue_size_ << " approximate_sync=" << approximate_sync_
+    << "  node parameters: queue_size=" << queue_size_ << " max_input_pixels=" << max_input_pixels_ << " approximate_sync=" << approximate_sync_
     << " approximate_sync_max_interval=" << approximate_sync_max_interval_ << " s downsample=" << downsample_
     << (downsample_ == 0 ? " (automatic)" : "") << " max_stamp_difference=" << max_stamp_difference_
     << " s max_pair_interval=" << max_pair_interval_ << " s no_input_warning_after=" << no_input_warning_after_
@@ -247,9 +268,12 @@ void MCFlowNodelet::connectCb() {
   const bool needed = anyListener() || print_summary_ || !save_dir_.empty() || publish_tf_;
   if (needed && !subscribed_) {
     const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh_);
-    rgb_sub_.subscribe(*it_in_, "rgb/image_rect_color", 2, hints);
-    depth_sub_.subscribe(*it_in_, "depth_registered/image_rect", 2, hints);
-    info_sub_.subscribe(nh_, "rgb/camera_info", 2);
+    // One queue length for the subscribers and the synchroniser: a burst the synchroniser could hold
+    // must not be dropped before it (the losses that remain show in diagnostics).
+    const auto queue = std::uint32_t(queue_size_);
+    rgb_sub_.subscribe(*it_in_, "rgb/image_rect_color", queue, hints);
+    depth_sub_.subscribe(*it_in_, "depth_registered/image_rect", queue, hints);
+    info_sub_.subscribe(nh_, "rgb/camera_info", queue);
     subscribed_ = true;
     std::lock_guard<std::mutex> stats(stats_mutex_);
     subscribed_since_ = ros::WallTime::now();
@@ -363,10 +387,10 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   if (!solver_) return;
   FrameInput current;
   try {
-    current = toFrameInput(*input.rgb, *input.depth, *input.info, downsample_);
+    current = toFrameInput(*input.rgb, *input.depth, *input.info, downsample_, std::uint64_t(max_input_pixels_));
   } catch (const FrameInputError& e) {
     // Throttled per distinct problem (digits removed: the same fault in every frame is one key).
-    std::string key = problemKey(e.problem) + ":" + e.what();
+    std::string key = std::string(inputProblemName(e.problem)) + ":" + e.what();
     key.erase(std::remove_if(key.begin(), key.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); }),
               key.end());
     warnThrottled(key, std::string("frame ") + stampText(input.rgb->header.stamp) + " skipped: " + e.what());
@@ -429,14 +453,7 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   }
   const double solve_ms = (ros::WallTime::now() - start).toSec() * 1e3;
 
-  if (!backend_reported_) {
-    backend_reported_ = true;
-    if (result.backend != "cuda" && solver_->config().backend != mc_flow::Backend::Cpu) {
-      NODELET_WARN("CUDA is not usable, running on the CPU: %s", result.backend_note.c_str());
-    } else {
-      NODELET_INFO("solver backend: %s (%s)", result.backend.c_str(), result.backend_note.c_str());
-    }
-  }
+  reportBackend(result);
 
   PairContext pair;
   pair.header = current.header;
@@ -457,6 +474,23 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   }
   ++pair_index_;
   previous_ = std::move(current);
+}
+
+void MCFlowNodelet::reportBackend(const mc_flow::Result& result) {
+  if (backend_reported_) return;
+  backend_reported_ = true;
+  const mc_flow::Backend requested = solver_->config().backend;
+  if (result.backend == "cuda" || requested == mc_flow::Backend::Cpu) {
+    NODELET_INFO("solver backend: %s (%s)", result.backend.c_str(), result.backend_note.c_str());
+  } else if (requested == mc_flow::Backend::Auto) {
+    // The usual case on a machine without an NVIDIA GPU: the CUDA runtime's own words ("driver version is
+    // insufficient") read as a request to upgrade a driver, so they go to debug level.
+    NODELET_INFO("no usable NVIDIA GPU/driver found: running on the CPU");
+    NODELET_DEBUG("CUDA detail: %s", result.backend_note.c_str());
+  } else {
+    NODELET_WARN("backend 'cuda' was requested but no usable NVIDIA GPU/driver was found: running on the CPU (%s)",
+                 result.backend_note.c_str());
+  }
 }
 
 void MCFlowNodelet::publish(const mc_flow::Result& result, const PairContext& pair) {
@@ -536,6 +570,7 @@ void MCFlowNodelet::saveAndSummarise(const mc_flow::Result& result, const PairCo
     s << " | solve " << std::setprecision(0) << pair.solve_time_ms << " ms (" << result.backend << "), dropped "
       << dropped;
     NODELET_INFO_STREAM(s.str());
+    std::fflush(stdout);  // one line per pair also when stdout is a file (roslaunch logs)
   }
   if (!save_dir_.empty()) {
     char name[64];
@@ -555,17 +590,28 @@ void MCFlowNodelet::saveAndSummarise(const mc_flow::Result& result, const PairCo
 
 void MCFlowNodelet::warnThrottled(const std::string& key, const std::string& text, double period) {
   const ros::WallTime now = ros::WallTime::now();
+  long held_back = 0;
   bool emit = false;
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     last_problem_ = text;
-    auto it = last_warning_.find(key);
-    if (it == last_warning_.end() || (now - it->second).toSec() >= period) {
-      last_warning_[key] = now;
+    ++warnings_per_kind_[key.substr(0, key.find(':'))];
+    WarningState& state = warnings_[key];
+    if (state.last_shown.isZero() || (now - state.last_shown).toSec() >= period) {
+      held_back = state.held_back;
+      state.last_shown = now;
+      state.held_back = 0;
       emit = true;
+    } else {
+      ++state.held_back;
     }
   }
-  if (emit) NODELET_WARN("%s", text.c_str());
+  if (!emit) return;
+  if (held_back > 0) {
+    NODELET_WARN("%s (%ld more like this since the last such warning)", text.c_str(), held_back);
+  } else {
+    NODELET_WARN("%s", text.c_str());
+  }
 }
 
 void MCFlowNodelet::timerCb(const ros::WallTimerEvent&) {
@@ -600,6 +646,8 @@ void MCFlowNodelet::timerCb(const ros::WallTimerEvent&) {
                                   " s (latest stamps: rgb " + stampText(stamps[0]) + ", depth " + stampText(stamps[1]) +
                                   ", camera_info " + stampText(stamps[2]) + "): restarting the synchroniser");
       createSynchroniser();
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++synchroniser_restarts_;
     } else if (silent > no_input_warning_after_) {
       std::ostringstream s;
       s << "no synchronised input for " << int(silent) << " s. Waiting for " << rgb_topic_ << " (" << rgb
@@ -636,6 +684,13 @@ void MCFlowNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("sequence resets", sequence_resets_);
   status.add("received rgb / depth / camera_info", std::to_string(rgb_count_) + " / " + std::to_string(depth_count_) +
                                                       " / " + std::to_string(info_count_));
+  status.add("lost before the callbacks rgb / depth / camera_info (header.seq gaps)",
+             std::to_string(lost_before_callback_[0]) + " / " + std::to_string(lost_before_callback_[1]) + " / " +
+                 std::to_string(lost_before_callback_[2]));
+  status.add("held back (repeated or backward stamps) rgb / depth / camera_info",
+             std::to_string(held_back_[0]) + " / " + std::to_string(held_back_[1]) + " / " + std::to_string(held_back_[2]));
+  status.add("synchroniser restarts", synchroniser_restarts_);
+  for (const auto& [kind, count] : warnings_per_kind_) status.add("warnings: " + kind, count);
   status.add("solve time mean [ms]", pairs_solved_ > 0 ? total_solve_ms_ / double(pairs_solved_) : 0.0);
   status.add("solve time last [ms]", last_timings_.total);
   status.add("stage preprocessing [ms]", last_timings_.preprocessing);

@@ -135,6 +135,58 @@ TEST_F(BadInput, EveryCaseWarnsAndTheNodeKeepsSolving) {
   }
 }
 
+// Crafted headers that made cv_bridge/OpenCV read far out of bounds (exit -11 of the manager): a 32-bit
+// `height * step` equal to the data size. The manager must stay alive, name the problem, and answer the
+// next valid pair.
+TEST_F(BadInput, CraftedHeadersNeverKillTheManager) {
+  const ros::Time base = stamp(100.0);
+  camera_->publish(0, base);  // a valid frame first, so that a pair is pending
+  struct Craft {
+    bool colour;
+    std::string encoding;
+    std::uint32_t width, bytes_per_pixel;
+  };
+  // 4096 rows x 1048578 bytes = 2^32 + 8192 bytes, with 8192 bytes of data.
+  const std::vector<Craft> crafts = {{false, "16UC1", 5461, 2}, {false, "32FC1", 640, 4}, {true, "rgb8", 640, 3},
+                                     {true, "mono16", 640, 2},  {true, "bgra8", 640, 4}};
+  double t = 0.1;
+  for (const Craft& c : crafts) {
+    SCOPED_TRACE(c.encoding);
+    auto rgb = camera_->rgb(0, base + ros::Duration(t));
+    auto depth = camera_->depth(0, base + ros::Duration(t), "16UC1");
+    sensor_msgs::ImagePtr& target = c.colour ? rgb : depth;
+    target->encoding = c.encoding;
+    target->width = c.width;
+    target->height = 4096;
+    target->step = 1048578;
+    target->data.assign(8192, 0x11);
+    // The partner keeps its aspect ratio out of the way: it is refused for the crafted image first.
+    expectWarning(rgb, depth, camera_->info(base + ros::Duration(t)), "4294975488 bytes, but 8192 bytes of data are present");
+    t += 0.1;
+  }
+  // An odd step for 16UC1 is a named layout problem, not OpenCV's "Step must be a multiple of esz1".
+  auto odd = camera_->depth(0, base + ros::Duration(t), "16UC1");
+  odd->step += 1;
+  odd->data.resize(std::size_t(odd->step) * odd->height);
+  expectWarning(camera_->rgb(0, base + ros::Duration(t)), odd, camera_->info(base + ros::Duration(t)),
+                "is not a multiple of the 2-byte value size");
+  EXPECT_FALSE(watcher_->seen("unexpected error")) << dumpWarnings(*watcher_);
+
+  // Still alive: the next valid frames give a pair.
+  const ros::Time resume = base + ros::Duration(0.8);
+  auto solvedAfter = [&] {
+    for (const auto& m : segments_->messages()) {
+      if (m->previous_stamp >= resume) return true;
+    }
+    return false;
+  };
+  for (int i = 0; i < 60 && !solvedAfter(); ++i) {
+    camera_->publish(i % 4, resume + ros::Duration(0.1 * i));
+    ros::WallDuration(0.3).sleep();
+  }
+  EXPECT_TRUE(waitFor(solvedAfter, 30.0)) << "no pair solved after the crafted messages";
+}
+
 int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);
   ros::init(argc, argv, "mc_flow_bad_input_test");

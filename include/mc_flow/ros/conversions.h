@@ -23,17 +23,10 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/image.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/ros/input_error.h"
+#include "mc_flow/ros/message_validation.h"
 
 namespace mc_flow_ros {
-
-/// @brief What was wrong with an input frame (the nodelet throttles its warnings per kind).
-enum class InputProblem { Encoding, Size, Depth, Intrinsics };
-
-/// @brief Thrown by the input conversions; the message names the offending value.
-struct FrameInputError : mc_flow::InputError {
-  FrameInputError(InputProblem kind, const std::string& message) : mc_flow::InputError(message), problem(kind) {}
-  InputProblem problem;
-};
 
 /// @brief One synchronised RGB-D frame, converted and resized to the processing resolution.
 struct FrameInput {
@@ -50,21 +43,20 @@ struct FrameInput {
 /// the width closest to 320 px (the paper's resolution; 640x480 -> 2, 320x240 -> 1, 1280x720 -> 4).
 int chooseDownsample(int requested, int width);
 
-/// @brief Colour encodings accepted: rgb8 bgr8 rgba8 bgra8 mono8 mono16.
-bool isSupportedColourEncoding(const std::string& encoding);
-/// @brief Depth encodings accepted: 16UC1 (millimetres, 0 = invalid) and 32FC1 (metres, NaN/0 = invalid).
-bool isSupportedDepthEncoding(const std::string& encoding);
-
 /// @brief Pinhole intrinsics of an image of `width` x `height` pixels from camera_info. Uses P (the
 /// rectified projection), falling back to K when P is all zero; rescales when camera_info describes a
-/// different size than the image. Throws FrameInputError (Intrinsics) for zero/non-finite focal lengths.
+/// different size than the image. Throws FrameInputError as validateCameraInfo() does.
 mc_flow::Intrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info, int width, int height);
 
-/// @brief Converts and resizes one synchronised frame. Depth of a different size than the RGB image is
+/// @brief Converts and resizes one synchronised frame. Validates the three messages first
+/// (message_validation.h), so any header is safe to pass. Depth of a different size than the RGB image is
 /// resampled when both have the same aspect ratio. Throws FrameInputError naming the bad value for an
-/// unsupported encoding, an empty image, a size/aspect mismatch, all-invalid depth or zero intrinsics.
+/// unsupported encoding, an inconsistent buffer, a size/aspect mismatch, all-invalid depth or unusable
+/// intrinsics. Colour: rgb8 bgr8 rgba8 bgra8 mono8 mono16; depth: 16UC1 (mm, 0 = invalid), 32FC1 (m, NaN/0 =
+/// invalid). `max_pixels` bounds each image's pixel count.
 FrameInput toFrameInput(const sensor_msgs::Image& rgb, const sensor_msgs::Image& depth,
-                        const sensor_msgs::CameraInfo& info, int downsample_request);
+                        const sensor_msgs::CameraInfo& info, int downsample_request,
+                        std::uint64_t max_pixels = mc_flow::kDefaultMaxInputPixels);
 
 /// @brief Camera info of the processing resolution (outputs can be projected with it).
 sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input);

@@ -23,6 +23,7 @@
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
 #include <image_transport/subscriber_filter.h>
+#include <message_filters/pass_through.h>
 #include <message_filters/subscriber.h>
 #include <message_filters/sync_policies/approximate_time.h>
 #include <message_filters/sync_policies/exact_time.h>
@@ -59,11 +60,13 @@ class MCFlowNodelet : public nodelet::Nodelet {
 
   void onInit() override;
   void readParameters();
-  /// (Re)creates the synchroniser of the three inputs (approximate or exact time).
+  /// (Re)creates the synchroniser of the three inputs (approximate or exact time), fed by the gates.
   void createSynchroniser();
-  /// Counts arrivals per topic (0 rgb, 1 depth, 2 camera_info) and restarts the synchroniser when a
-  /// topic's stamps repeat or go back.
-  void checkInputStamp(int topic, const ros::Time& stamp);
+  /// Counts arrivals per topic (0 rgb, 1 depth, 2 camera_info) and gaps in header.seq (messages lost
+  /// before the callback), and decides whether the message reaches the synchroniser: stamps that repeat
+  /// or go back are held back, except that a jump back restarts the stream (at most every
+  /// kMinSecondsBetweenRestarts), so the synchroniser only ever sees increasing stamps.
+  bool admitInput(int topic, const std_msgs::Header& header);
   void logStartup();
   /// Subscribes the inputs while any output has a listener (or a demo option needs results).
   void connectCb();
@@ -78,12 +81,17 @@ class MCFlowNodelet : public nodelet::Nodelet {
   void resetSequence(const std::string& key, const std::string& why);
   void timerCb(const ros::WallTimerEvent& event);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
-  /// Warns at most every `period` seconds per key (one key per kind of problem), remembers the text.
+  /// Warns at most every `period` seconds per key (one key per distinct problem); the next warning of a
+  /// key says how many were held back since. Counts every call per kind (the key up to its first ':')
+  /// for the diagnostics, and remembers the text.
   void warnThrottled(const std::string& key, const std::string& text, double period = 5.0);
+  /// Says once, at start-up, which backend solves (no GPU is normal: not a warning unless CUDA was asked for).
+  void reportBackend(const mc_flow::Result& result);
   bool anyListener() const;
 
   // ---- parameters (private namespace; see logStartup and the README for units) ----
-  int queue_size_ = 5;
+  int queue_size_ = 5;                          // input subscribers' and synchroniser's queues [messages]
+  int max_input_pixels_ = int(mc_flow::kDefaultMaxInputPixels);  // larger images are refused
   bool approximate_sync_ = true;
   double approximate_sync_max_interval_ = 0.0;  // [s], 0 = no limit
   int downsample_ = 0;                          // 0 = automatic (towards 320 px wide)
@@ -104,6 +112,9 @@ class MCFlowNodelet : public nodelet::Nodelet {
   std::unique_ptr<image_transport::ImageTransport> it_in_, it_out_;
   image_transport::SubscriberFilter rgb_sub_, depth_sub_;
   message_filters::Subscriber<CameraInfo> info_sub_;
+  // Between the subscribers and the synchroniser: pass only what admitInput() lets through.
+  message_filters::PassThrough<Image> rgb_gate_, depth_gate_;
+  message_filters::PassThrough<CameraInfo> info_gate_;
   std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_ptr_;
   std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_ptr_;
   image_transport::Publisher soft_labels_pub_, labels_pub_, segmentation_pub_, occlusion_pub_;
@@ -112,8 +123,8 @@ class MCFlowNodelet : public nodelet::Nodelet {
   std::unique_ptr<dynamic_reconfigure::Server<mc_flow::McFlowConfig>> reconfigure_server_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<diagnostic_updater::Updater> updater_;
-  ros::WallTimer timer_, resync_timer_;
-  bool resync_pending_ = false;  // touched only by this nodelet's (serialised) callbacks
+  ros::WallTimer timer_;
+  ros::WallTime last_restart_;  // last synchroniser restart (stats_mutex_)
   std::mutex connect_mutex_;
   std::atomic<bool> subscribed_{false};
   std::string rgb_topic_, depth_topic_, info_topic_;
@@ -141,12 +152,21 @@ class MCFlowNodelet : public nodelet::Nodelet {
   ros::WallTime last_sync_time_, subscribed_since_;
   long frames_synced_ = 0, frames_dropped_ = 0, frames_skipped_ = 0, pairs_solved_ = 0, sequence_resets_ = 0;
   long rgb_count_ = 0, depth_count_ = 0, info_count_ = 0;
-  ros::Time last_input_stamp_[3];
+  ros::Time last_input_stamp_[3];   // last stamp admitted per topic (zero after a restart)
+  std::uint32_t last_input_seq_[3] = {0, 0, 0};
+  long lost_before_callback_[3] = {0, 0, 0};  // header.seq gaps
+  long held_back_[3] = {0, 0, 0};             // repeated or backward stamps not passed to the synchroniser
+  long synchroniser_restarts_ = 0;
   long sync_counts_[3] = {0, 0, 0};  // per-topic arrivals at the last synchronised frame
   mc_flow::StageTimings last_timings_;
   double total_solve_ms_ = 0;
   std::string backend_, backend_note_, last_problem_;
-  std::map<std::string, ros::WallTime> last_warning_;
+  struct WarningState {
+    ros::WallTime last_shown;
+    long held_back = 0;  // since last_shown
+  };
+  std::map<std::string, WarningState> warnings_;
+  std::map<std::string, long> warnings_per_kind_;
 };
 
 }  // namespace mc_flow_ros
