@@ -81,6 +81,41 @@ TEST(FlowIo, FloRejectsWrongChannelsAndBadMagic) {
   EXPECT_THROW(io::readFlo(tempPath("does_not_exist.flo")), InputError);
 }
 
+// A header may claim any size: the loaders compare it with the bytes in the file before allocating.
+TEST(FlowIo, HugeHeadersWithTinyFilesAreRefusedBeforeAllocating) {
+  const std::string flo = tempPath("huge.flo");
+  {
+    std::ofstream out(flo, std::ios::binary);
+    const float magic = 202021.25f;
+    const std::int32_t size[2] = {2000000000, 2000000000};
+    out.write(reinterpret_cast<const char*>(&magic), 4);
+    out.write(reinterpret_cast<const char*>(size), 8);
+    out << "12345678";
+  }
+  try {
+    io::readFlo(flo);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("2000000000x2000000000"), std::string::npos) << e.what();
+  }
+  const std::string pfm = tempPath("huge.pfm");
+  std::ofstream(pfm, std::ios::binary) << "Pf\n100000 100000\n-1.0\n" << std::string(64, '\0');
+  try {
+    io::readPfm(pfm);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("100000x100000"), std::string::npos) << e.what();
+  }
+  const std::string short_pfm = tempPath("short.pfm");
+  std::ofstream(short_pfm, std::ios::binary) << "Pf\n4 4\n-1.0\n" << std::string(63, '\0');  // needs 64
+  try {
+    io::readPfm(short_pfm);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("64 bytes, but 63 bytes of data are left"), std::string::npos) << e.what();
+  }
+}
+
 TEST(FlowIo, PfmRoundTripOneAndThreeChannels) {
   for (int channels : {1, 3}) {
     ImageF image = randomImage(19, 11, channels, 2 + channels);
