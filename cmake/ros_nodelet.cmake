@@ -8,6 +8,7 @@ target_compile_options(mc_flow_tracker PRIVATE -Wall -Wextra)
 
 add_library(mc_flow_nodelet SHARED
   src/ros/conversions.cpp
+  src/ros/input_watch.cpp
   src/ros/message_validation.cpp
   src/ros/reconfigure.cpp
   src/ros/mc_flow_nodelet.cpp)
@@ -31,7 +32,7 @@ install(TARGETS mc_flow_nodelet make_synthetic_bag
 install(DIRECTORY include/mc_flow/ros DESTINATION ${CATKIN_PACKAGE_INCLUDE_DESTINATION}/ros)
 install(FILES nodelet_plugins.xml DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
 install(DIRECTORY launch rviz DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
-catkin_install_python(PROGRAMS scripts/demo_monitor.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+catkin_install_python(PROGRAMS scripts/demo_monitor.py scripts/start_rviz.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
 
 if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
   find_package(GTest REQUIRED)
@@ -45,7 +46,8 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     test/ros/test_segment_tracker.cpp
     test/ros/test_conversions.cpp
     test/ros/test_message_validation.cpp
-    test/ros/test_reconfigure.cpp)
+    test/ros/test_reconfigure.cpp
+    test/ros/test_input_watch.cpp)
   target_link_libraries(test_ros_units PRIVATE mc_flow_nodelet GTest::gtest GTest::gtest_main)
   gtest_discover_tests(test_ros_units DISCOVERY_MODE PRE_TEST TEST_PREFIX "ros.")
   add_dependencies(tests test_ros_units)

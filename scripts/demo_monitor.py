@@ -2,8 +2,10 @@
 """Ends the demo: waits until the bag player has finished and the nodelet's last pair has come out,
 then reports and exits (demo.launch marks this node required, so roslaunch then stops everything).
 
-Parameters (private): segments_topic, input_topic (a topic the player publishes), save_dir,
-settle (s to wait for results after the player is gone), first_result_timeout (s), timeout (s, whole demo).
+Parameters (private): segments_topic, input_topic (a topic the player publishes), player (its node name),
+bag (its path, for messages), save_dir, status_file (gets "0" or "1 <reason>": roslaunch exits 0 when a
+required node ends, so scripts read this), settle (s to wait for results after the player is gone),
+first_result_timeout (s), timeout (s, whole demo).
 """
 import os
 import sys
@@ -21,6 +23,9 @@ class Monitor:
         self.settle = float(rospy.get_param("~settle", 3.0))
         self.timeout = float(rospy.get_param("~timeout", 900.0))
         self.first_result_timeout = float(rospy.get_param("~first_result_timeout", 120.0))
+        self.player = rospy.get_param("~player", "/player")
+        self.bag = rospy.get_param("~bag", "")
+        self.status_file = rospy.get_param("~status_file", "")
         self.results = 0
         self.last_result = None
         self.longest_gap = 0.0
@@ -42,17 +47,45 @@ class Monitor:
             return False
         return any(topic == self.input_topic and nodes for topic, nodes in publishers)
 
+    def player_alive(self):
+        try:
+            self.master.lookupNode(self.player)
+            return True
+        except Exception:  # not registered (exited), or the master is gone
+            return False
+
+    def fail(self, reason):
+        rospy.logerr("demo failed: %s", reason)
+        print("demo failed: %s" % reason, file=sys.stderr, flush=True)
+        self.write_status("1 " + reason)
+        return 1
+
+    def write_status(self, text):
+        if self.status_file:
+            with open(self.status_file, "w") as f:
+                f.write(text + "\n")
+
     def run(self):
         start = time.monotonic()
         seen_player = False
+        player_registered = False
         player_gone_at = None
         while not rospy.is_shutdown():
             now = time.monotonic()
             if now - start > self.timeout:
-                rospy.logerr("demo did not finish within %.0f s (%d pairs solved)", self.timeout, self.results)
-                return 1
+                return self.fail("the demo did not finish within %.0f s (%d pairs solved)" % (self.timeout, self.results))
             publishing = self.player_publishing()
             seen_player = seen_player or publishing
+            alive = self.player_alive()
+            player_registered = player_registered or alive
+            if player_registered and not alive and not seen_player:
+                # The player ended without ever publishing the input: it could not open or read the bag
+                # (its own message is above, on the screen), or the bag has other topic names.
+                return self.fail("the bag player %s ended without publishing %s: see its message above; "
+                                 "`rosbag info %s` lists the bag's topics (camera:= and the *_topic "
+                                 "arguments select them)" % (self.player, self.input_topic, self.bag))
+            if not player_registered and now - start > 30.0:
+                return self.fail("the bag player %s did not start within 30 s" % self.player)
             if seen_player and not publishing and player_gone_at is None:
                 player_gone_at = now
                 rospy.loginfo("the bag has been played; waiting for the last pairs")
@@ -70,7 +103,10 @@ class Monitor:
             pictures = "; %d pictures in %s" % (count, self.save_dir)
         rospy.loginfo("demo finished: %d pairs solved%s", self.results, pictures)
         print("demo finished: %d pairs solved%s" % (self.results, pictures), flush=True)
-        return 0 if self.results > 0 else 1
+        if self.results == 0:
+            return self.fail("the bag was played but no pair was solved: see the nodelet's warnings above")
+        self.write_status("0")
+        return 0
 
 
 if __name__ == "__main__":

@@ -28,4 +28,17 @@ rm -f "$out"/pictures/*.png 2>/dev/null || true
 bag="$out/mc_flow_synthetic.bag"
 "$build/devel/lib/mc_flow/make_synthetic_bag" "$bag" --frames "$frames" --rate 10
 echo "playing $bag at rate $rate into the nodelet (pictures: $out/pictures)"
-roslaunch -p "$port" mc_flow demo.launch bag:="$bag" rate:="$rate" save_dir:="$out/pictures" rviz:="${RVIZ:-false}"
+# roslaunch exits 0 when the required demo_monitor ends, even on failure: the monitor's status file says.
+status="$out/demo_status"
+rm -f "$status"
+roslaunch -p "$port" mc_flow demo.launch bag:="$bag" rate:="$rate" save_dir:="$out/pictures" \
+    rviz:="${RVIZ:-false}" status_file:="$status"
+if [ ! -s "$status" ]; then
+  echo "run_demo.sh: the demo ended without a result (roslaunch refused to start, or was interrupted)" >&2
+  exit 1
+fi
+read -r code reason < "$status" || true
+if [ "$code" != "0" ]; then
+  echo "run_demo.sh: demo failed: $reason" >&2
+  exit 1
+fi

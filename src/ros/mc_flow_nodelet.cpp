@@ -20,6 +20,7 @@
 
 #include "mc_flow/SegmentArray.h"
 #include "mc_flow/core/error.h"
+#include "mc_flow/ros/input_watch.h"
 #include "mc_flow/ros/reconfigure.h"
 
 namespace mc_flow_ros {
@@ -621,40 +622,53 @@ void MCFlowNodelet::timerCb(const ros::WallTimerEvent&) {
     subscribed = subscribed_;
   }
   if (subscribed) {
-    double silent = 0;
-    long rgb = 0, depth = 0, info = 0;
+    // The words come from describeInputSilence (input_watch.h, tested without a node); here we only
+    // take the snapshot. Arrival times are this timer's: a count that changed since the last tick.
+    InputSnapshot snapshot;
+    long counts[3] = {0, 0, 0};
+    bool new_since_sync = true;
     {
       std::lock_guard<std::mutex> lock(stats_mutex_);
-      const ros::WallTime since = std::max(last_sync_time_, subscribed_since_);
-      silent = (ros::WallTime::now() - since).toSec();
-      rgb = rgb_count_;
-      depth = depth_count_;
-      info = info_count_;
-    }
-    if (silent > no_input_warning_after_ && rgb > sync_counts_[0] && depth > sync_counts_[1] && info > sync_counts_[2]) {
-      // Every topic delivers but nothing synchronises: a synchroniser confused by an irregular stream
-      // (dropped or skewed messages) can stay stuck; start it afresh and say what the stamps are.
-      ros::Time stamps[3];
-      {
-        std::lock_guard<std::mutex> lock(stats_mutex_);
-        for (int i = 0; i < 3; ++i) stamps[i] = last_input_stamp_[i];
-        sync_counts_[0] = rgb;
-        sync_counts_[1] = depth;
-        sync_counts_[2] = info;
+      const ros::WallTime now = ros::WallTime::now();
+      snapshot.seconds_without_sync = (now - std::max(last_sync_time_, subscribed_since_)).toSec();
+      counts[0] = rgb_count_;
+      counts[1] = depth_count_;
+      counts[2] = info_count_;
+      const std::string* names[3] = {&rgb_topic_, &depth_topic_, &info_topic_};
+      const char* labels[3] = {"rgb", "depth", "camera_info"};
+      for (int i = 0; i < 3; ++i) {
+        if (counts[i] != watch_counts_[i] || watch_last_arrival_[i] < subscribed_since_) {
+          watch_last_arrival_[i] = counts[i] != watch_counts_[i] ? now : subscribed_since_;
+          watch_counts_[i] = counts[i];
+        }
+        WatchedTopic& t = snapshot.topics[i];
+        t.label = labels[i];
+        t.topic = *names[i];
+        t.received = counts[i];
+        t.seconds_since_last = (now - watch_last_arrival_[i]).toSec();
+        t.has_stamp = !last_input_stamp_[i].isZero();
+        t.stamp = last_input_stamp_[i].toSec();
+        new_since_sync = new_since_sync && counts[i] > sync_counts_[i];
       }
-      warnThrottled("resync", "messages arrive on all inputs but none were synchronised for " + std::to_string(int(silent)) +
-                                  " s (latest stamps: rgb " + stampText(stamps[0]) + ", depth " + stampText(stamps[1]) +
-                                  ", camera_info " + stampText(stamps[2]) + "): restarting the synchroniser");
-      createSynchroniser();
-      std::lock_guard<std::mutex> lock(stats_mutex_);
-      ++synchroniser_restarts_;
-    } else if (silent > no_input_warning_after_) {
-      std::ostringstream s;
-      s << "no synchronised input for " << int(silent) << " s. Waiting for " << rgb_topic_ << " (" << rgb
-        << " received), " << depth_topic_ << " (" << depth << " received) and " << info_topic_ << " (" << info
-        << " received): check that all three are published and stamped alike; a missing camera_info is the "
-        << "most common cause";
-      warnThrottled("no_input", s.str(), std::max(no_input_warning_after_, 15.0));
+    }
+    snapshot.approximate_sync = approximate_sync_;
+    snapshot.approximate_sync_max_interval = approximate_sync_max_interval_;
+    const std::optional<InputWarning> warning = describeInputSilence(snapshot, no_input_warning_after_);
+    if (warning && warning->restart_synchroniser) {
+      if (new_since_sync) {
+        // A synchroniser confused by an irregular stream (dropped or skewed messages) can stay stuck:
+        // start it afresh, at most once per new message on every topic.
+        warnThrottled(warning->key, warning->text);
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex_);
+          for (int i = 0; i < 3; ++i) sync_counts_[i] = counts[i];
+        }
+        createSynchroniser();
+        std::lock_guard<std::mutex> lock(stats_mutex_);
+        ++synchroniser_restarts_;
+      }
+    } else if (warning) {
+      warnThrottled(warning->key, warning->text, std::max(no_input_warning_after_, 15.0));
     }
   }
   updater_->update();

@@ -158,6 +158,8 @@ class MCFlowNodelet : public nodelet::Nodelet {
   long held_back_[3] = {0, 0, 0};             // repeated or backward stamps not passed to the synchroniser
   long synchroniser_restarts_ = 0;
   long sync_counts_[3] = {0, 0, 0};  // per-topic arrivals at the last synchronised frame
+  long watch_counts_[3] = {0, 0, 0};  // timerCb: per-topic arrivals at its last tick
+  ros::WallTime watch_last_arrival_[3];  // timerCb: when each count last changed (its resolution: 1 s)
   mc_flow::StageTimings last_timings_;
   double total_solve_ms_ = 0;
   std::string backend_, backend_note_, last_problem_;
