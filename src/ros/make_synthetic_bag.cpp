@@ -33,6 +33,8 @@ struct Options {
   std::string frame_id = "camera_rgb_optical_frame";
   std::string base_frame = "camera_link";
   std::string depth_encoding = "32FC1";
+  std::string depth_frame_id;  // empty: the colour frame_id
+  bool write_tf = true;        // false: only the three camera topics, as many recorded bags
   mc_flow::SyntheticSceneOptions scene;
 };
 
@@ -40,7 +42,7 @@ void usage() {
   std::cerr << "usage: make_synthetic_bag OUTPUT.bag [--frames N (20)] [--rate HZ (10)] [--width W (640)]\n"
                "       [--height H (480)] [--variant V (0)] [--namespace NS (/camera)]\n"
                "       [--frame-id ID (camera_rgb_optical_frame)] [--base-frame ID (camera_link)]\n"
-               "       [--depth-encoding 32FC1|16UC1]\n"
+               "       [--depth-encoding 32FC1|16UC1] [--depth-frame-id ID (the colour one)] [--no-tf]\n"
                "       [--depth-noise M (0)] [--intensity-noise I (0)]\n";
 }
 
@@ -62,6 +64,8 @@ bool parse(int argc, char** argv, Options& o) {
     else if (arg == "--frame-id") o.frame_id = next();
     else if (arg == "--base-frame") o.base_frame = next();
     else if (arg == "--depth-encoding") o.depth_encoding = next();
+    else if (arg == "--depth-frame-id") o.depth_frame_id = next();
+    else if (arg == "--no-tf") o.write_tf = false;
     else if (arg == "--depth-noise") o.scene.depth_noise = std::stod(next());
     else if (arg == "--intensity-noise") o.scene.intensity_noise = std::stod(next());
     else if (arg == "-h" || arg == "--help") return false;
@@ -96,7 +100,7 @@ int main(int argc, char** argv) {
   try {
     rosbag::Bag bag(o.output, rosbag::bagmode::Write);
     const ros::Time start(1000.0);  // fixed start: the bag is the same on every run
-    {
+    if (o.write_tf) {
       // Like a camera driver: a latched /tf_static from the body frame (x forward, z up) to the optical
       // frame (z forward, y down, REP 103), so viewers can use an upright fixed frame.
       tf2_msgs::TFMessage tf;
@@ -138,6 +142,7 @@ int main(int argc, char** argv) {
 
       sensor_msgs::Image depth;
       depth.header = rgb.header;
+      if (!o.depth_frame_id.empty()) depth.header.frame_id = o.depth_frame_id;
       depth.width = rgb.width;
       depth.height = rgb.height;
       depth.encoding = o.depth_encoding;
