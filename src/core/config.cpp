@@ -110,9 +110,9 @@ const FieldEntry kFields[] = {
     MCFLOW_FIELD(outlier_cost),
     MCFLOW_FIELD(out_of_view_cost),
     MCFLOW_FIELD(min_geometric_weight),
-    MCFLOW_FIELD(merge_translation),
-    MCFLOW_FIELD(merge_rotation),
-    MCFLOW_FIELD(merge_data_cost),
+    MCFLOW_FIELD(label_cost),
+    MCFLOW_FIELD(max_splits_per_iteration),
+    MCFLOW_FIELD(max_labels),
     MCFLOW_FIELD(min_support_fraction),
     MCFLOW_FIELD(detect_occlusions),
     MCFLOW_FIELD(occlusion_kz),
@@ -234,10 +234,10 @@ void Config::validate() const {
   if (min_geometric_weight > 1)
     rangeError("min_geometric_weight", doubleText(min_geometric_weight), "must be <= 1 (weights are in (0, 1])");
 
-  requireNonNegative("merge_translation", merge_translation);
-  requireNonNegative("merge_rotation", merge_rotation);
+  requireNonNegative("label_cost", label_cost);
+  requireIntIn("max_splits_per_iteration", max_splits_per_iteration, 0, 16);
+  requireIntIn("max_labels", max_labels, 1, 64);
   requireFraction("min_support_fraction", min_support_fraction);
-  requireNonNegative("merge_data_cost", merge_data_cost);
 
   requireNonNegative("occlusion_kz", occlusion_kz);
   requireNonNegative("occlusion_ko", occlusion_ko);

@@ -218,9 +218,9 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
     // Labels whose motions came out alike are merged before the label step as well as after it: the
     // result is the same as merging one step later, but the label step then runs on a few labels, not 20.
     t = Clock::now();
-    Config merge_only = config;
-    merge_only.min_support_fraction = 0.0;
-    const AdaptationStats early = adaptLabelCount(u, twists, L1.points, valid_label_level, merge_only);
+    const ImageU8* occlusion_used = config.detect_occlusions ? &occlusion : nullptr;
+    LabelCostModel early_model = labelCostModel(L1, pyr2[label_level], u, occlusion_used, twists, config, *impl_->motion);
+    const AdaptationStats early = adaptLabelCount(u, twists, early_model, valid_label_level, config, false);
     stats.merged += early.merged;
     if (early.merged > 0) dual.reset(LW, LH, u.count);
     result.timings.adaptation += elapsedMs(t);
@@ -243,18 +243,26 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
     stats.label_change = meanAbsoluteChange(u_before, u);
     result.timings.labels += elapsedMs(t);
 
-    // 3. update n
+    // 3. update n: merges and removals on the energy, then (while a motion step follows) splits
     t = Clock::now();
-    const AdaptationStats as = adaptLabelCount(u, twists, L1.points, valid_label_level, config, &problem.data_cost);
+    LabelCostModel model = labelCostModel(L1, pyr2[label_level], u, occlusion_used, twists, config, *impl_->motion);
+    const AdaptationStats as = adaptLabelCount(u, twists, model, valid_label_level, config, true);
     stats.merged += as.merged;
     stats.removed = as.removed;
+    stats.smallest_refused_merge = as.smallest_refused_merge;
+    if (k + 1 < config.outer_iterations) {
+      stats.split = proposeSplits(u, twists, L1, pyr2[label_level], occlusion_used, valid_label_level, config,
+                                  *impl_->motion).split;
+    }
     stats.labels_after = u.count - 1;
-    if (as.merged + as.removed > 0) dual.reset(LW, LH, u.count);
+    if (as.merged + as.removed + stats.split > 0) dual.reset(LW, LH, u.count);
     result.timings.adaptation += elapsedMs(t);
     result.energy = ls.energy;
     result.iterations.push_back(stats);
-    impl_->progress("outer iteration %d: %d motion labels, label change %.5f", k, stats.labels_after, stats.label_change);
-    if (k > 0 && as.merged + as.removed == 0 && stats.label_change < config.outer_convergence) break;
+    impl_->progress("outer iteration %d: %d motion labels (merged %d, removed %d, split %d; cheapest refused merge %.1f, label cost %.1f), label change %.5f",
+                    k, stats.labels_after, stats.merged, stats.removed, stats.split, stats.smallest_refused_merge,
+                    labelCost(config, valid_label_level), stats.label_change);
+    if (k > 0 && as.merged + as.removed + stats.split == 0 && stats.label_change < config.outer_convergence) break;
   }
 
   // ---- final label step at the processing level (also when that is the label level: labels removed in the

@@ -152,6 +152,7 @@ PairSolves solveRealPair(const RealPair& pair, const Config& base, int repeat) {
   PairSolves solves;
   Config one = base;
   one.initial_labels = 1;  // a single rigid motion for the whole image: dense robust visual odometry
+  one.max_labels = 1;      // and no split proposals
   solves.one_label = solveRepeated(pair, one, repeat, solves.one_label_time);
   Config tv = base;
   tv.regularizer = Regularizer::TotalVariation;

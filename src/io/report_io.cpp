@@ -81,6 +81,7 @@ std::string reportJson(const Result& result, const Config& config, const RunInfo
                           {"labels_after", it.labels_after},
                           {"merged", it.merged},
                           {"removed", it.removed},
+                          {"split", it.split},
                           {"motion_iterations", it.motion_iterations},
                           {"label_iterations", it.label_iterations},
                           {"label_change", number(it.label_change)},

@@ -47,14 +47,14 @@ TEST(Reconfigure, ChangedValuesReachTheCoreConfig) {
   parameters.regularizer = "tv";
   parameters.backend = "cpu";
   parameters.detect_occlusions = !mc_flow::Config().detect_occlusions;
-  parameters.merge_rotation = 0.1234567890123;
+  parameters.label_cost = 0.1234567890123;
   const mc_flow::Config config = mc_flow_ros::toCoreConfig(parameters);
   EXPECT_DOUBLE_EQ(config.alpha, 3.25);
   EXPECT_EQ(config.initial_labels, 12);
   EXPECT_EQ(config.regularizer, mc_flow::Regularizer::TotalVariation);
   EXPECT_EQ(config.backend, mc_flow::Backend::Cpu);
   EXPECT_EQ(config.detect_occlusions, !mc_flow::Config().detect_occlusions);
-  EXPECT_EQ(config.merge_rotation, 0.1234567890123);  // exact: the text keeps 17 digits
+  EXPECT_EQ(config.label_cost, 0.1234567890123);  // exact: the text keeps 17 digits
 }
 
 TEST(Reconfigure, InvalidValuesAreRejectedNamingTheParameter) {

@@ -76,11 +76,11 @@ struct Config {
   double min_geometric_weight = 1e-3;  ///< floor of the 3D-distance weights (0 would disconnect the graph)
 
   // ---- label count (section 5) ----
-  double merge_translation = 0.006;  ///< [m] merge two labels when their motions move the segments' centroids
-                                     ///< differently by less than this
-  double merge_rotation = 0.01;      ///< [rad] ... and their rotations differ by less than this
-  double merge_data_cost = 0.15;     ///< [normalised Cauchy cost per pixel] ... or when each label's motion explains
-                                     ///< the other's pixels with less extra data cost than this (0 = off)
+  double label_cost = 0.001;         /// [normalised Cauchy cost per valid label-level pixel] price of one motion:
+                                     ///< labels merge when sharing a motion costs less data cost than this times
+                                     ///< the valid pixels, and split when a second motion saves more
+  int max_splits_per_iteration = 2;  ///< new labels proposed by splitting, per outer iteration (0 = never split)
+  int max_labels = 64;               ///< [labels] splits stop at this many motion labels
   double min_support_fraction = 0.004;  ///< labels with support below this fraction of the valid pixels go to the outlier label
 
   // ---- occlusion (section 6) ----

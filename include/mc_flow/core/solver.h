@@ -36,7 +36,8 @@ struct OuterIterationStats {
   int iteration = 0;
   int labels_before = 0;  ///< motion labels at the start (outlier label not counted)
   int labels_after = 0;   ///< after merging / removal
-  int merged = 0, removed = 0;
+  int merged = 0, removed = 0, split = 0;
+  double smallest_refused_merge = 0;  ///< predicted data-cost increase of the cheapest merge not taken
   int motion_iterations = 0;  ///< IRLS iterations summed over levels
   int label_iterations = 0;   ///< primal-dual iterations
   double label_change = 0;    ///< mean |u_k+1 - u_k| at the label level
