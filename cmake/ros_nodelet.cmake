@@ -84,4 +84,12 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     add_dependencies(rostest_${name} mc_flow_nodelet)
     add_dependencies(tests rostest_${name})
   endforeach()
+
+  # Scripted checks of what a user meets: the tools the README names start; demo.launch with a bag of
+  # only the three camera topics (relative path, output frames vs the rviz Fixed Frame, bad paths).
+  add_test(NAME ros.ToolsTheReadmeUses
+    COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/test/ros/check_tools.sh ${CMAKE_CURRENT_SOURCE_DIR}/README.md ${CATKIN_DEVEL_PREFIX})
+  add_test(NAME ros.DemoLaunchWithARecordedBag
+    COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/test/ros/check_bag_launch.sh ${CMAKE_CURRENT_SOURCE_DIR} ${CATKIN_DEVEL_PREFIX})
+  set_tests_properties(ros.DemoLaunchWithARecordedBag PROPERTIES TIMEOUT 400 RUN_SERIAL TRUE)
 endif()

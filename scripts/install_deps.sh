@@ -1,6 +1,16 @@
 #!/usr/bin/env bash
-# Installs the Debian 12 packages mc_flow needs (ROS 1 from Debian, OpenCV, Eigen, gtest). Idempotent.
+# Installs the Debian 12 packages mc_flow needs (ROS 1 from Debian, OpenCV, Eigen, gtest) and the tools
+# a ROS user reaches for (rviz, rosmsg, rosservice, dynparam, rostopic with every message type the package
+# publishes, rosnode, rosrun, rosbag). Idempotent.
+# Headless machines: MCFLOW_NO_RVIZ=1 (or --no-rviz) skips rviz, Xvfb and ImageMagick.
 set -euo pipefail
+NO_RVIZ="${MCFLOW_NO_RVIZ:-0}"
+for arg in "$@"; do
+  case "$arg" in
+    --no-rviz) NO_RVIZ=1 ;;
+    *) echo "install_deps.sh: unknown argument '$arg' (only --no-rviz)" >&2; exit 2 ;;
+  esac
+done
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 PACKAGES=(
@@ -13,7 +23,20 @@ PACKAGES=(
   libpcl-conversions-dev librosbag-dev librostest-dev python3-rostest python3-roslaunch python3-rosmaster
   python3-rosbag python3-rostopic python3-rosnode python3-sensor-msgs python3-geometry-msgs rosbash
   libgtest-dev libeigen3-dev libopencv-dev nlohmann-json3-dev libyaml-cpp-dev
+  # command-line tools: rosmsg, rosservice (dynparam needs it), rosnode, rosdiagnostic, image_transport's
+  # list_transports; Python messages for rostopic of every output type (sensor_msgs, visualization_msgs,
+  # tf2_msgs, diagnostic_msgs, dynamic_reconfigure; mc_flow's own come from the build)
+  python3-rosmsg python3-rosservice rosdiagnostic image-transport-tools python3-visualization-msgs
+  python3-diagnostic-msgs python3-tf2-msgs ros-tf2-msgs ros-diagnostic-msgs python3-roslib
 )
+# The viewer (about 20 MB of archives on top of the above): rviz, and Xvfb + ImageMagick for
+# scripts/rviz_screenshot.sh.
+VIEWER=(rviz xvfb imagemagick)
+if [ "$NO_RVIZ" = "1" ]; then
+  echo "[install_deps] MCFLOW_NO_RVIZ=1 / --no-rviz: skipping ${VIEWER[*]}"
+else
+  PACKAGES+=("${VIEWER[@]}")
+fi
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

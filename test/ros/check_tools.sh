@@ -1,0 +1,52 @@
+#!/bin/bash
+# Every ROS tool the README tells users to run is installed and starts (scripts/install_deps.sh installs
+# them), and rostopic can load the message class of every type the package publishes.
+# Usage: check_tools.sh README.md DEVEL_DIR. rviz is skipped, visibly, under MCFLOW_NO_RVIZ=1.
+set -uo pipefail
+readme=$1
+devel=$2
+export PATH="/usr/bin:$PATH"   # Debian's ROS python tools, not a pyenv python3
+set +u
+# shellcheck disable=SC1091
+source "$devel/setup.bash"
+set -u
+failures=0
+# Tool names that appear in the README's code (blocks and `inline`).
+tools=$(awk '/^```/{inblock=!inblock; next} inblock{print; next} {while (match($0, /`[^`]*`/)) {print substr($0, RSTART+1, RLENGTH-2); $0=substr($0, RSTART+RLENGTH)}}' "$readme" |
+        grep -oE '(^|[[:space:];(|&])(ros[a-z_]+|rviz|dynparam)\b' | tr -d ' \t;(|&' | sort -u)
+[ -n "$tools" ] || { echo "FAIL: no ROS tools found in $readme"; exit 1; }
+for tool in $tools; do
+  case "$tool" in
+    rviz)
+      if [ "${MCFLOW_NO_RVIZ:-0}" = "1" ]; then echo "SKIP rviz (MCFLOW_NO_RVIZ=1)"; continue; fi
+      cmd=(env QT_QPA_PLATFORM=offscreen rviz -h) ;;
+    dynparam) cmd=(rosrun dynamic_reconfigure dynparam -h) ;;
+    roslaunch|rosbag|rostopic|rosmsg|rosservice|rosnode|rosrun|rosparam) cmd=("$tool" -h) ;;
+    rosdep|ros_*) echo "SKIP $tool (not a runtime tool)"; continue ;;
+    *) cmd=("$tool" -h) ;;
+  esac
+  if out=$("${cmd[@]}" 2>&1) && [ -n "$out" ]; then
+    echo "ok   $tool"
+  elif [ "$tool" = rosrun ] && echo "$out" | grep -q "Usage: rosrun"; then
+    echo "ok   $tool"
+  elif [ "$tool" = rviz ] && echo "$out" | grep -q -- "--fixed-frame"; then
+    echo "ok   $tool"   # rviz -h prints its options and exits 1
+  else
+    echo "FAIL $tool: '${cmd[*]}' failed: $(echo "$out" | tail -2)"
+    failures=$((failures + 1))
+  fi
+done
+# Every type the nodelet publishes (outputs, /tf, /diagnostics, dynamic_reconfigure), as rostopic loads it.
+python3 - <<'PY' || failures=$((failures + 1))
+import sys
+import roslib.message
+types = ["mc_flow/SegmentArray", "sensor_msgs/Image", "sensor_msgs/PointCloud2", "sensor_msgs/CameraInfo",
+         "visualization_msgs/MarkerArray", "tf2_msgs/TFMessage", "diagnostic_msgs/DiagnosticArray",
+         "dynamic_reconfigure/Config", "dynamic_reconfigure/ConfigDescription", "rosgraph_msgs/Log"]
+missing = [t for t in types if roslib.message.get_message_class(t) is None]
+for t in types:
+    print(("FAIL cannot load message class for [%s]" if t in missing else "ok   message %s") % t)
+sys.exit(1 if missing else 0)
+PY
+if [ "$failures" -gt 0 ]; then echo "$failures tool check(s) failed"; exit 1; fi
+echo "all tools present"
