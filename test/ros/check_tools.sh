@@ -25,14 +25,15 @@ for tool in $tools; do
     rosdep|ros_*) echo "SKIP $tool (not a runtime tool)"; continue ;;
     *) cmd=("$tool" -h) ;;
   esac
-  if out=$("${cmd[@]}" 2>&1) && [ -n "$out" ]; then
+  # Most ROS tools print their usage for -h and exit 64 (rviz: 1): judge by what they print. A missing
+  # tool (exit 127) or Python module (a traceback, as dynparam without rosservice) fails.
+  out=$("${cmd[@]}" 2>&1)
+  rc=$?
+  if [ "$rc" != 127 ] && echo "$out" | grep -qiE "usage|commands:|--fixed-frame" &&
+     ! echo "$out" | grep -qE "Traceback|No module named|command not found"; then
     echo "ok   $tool"
-  elif [ "$tool" = rosrun ] && echo "$out" | grep -q "Usage: rosrun"; then
-    echo "ok   $tool"
-  elif [ "$tool" = rviz ] && echo "$out" | grep -q -- "--fixed-frame"; then
-    echo "ok   $tool"   # rviz -h prints its options and exits 1
   else
-    echo "FAIL $tool: '${cmd[*]}' failed: $(echo "$out" | tail -2)"
+    echo "FAIL $tool: '${cmd[*]}' exited $rc: $(echo "$out" | grep -v '^\s*$' | tail -2)"
     failures=$((failures + 1))
   fi
 done
