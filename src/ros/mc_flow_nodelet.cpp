@@ -268,7 +268,18 @@ void MCFlowNodelet::connectCb() {
   std::lock_guard<std::mutex> lock(connect_mutex_);
   const bool needed = anyListener() || print_summary_ || !save_dir_.empty() || publish_tf_;
   if (needed && !subscribed_) {
-    const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh_);
+    // The transport comes from ~image_transport. One whose plug-in is not installed would throw inside
+    // image_transport and take the manager (and the camera) down: check first, fall back to raw.
+    image_transport::TransportHints hints("raw", ros::TransportHints(), pnh_);
+    const std::vector<std::string> loadable = it_in_->getLoadableTransports();
+    if (std::find(loadable.begin(), loadable.end(), "image_transport/" + hints.getTransport()) == loadable.end()) {
+      std::string available;
+      for (const std::string& name : loadable) available += " " + name.substr(name.find('/') + 1);
+      NODELET_ERROR("image_transport '%s' is not installed (installed:%s): install its plug-in package or set "
+                    "~image_transport to one of those; subscribing with 'raw' instead",
+                    hints.getTransport().c_str(), available.c_str());
+      hints = image_transport::TransportHints("raw");
+    }
     // One queue length for the subscribers and the synchroniser: a burst the synchroniser could hold
     // must not be dropped before it (the losses that remain show in diagnostics).
     const auto queue = std::uint32_t(queue_size_);

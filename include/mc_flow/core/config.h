@@ -76,7 +76,7 @@ struct Config {
   double min_geometric_weight = 1e-3;  ///< floor of the 3D-distance weights (0 would disconnect the graph)
 
   // ---- label count (section 5) ----
-  double label_cost = 0.001;         /// [normalised Cauchy cost per valid label-level pixel] price of one motion:
+  double label_cost = 0.001;         ///< [normalised Cauchy cost per valid label-level pixel] price of one motion:
                                      ///< labels merge when sharing a motion costs less data cost than this times
                                      ///< the valid pixels, and split when a second motion saves more
   int max_splits_per_iteration = 2;  ///< new labels proposed by splitting, per outer iteration (0 = never split)
