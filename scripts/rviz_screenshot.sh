@@ -57,5 +57,14 @@ done
 sleep "${SETTLE:-8}"
 grep -q "Fixed Frame" "$work/launch.log" && grep "Fixed Frame" "$work/launch.log" | tail -1
 mkdir -p "$(dirname "$png")"
-import -display "$display" -window root "$png"
+shot="$(dirname "$png")/.rviz_screenshot_$$.png"
+import -display "$display" -window root "$shot"
+# A screen grabbed before rviz drew (seen once under load) is one flat colour: refuse it, keep the old picture.
+spread=$(identify -format '%[fx:standard_deviation]' "$shot")
+if awk -v s="$spread" 'BEGIN { exit !(s < 0.02) }'; then
+  rm -f "$shot"
+  echo "error: the screenshot is blank (pixel standard deviation $spread): rviz had not drawn yet; run again" >&2
+  exit 1
+fi
+mv "$shot" "$png"
 echo "wrote $png"

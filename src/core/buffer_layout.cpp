@@ -26,7 +26,7 @@ std::string bufferLayoutProblem(const BufferLayout& layout, std::uint64_t max_pi
     return "row of " + std::to_string(layout.width) + " px x " + std::to_string(layout.channels) + " x " +
            std::to_string(layout.value_bytes) + " bytes does not fit in 64 bits";
   }
-  const std::uint64_t step = layout.row_step == 0 ? row_bytes : layout.row_step;
+  const std::uint64_t step = layout.row_step;
   if (step < row_bytes) {
     return "step " + std::to_string(step) + " bytes is below the row size " + std::to_string(row_bytes) +
            " bytes (width " + std::to_string(layout.width) + " x " + std::to_string(pixel_bytes) + " bytes per pixel)";

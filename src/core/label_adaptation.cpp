@@ -232,26 +232,26 @@ AdaptationStats proposeSplits(SoftLabels& u, std::vector<Vector6d>& twists, cons
   }
   std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
   const int take = std::min({int(gains.size()), room, config.max_splits_per_iteration});
+  if (take == 0) return stats;
+  // The taken second halves become labels n .. n+take-1, before the outlier label: one new labelling.
+  SoftLabels grown(u.width, u.height, u.count + take, 0.f);
+  for (int i = 0; i < n; ++i) std::copy_n(u.plane(i), plane, grown.plane(i));
+  std::copy_n(u.plane(u.outlier()), plane, grown.plane(grown.outlier()));
   for (int t = 0; t < take; ++t) {
     const int c = gains[std::size_t(t)].second;
     const int p = parent[std::size_t(c)];
     const Vector6d base = twists[std::size_t(p)];
     twists[std::size_t(p)] = base + gaussNewtonStep(model.curvature[std::size_t(p)], model.gradient[std::size_t(p)]);
-    const Vector6d second = base + gaussNewtonStep(model.curvature[std::size_t(n + c)], model.gradient[std::size_t(n + c)]);
-    // Append the second half as a new label before the outlier label.
-    SoftLabels grown(u.width, u.height, u.count + 1, 0.f);
-    for (int i = 0; i < u.count - 1; ++i) std::copy_n(u.plane(i), plane, grown.plane(i));
-    std::copy_n(u.plane(u.outlier()), plane, grown.plane(grown.outlier()));
+    twists.push_back(base + gaussNewtonStep(model.curvature[std::size_t(n + c)], model.gradient[std::size_t(n + c)]));
     float* from = grown.plane(p);
-    float* to = grown.plane(grown.count - 2);
+    float* to = grown.plane(n + t);
     for (std::size_t k : second_half[std::size_t(c)]) {
       to[k] = from[k];
       from[k] = 0.f;
     }
-    u = std::move(grown);
-    twists.push_back(second);
     ++stats.split;
   }
+  u = std::move(grown);
   return stats;
 }
 

@@ -88,6 +88,7 @@ void checkPayload(std::ifstream& in, std::uint64_t width, std::uint64_t height, 
   layout.height = height;
   layout.channels = channels;
   layout.value_bytes = sizeof(float);
+  layout.row_step = width * channels * sizeof(float);  // packed rows; < 2^36 for 32-bit sizes
   layout.available_bytes = bytesLeft(in);
   layout.exact = false;
   checkBufferLayout(layout, what);

@@ -146,23 +146,19 @@ int chooseDownsample(int requested, int width) {
 
 mc_flow::Intrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info, int width, int height) {
   validateCameraInfo(info);
-  const bool p_empty = info.P[0] == 0 && info.P[5] == 0 && info.P[2] == 0 && info.P[6] == 0;
-  const double fx = p_empty ? info.K[0] : info.P[0], fy = p_empty ? info.K[4] : info.P[5];
-  const double cx = p_empty ? info.K[2] : info.P[2], cy = p_empty ? info.K[5] : info.P[6];
+  const PinholeValues p = pinholeValues(info);
   // camera_info may describe the full sensor while the image is binned or scaled: rescale.
   const double sx = info.width > 0 ? double(width) / double(info.width) : 1.0;
   const double sy = info.height > 0 ? double(height) / double(info.height) : 1.0;
-  return {fx * sx, fy * sy, (cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5};
+  return {p.fx * sx, p.fy * sy, (p.cx + 0.5) * sx - 0.5, (p.cy + 0.5) * sy - 0.5};
 }
 
 FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs::Image& depth_message,
                         const sensor_msgs::CameraInfo& info, int downsample_request, std::uint64_t max_pixels) {
   // Nothing below (cv_bridge, OpenCV) may read a buffer whose header has not been checked in 64 bits.
-  validateImage(rgb_message, ImageRole::Colour, max_pixels);
-  validateImage(depth_message, ImageRole::Depth, max_pixels);
+  const EncodingLayout rgb_layout = validateImage(rgb_message, ImageRole::Colour, max_pixels);
+  const EncodingLayout depth_layout = validateImage(depth_message, ImageRole::Depth, max_pixels);
   validateCameraInfo(info, max_pixels);
-  const EncodingLayout rgb_layout = encodingLayout(rgb_message.encoding, ImageRole::Colour);
-  const EncodingLayout depth_layout = encodingLayout(depth_message.encoding, ImageRole::Depth);
   // Big-endian 16/32-bit values are swapped into a copy; host-order messages are read in place.
   std::optional<sensor_msgs::Image> rgb_swapped, depth_swapped;
   if (needsByteSwap(rgb_message, rgb_layout)) rgb_swapped = toHostByteOrder(rgb_message, rgb_layout);

@@ -39,7 +39,7 @@ EncodingLayout encodingLayout(const std::string& encoding, ImageRole role) {
                                                     "' (accepted: 16UC1 in mm, 32FC1 in m)");
 }
 
-void validateImage(const sensor_msgs::Image& image, ImageRole role, std::uint64_t max_pixels) {
+EncodingLayout validateImage(const sensor_msgs::Image& image, ImageRole role, std::uint64_t max_pixels) {
   const char* what = role == ImageRole::Colour ? "colour image" : "depth image";
   const EncodingLayout layout = encodingLayout(image.encoding, role);
   if (image.is_bigendian > 1) {
@@ -54,11 +54,6 @@ void validateImage(const sensor_msgs::Image& image, ImageRole role, std::uint64_
   buffer.row_step = image.step;
   buffer.available_bytes = image.data.size();
   buffer.exact = true;
-  if (image.step == 0) {  // 0 would mean "packed" to the layout check; a message must state its step
-    throw FrameInputError(InputProblem::Layout, std::string(what) + " (" + image.encoding + ", " +
-                                                    std::to_string(image.width) + "x" + std::to_string(image.height) +
-                                                    "): step is 0");
-  }
   const std::string problem = mc_flow::bufferLayoutProblem(buffer, max_pixels);
   if (!problem.empty()) {
     std::uint64_t pixels = 0;
@@ -68,6 +63,13 @@ void validateImage(const sensor_msgs::Image& image, ImageRole role, std::uint64_
                           std::string(what) + " (" + image.encoding + ", step " + std::to_string(image.step) + "): " +
                               problem);
   }
+  return layout;
+}
+
+PinholeValues pinholeValues(const sensor_msgs::CameraInfo& info) {
+  const bool from_k = info.P[0] == 0 && info.P[5] == 0 && info.P[2] == 0 && info.P[6] == 0;
+  if (from_k) return {info.K[0], info.K[4], info.K[2], info.K[5], true};
+  return {info.P[0], info.P[5], info.P[2], info.P[6], false};
 }
 
 void validateCameraInfo(const sensor_msgs::CameraInfo& info, std::uint64_t max_pixels) {
@@ -84,13 +86,11 @@ void validateCameraInfo(const sensor_msgs::CameraInfo& info, std::uint64_t max_p
     throw FrameInputError(InputProblem::Size, "camera_info size " + size + " exceeds the limit of " +
                                                   std::to_string(max_pixels) + " pixels");
   }
-  const bool p_empty = info.P[0] == 0 && info.P[5] == 0 && info.P[2] == 0 && info.P[6] == 0;
-  const double fx = p_empty ? info.K[0] : info.P[0];
-  const double fy = p_empty ? info.K[4] : info.P[5];
-  if (!(fx > 0) || !(fy > 0)) {
+  const PinholeValues pinhole = pinholeValues(info);
+  if (!(pinhole.fx > 0) || !(pinhole.fy > 0)) {
     std::ostringstream s;
-    s << "camera_info has unusable intrinsics (fx=" << fx << ", fy=" << fy << " from "
-      << (p_empty ? "K, P being all zero" : "P") << "): is the camera calibrated?";
+    s << "camera_info has unusable intrinsics (fx=" << pinhole.fx << ", fy=" << pinhole.fy << " from "
+      << (pinhole.from_k ? "K, P being all zero" : "P") << "): is the camera calibrated?";
     throw FrameInputError(InputProblem::Intrinsics, s.str());
   }
 }

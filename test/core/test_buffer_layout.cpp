@@ -30,8 +30,7 @@ constexpr std::uint64_t kMax = std::numeric_limits<std::uint64_t>::max();
 TEST(BufferLayout, ExactAndPaddedLayoutsPass) {
   EXPECT_EQ(mc_flow::bufferLayoutProblem(layout(10, 3, 40, 120)), "");
   EXPECT_EQ(mc_flow::bufferLayoutProblem(layout(10, 3, 48, 144)), "");
-  EXPECT_EQ(mc_flow::bufferLayoutProblem(layout(10, 3, 0, 120)), "");            // 0 = packed
-  EXPECT_EQ(mc_flow::bufferLayoutProblem(layout(10, 3, 0, 500, false)), "");    // a file with more after it
+  EXPECT_EQ(mc_flow::bufferLayoutProblem(layout(10, 3, 40, 500, false)), "");   // a file with more after it
 }
 
 TEST(BufferLayout, ProductsThatWrapAroundTwoToThe64AreRefused) {
@@ -50,6 +49,8 @@ TEST(BufferLayout, ProductsThatWrapAroundTwoToThe64AreRefused) {
 
 TEST(BufferLayout, EachProblemIsNamed) {
   EXPECT_NE(mc_flow::bufferLayoutProblem(layout(0, 3, 40, 0)).find("empty image (0x3)"), std::string::npos);
+  EXPECT_NE(mc_flow::bufferLayoutProblem(layout(10, 3, 0, 120)).find("step 0 bytes is below the row size 40"),
+            std::string::npos);
   EXPECT_NE(mc_flow::bufferLayoutProblem(layout(10, 3, 36, 108)).find("step 36 bytes is below the row size 40"),
             std::string::npos);
   EXPECT_NE(mc_flow::bufferLayoutProblem(layout(10, 3, 42, 126)).find("not a multiple of the 4-byte value size"),

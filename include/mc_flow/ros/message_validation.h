@@ -33,9 +33,16 @@ EncodingLayout encodingLayout(const std::string& encoding, ImageRole role);
 /// @brief Throws FrameInputError naming every bad value unless the message is exactly consistent: an
 /// accepted encoding; width, height > 0; width * height <= max_pixels; step >= width * bytes per pixel;
 /// step a multiple of the value size; height * step == data.size() (no wrap); is_bigendian 0 or 1.
-/// A big-endian message with multi-byte values is valid (the conversion swaps it).
-void validateImage(const sensor_msgs::Image& image, ImageRole role,
+/// A big-endian message with multi-byte values is valid (the conversion swaps it). Returns the encoding's layout.
+EncodingLayout validateImage(const sensor_msgs::Image& image, ImageRole role,
                    std::uint64_t max_pixels = mc_flow::kDefaultMaxInputPixels);
+
+/// @brief The pinhole values of camera_info: from P (the rectified projection), or from K when P is all zero.
+struct PinholeValues {
+  double fx, fy, cx, cy;  ///< [px]
+  bool from_k;
+};
+PinholeValues pinholeValues(const sensor_msgs::CameraInfo& info);
 
 /// @brief Throws FrameInputError unless camera_info is usable: every K, R, P and D entry finite; a
 /// positive focal length in P (or, when P is all zero, in K); width and height both zero (unknown) or both
