@@ -20,6 +20,7 @@
 #include "mc_flow/io/flow_io.h"
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
+#include "temp_dir.h"
 
 #ifndef MCFLOW_CLI_PATH
 #error "MCFLOW_CLI_PATH must name the mcflow binary"
@@ -38,9 +39,8 @@ struct CliRun {
 };
 
 fs::path workDir() {
-  static const fs::path dir = fs::path(::testing::TempDir()) / ("mcflow_cli_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  return dir;
+  static const test::TempDir dir("mcflow_cli_");
+  return dir.path();
 }
 
 std::string quote(const std::string& s) { return "'" + s + "'"; }

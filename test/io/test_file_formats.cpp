@@ -20,6 +20,7 @@
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
 #include "mc_flow/io/visualization.h"
+#include "temp_dir.h"
 
 namespace fs = std::filesystem;
 using namespace mc_flow;
@@ -27,9 +28,8 @@ using namespace mc_flow;
 namespace {
 
 std::string tempPath(const std::string& name) {
-  const fs::path dir = fs::path(::testing::TempDir()) / ("mcflow_io_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  return (dir / name).string();
+  static const test::TempDir dir("mcflow_io_");
+  return (dir.path() / name).string();
 }
 
 ImageF randomImage(int w, int h, int c, unsigned seed) {

@@ -30,6 +30,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/io/benchmark.h"
 #include "mc_flow/io/report_io.h"
+#include "temp_dir.h"
 
 #ifndef MCFLOW_CLI_PATH
 #error "MCFLOW_CLI_PATH must name the mcflow binary"
@@ -158,8 +159,8 @@ struct CliOutput {
 
 CliOutput runBenchReal(const std::string& arguments) {
   static int counter = 0;
-  const fs::path dir = fs::path(::testing::TempDir()) / ("mcflow_bench_real_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
+  static const test::TempDir work("mcflow_bench_real_");
+  const fs::path& dir = work.path();
   const std::string tag = std::to_string(counter++);
   const fs::path out = dir / ("stdout_" + tag), err = dir / ("stderr_" + tag);
   const std::string command = "'" + std::string(MCFLOW_CLI_PATH) + "' bench-real " + arguments + " >'" +
