@@ -1,11 +1,10 @@
 #include "mc_flow/ros/mc_flow_nodelet.h"
 
-#include <sys/stat.h>
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <iomanip>
 #include <sstream>
 #include <utility>
@@ -35,20 +34,6 @@ std::string stampText(const ros::Time& t) {
   char buffer[48];
   std::snprintf(buffer, sizeof(buffer), "%u.%09u", t.sec, t.nsec);
   return buffer;
-}
-
-bool makeDirectories(const std::string& path) {
-  std::string partial;
-  std::stringstream parts(path);
-  std::string part;
-  if (!path.empty() && path[0] == '/') partial = "/";
-  while (std::getline(parts, part, '/')) {
-    if (part.empty()) continue;
-    partial += part + "/";
-    mkdir(partial.c_str(), 0755);
-  }
-  struct stat info {};
-  return stat(path.c_str(), &info) == 0 && S_ISDIR(info.st_mode);
 }
 
 }  // namespace
@@ -226,9 +211,14 @@ void MCFlowNodelet::readParameters() {
     NODELET_WARN("cloud_colour '%s' is neither 'segment' nor 'image'; using 'segment'", cloud_colour.c_str());
   }
   segmentation_blend_ = std::min(std::max(segmentation_blend_, 0.0), 1.0);
-  if (!save_dir_.empty() && !makeDirectories(save_dir_)) {
-    NODELET_ERROR("save_dir '%s' cannot be created; pictures will not be saved", save_dir_.c_str());
-    save_dir_.clear();
+  if (!save_dir_.empty()) {
+    std::error_code error;
+    std::filesystem::create_directories(save_dir_, error);
+    if (error || !std::filesystem::is_directory(save_dir_, error)) {
+      NODELET_ERROR("save_dir '%s' cannot be created (%s); pictures will not be saved", save_dir_.c_str(),
+                    error ? error.message().c_str() : "it exists and is not a folder");
+      save_dir_.clear();
+    }
   }
 }
 
