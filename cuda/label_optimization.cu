@@ -17,6 +17,7 @@
 #include <cub/device/device_reduce.cuh>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -25,6 +26,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/simplex_projection.h"
+#include "device_stages.h"
 
 namespace mc_flow {
 
@@ -221,34 +223,28 @@ struct GraphHolder {
   }
 };
 
-class CudaLabelOptimizer final : public LabelOptimizer {
+// The primal-dual iteration on device-resident problems: the label step of cuda/solve_backend.cu, and the
+// engine under CudaLabelOptimizer (the host-memory interface).
+class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
  public:
-  std::string name() const override { return "cuda"; }
+  explicit PrimalDualEngine(cudaStream_t stream) : stream_(stream) {}
 
-  LabelStats optimize(const LabelProblem& problem, SoftLabels& u, LabelDual& dual, int iterations,
-                      double tolerance) override {
-    validateProblem(problem, u);
+  LabelStats run(const cuda_detail::DeviceLabelProblem& problem, float* u, float* p, int iterations,
+                 double tolerance) override {
     const int W = problem.width, H = problem.height, n = problem.count;
-    if (dual.width != W || dual.height != H || dual.count != n || dual.p.size() != std::size_t(W) * H * n * 2)
-      dual.reset(W, H, n);
+    if (W <= 0 || H <= 0 || n < 1 || n > kMaxLabels)
+      throw InputError("CUDA label step: problem size " + sizeText(W, H, n) + " is empty or has more than " +
+                       std::to_string(kMaxLabels) + " labels");
     const std::size_t plane = std::size_t(W) * H;
     const bool tv = problem.regularizer == Regularizer::TotalVariation;
-    cudaStream_t s = stream_.stream;
-
+    cudaStream_t s = stream_;
     reserve(plane, n);
-    // Per-call traffic: the problem and the warm start up, u and p down; everything else stays on the device.
-    upload(data_cost_.get(), problem.data_cost.data(), plane * n);
-    upload(rx_.get(), problem.weight_x.ptr(), plane);
-    upload(ry_.get(), problem.weight_y.ptr(), plane);
-    upload(outlier_only_.get(), problem.outlier_only.ptr(), plane);
-    upload(u_.get(), u.data.data(), plane * n);
-    upload(p_.get(), dual.p.data(), plane * n * 2);
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u_bar_.get(), u_.get(), plane * n * sizeof(float), cudaMemcpyDeviceToDevice, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u_bar_.get(), u, plane * n * sizeof(float), cudaMemcpyDeviceToDevice, s));
 
-    const Launch launch = makeLaunch(W, H, n, tv, float(problem.lambda));
-    computeStepSizes<<<launch.grid, launch.block, 0, s>>>(rx_.get(), ry_.get(), W, H, tv, float(problem.lambda),
-                                                          sigma_rx_.get(), sigma_ry_.get(), shrink_x_.get(),
-                                                          shrink_y_.get(), tau_.get());
+    const Launch launch = makeLaunch(problem, u, p, tv);
+    computeStepSizes<<<launch.grid, launch.block, 0, s>>>(problem.weight_x, problem.weight_y, W, H, tv,
+                                                          float(problem.lambda), sigma_rx_.get(), sigma_ry_.get(),
+                                                          shrink_x_.get(), shrink_y_.get(), tau_.get());
     MCFLOW_CUDA_CHECK_LAUNCH("computeStepSizes");
 
     // Iterations run in rounds that end with a checked iteration (one recording the change): every
@@ -276,15 +272,12 @@ class CudaLabelOptimizer final : public LabelOptimizer {
       if (stats.last_change < tolerance) break;
     }
 
-    pixelEnergy<<<launch.grid, launch.block, 0, s>>>(u_.get(), data_cost_.get(), rx_.get(), ry_.get(), W, H, n, tv,
-                                                     problem.lambda, pixel_energy_.get());
+    pixelEnergy<<<launch.grid, launch.block, 0, s>>>(u, problem.data_cost, problem.weight_x, problem.weight_y, W, H,
+                                                     n, tv, problem.lambda, pixel_energy_.get());
     MCFLOW_CUDA_CHECK_LAUNCH("pixelEnergy");
     std::size_t bytes = temp_bytes_;
     MCFLOW_CUDA_CHECK(cub::DeviceReduce::Sum(temp_.get(), bytes, pixel_energy_.get(), energy_.get(), int(plane), s));
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&pinned_.scalars->energy, energy_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u.data.data(), u_.get(), plane * n * sizeof(float), cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_CHECK(
-        cudaMemcpyAsync(dual.p.data(), p_.get(), plane * n * 2 * sizeof(float), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
     stats.energy = pinned_.scalars->energy;
     return stats;
@@ -300,21 +293,35 @@ class CudaLabelOptimizer final : public LabelOptimizer {
     float lambda = 0.f, inv_lambda = 0.f;
     dim3 block, grid, label_grid, primal_block, primal_grid;
     std::size_t primal_shared_bytes = 0;
-    std::uint64_t buffers = 0;  // generation of the device buffers (pointers change when they grow)
+    float* u = nullptr;
+    float* p = nullptr;
+    const float* data_cost = nullptr;
+    const float* rx = nullptr;
+    const float* ry = nullptr;
+    const std::uint8_t* outlier_only = nullptr;
+    std::uint64_t buffers = 0;  // generation of the engine's buffers (pointers change when they grow)
     bool operator==(const Launch& o) const {
       return width == o.width && height == o.height && count == o.count && tv == o.tv && lambda == o.lambda &&
-             buffers == o.buffers;
+             u == o.u && p == o.p && data_cost == o.data_cost && rx == o.rx && ry == o.ry &&
+             outlier_only == o.outlier_only && buffers == o.buffers;
     }
   };
 
-  Launch makeLaunch(int W, int H, int n, bool tv, float lambda) {
+  Launch makeLaunch(const cuda_detail::DeviceLabelProblem& problem, float* u, float* p, bool tv) {
+    const int W = problem.width, H = problem.height, n = problem.count;
     Launch l;
     l.width = W;
     l.height = H;
     l.count = n;
     l.tv = tv;
-    l.lambda = lambda;
-    l.inv_lambda = 1.f / lambda;  // the CPU multiplies by this float reciprocal
+    l.lambda = float(problem.lambda);
+    l.inv_lambda = 1.f / l.lambda;  // the CPU multiplies by this float reciprocal
+    l.u = u;
+    l.p = p;
+    l.data_cost = problem.data_cost;
+    l.rx = problem.weight_x;
+    l.ry = problem.weight_y;
+    l.outlier_only = problem.outlier_only;
     l.buffers = buffer_generation_;
     l.block = dim3(kBlockX, kBlockY);
     l.grid = dim3((W + kBlockX - 1) / kBlockX, (H + kBlockY - 1) / kBlockY);
@@ -338,14 +345,13 @@ class CudaLabelOptimizer final : public LabelOptimizer {
   }
 
   void launchIteration(const Launch& l, bool record_change) {
-    cudaStream_t s = stream_.stream;
-    dualStep<<<l.label_grid, l.block, 0, s>>>(u_bar_.get(), p_.get(), sigma_rx_.get(), sigma_ry_.get(),
-                                              shrink_x_.get(), shrink_y_.get(), l.width, l.height, l.tv,
-                                              l.inv_lambda);
+    cudaStream_t s = stream_;
+    dualStep<<<l.label_grid, l.block, 0, s>>>(u_bar_.get(), l.p, sigma_rx_.get(), sigma_ry_.get(), shrink_x_.get(),
+                                              shrink_y_.get(), l.width, l.height, l.tv, l.inv_lambda);
     MCFLOW_CUDA_CHECK_LAUNCH("dualStep");
     primalStep<<<l.primal_grid, l.primal_block, l.primal_shared_bytes, s>>>(
-        u_.get(), u_bar_.get(), p_.get(), data_cost_.get(), outlier_only_.get(), rx_.get(), ry_.get(), tau_.get(),
-        l.width, l.height, l.count, record_change, change_.get());
+        l.u, u_bar_.get(), l.p, l.data_cost, l.outlier_only, l.rx, l.ry, tau_.get(), l.width, l.height, l.count,
+        record_change, change_.get());
     MCFLOW_CUDA_CHECK_LAUNCH("primalStep");
   }
 
@@ -353,7 +359,7 @@ class CudaLabelOptimizer final : public LabelOptimizer {
   cudaGraphExec_t graphFor(const Launch& l) {
     if (graph_.exec && graph_launch_ == l) return graph_.exec;
     graph_.reset();
-    cudaStream_t s = stream_.stream;
+    cudaStream_t s = stream_;
     MCFLOW_CUDA_CHECK(cudaStreamBeginCapture(s, cudaStreamCaptureModeThreadLocal));
     cudaGraph_t graph = nullptr;
     try {
@@ -372,11 +378,6 @@ class CudaLabelOptimizer final : public LabelOptimizer {
   }
 
   template <typename T>
-  void upload(T* device, const T* host, std::size_t count) {
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(device, host, count * sizeof(T), cudaMemcpyHostToDevice, stream_.stream));
-  }
-
-  template <typename T>
   void grow(DeviceBuffer<T>& buffer, std::size_t count) {
     if (count <= buffer.capacity()) return;
     buffer.reserve(count);
@@ -386,18 +387,12 @@ class CudaLabelOptimizer final : public LabelOptimizer {
   // Grows the buffers only when this call needs more than any earlier one.
   void reserve(std::size_t plane, int n) {
     const std::size_t labels = plane * std::size_t(n);
-    grow(data_cost_, labels);
-    grow(u_, labels);
     grow(u_bar_, labels);
-    grow(p_, 2 * labels);
-    grow(rx_, plane);
-    grow(ry_, plane);
     grow(sigma_rx_, plane);
     grow(sigma_ry_, plane);
     grow(shrink_x_, plane);
     grow(shrink_y_, plane);
     grow(tau_, plane);
-    grow(outlier_only_, plane);
     grow(change_, plane);
     grow(pixel_energy_, plane);
     grow(max_change_, 1);
@@ -414,11 +409,11 @@ class CudaLabelOptimizer final : public LabelOptimizer {
   }
 
   static constexpr int kPrimalBlockY = 4;
-  cuda_detail::StreamHolder stream_;
+  cudaStream_t stream_;
   PinnedHolder pinned_;
-  DeviceBuffer<float> data_cost_, u_, u_bar_, p_, rx_, ry_, sigma_rx_, sigma_ry_, shrink_x_, shrink_y_, tau_;
+  DeviceBuffer<float> u_bar_, sigma_rx_, sigma_ry_, shrink_x_, shrink_y_, tau_;
   DeviceBuffer<float> change_, max_change_;
-  DeviceBuffer<std::uint8_t> outlier_only_, temp_;
+  DeviceBuffer<std::uint8_t> temp_;
   DeviceBuffer<double> pixel_energy_, energy_;
   std::size_t temp_bytes_ = 0, reduced_items_ = 0;
   std::size_t primal_shared_limit_ = 48 * 1024;  // available without opting in
@@ -426,6 +421,135 @@ class CudaLabelOptimizer final : public LabelOptimizer {
   GraphHolder graph_;  // declared last: destroyed before the buffers it refers to
   Launch graph_launch_;
 };
+
+// The host-memory interface: uploads the problem and the warm start, runs the engine, downloads u and p.
+class CudaLabelOptimizer final : public LabelOptimizer {
+ public:
+  CudaLabelOptimizer() : engine_(stream_.stream) {}
+  std::string name() const override { return "cuda"; }
+
+  LabelStats optimize(const LabelProblem& problem, SoftLabels& u, LabelDual& dual, int iterations,
+                      double tolerance) override {
+    validateProblem(problem, u);
+    const int W = problem.width, H = problem.height, n = problem.count;
+    if (dual.width != W || dual.height != H || dual.count != n || dual.p.size() != std::size_t(W) * H * n * 2)
+      dual.reset(W, H, n);
+    const std::size_t plane = std::size_t(W) * H;
+    cudaStream_t s = stream_.stream;
+    data_cost_.reserve(plane * n);
+    u_.reserve(plane * n);
+    p_.reserve(plane * n * 2);
+    rx_.reserve(plane);
+    ry_.reserve(plane);
+    outlier_only_.reserve(plane);
+    upload(data_cost_.get(), problem.data_cost.data(), plane * n);
+    upload(rx_.get(), problem.weight_x.ptr(), plane);
+    upload(ry_.get(), problem.weight_y.ptr(), plane);
+    upload(outlier_only_.get(), problem.outlier_only.ptr(), plane);
+    upload(u_.get(), u.data.data(), plane * n);
+    upload(p_.get(), dual.p.data(), plane * n * 2);
+    cuda_detail::DeviceLabelProblem device;
+    device.width = W;
+    device.height = H;
+    device.count = n;
+    device.data_cost = data_cost_.get();
+    device.weight_x = rx_.get();
+    device.weight_y = ry_.get();
+    device.outlier_only = outlier_only_.get();
+    device.regularizer = problem.regularizer;
+    device.lambda = problem.lambda;
+    const LabelStats stats = engine_.run(device, u_.get(), p_.get(), iterations, tolerance);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u.data.data(), u_.get(), plane * n * sizeof(float), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(dual.p.data(), p_.get(), plane * n * 2 * sizeof(float), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    return stats;
+  }
+
+ private:
+  template <typename T>
+  void upload(T* device, const T* host, std::size_t count) {
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(device, host, count * sizeof(T), cudaMemcpyHostToDevice, stream_.stream));
+  }
+
+  cuda_detail::StreamHolder stream_;
+  DeviceBuffer<float> data_cost_, u_, p_, rx_, ry_;
+  DeviceBuffer<std::uint8_t> outlier_only_;
+  PrimalDualEngine engine_;  // declared last: destroyed before the stream and the buffers it ran on
+};
+
+// ----------------------------------------------------------------- data costs and weights (device-resident solve)
+__global__ void geometricWeightsKernel(const cuda_detail::DeviceImage points, float fmean, float wmin,
+                                       float* __restrict__ weight_x, float* __restrict__ weight_y) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+  const int W = points.width, H = points.height;
+  if (x >= W || y >= H) return;
+  auto weight = [&](int x1, int y1) {
+    const float z0 = points.at(x, y, 2), z1 = points.at(x1, y1, 2);
+    if (!isfinite(z0) || !isfinite(z1)) return wmin;
+    const float dx = sub(points.at(x, y, 0), points.at(x1, y1, 0)), dy = sub(points.at(x, y, 1), points.at(x1, y1, 1));
+    const float dz = sub(z0, z1);
+    const float distance = __fsqrt_rn(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz)));
+    const float footprint = __fdiv_rn(mul(0.5f, add(z0, z1)), fmean);
+    return fmaxf(wmin, __fdiv_rn(footprint, fmaxf(footprint, distance)));
+  };
+  const std::size_t i = std::size_t(y) * W + x;
+  weight_x[i] = x + 1 < W ? weight(x + 1, y) : 0.f;
+  weight_y[i] = y + 1 < H ? weight(x, y + 1) : 0.f;
+}
+
+struct DataCostParams {
+  cuda_detail::DeviceLevel level;
+  const cuda_detail::DeviceTransform* transforms;
+  int motion_labels;
+  const std::uint8_t* occluded;
+  float fx, fy, cx, cy, c_intensity, c_depth, alpha, outlier_cost, out_of_view, missing_depth_cost;
+};
+
+__global__ void dataCostsKernel(const DataCostParams q, float* __restrict__ data_cost,
+                                std::uint8_t* __restrict__ outlier_only) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+  const int W = q.level.width, H = q.level.height;
+  if (x >= W || y >= H) return;
+  const std::size_t plane = std::size_t(W) * H, idx = std::size_t(y) * W + x;
+  const int n = q.motion_labels + 1;
+  const float P[3] = {q.level.points1.at(x, y, 0), q.level.points1.at(x, y, 1), q.level.points1.at(x, y, 2)};
+  if (!isfinite(P[2])) {
+    outlier_only[idx] = 1;
+    for (int i = 0; i < n; ++i) data_cost[i * plane + idx] = 0.f;
+    return;
+  }
+  outlier_only[idx] = 0;
+  if (q.occluded && q.occluded[idx]) {  // section 6: no data term, the regulariser decides
+    for (int i = 0; i < n; ++i) data_cost[i * plane + idx] = 0.f;
+    return;
+  }
+  data_cost[std::size_t(q.motion_labels) * plane + idx] = q.outlier_cost;
+  const float I1 = q.level.intensity1.at(x, y, 0);
+  for (int i = 0; i < q.motion_labels; ++i) {
+    const float* T = q.transforms[i].m;
+    float P2[3];
+#pragma unroll
+    for (int r = 0; r < 3; ++r)
+      P2[r] = add(add(mul(T[4 * r], P[0]), add(mul(T[4 * r + 1], P[1]), mul(T[4 * r + 2], P[2]))), T[4 * r + 3]);
+    float cost = q.out_of_view;
+    if (P2[2] > 1e-3f) {
+      float u = add(__fdiv_rn(mul(q.fx, P2[0]), P2[2]), q.cx), v = add(__fdiv_rn(mul(q.fy, P2[1]), P2[2]), q.cy);
+      float I2, Z2;
+      if (clampIntoView(W, H, u, v) && cuda_detail::sampleBilinearDevice(q.level.intensity2, u, v, 0, I2)) {
+        const float rI = __fdiv_rn(sub(I1, I2), q.c_intensity);
+        cost = log1pf(mul(rI, rI));
+        if (cuda_detail::sampleDepthBilinearSmoothDevice(q.level.depth2, u, v, INFINITY, Z2)) {
+          const float rZ = __fdiv_rn(sub(P2[2], Z2), q.c_depth);
+          cost = add(cost, mul(q.alpha, log1pf(mul(rZ, rZ))));
+        } else {
+          cost = add(cost, q.missing_depth_cost);
+        }
+      }
+    }
+    data_cost[std::size_t(i) * plane + idx] = cost;
+  }
+}
 
 }  // namespace
 
@@ -472,5 +596,44 @@ std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer() {
   if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);
   return std::make_unique<CudaLabelOptimizer>();
 }
+
+namespace cuda_detail {
+
+std::unique_ptr<DevicePrimalDual> makeDevicePrimalDual(cudaStream_t stream) {
+  return std::make_unique<PrimalDualEngine>(stream);
+}
+
+void launchGeometricWeights(const DeviceLevel& level, double min_weight, float* weight_x, float* weight_y,
+                            cudaStream_t stream) {
+  const dim3 block(kBlockX, kBlockY), grid((level.width + kBlockX - 1) / kBlockX, (level.height + kBlockY - 1) / kBlockY);
+  const float fmean = float(0.5 * (level.intrinsics.fx + level.intrinsics.fy));
+  geometricWeightsKernel<<<grid, block, 0, stream>>>(level.points1, fmean, float(min_weight), weight_x, weight_y);
+  MCFLOW_CUDA_CHECK_LAUNCH("geometricWeightsKernel");
+}
+
+void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms, int motion_labels,
+                     const std::uint8_t* occluded, const Config& config, float* data_cost, std::uint8_t* outlier_only,
+                     cudaStream_t stream) {
+  DataCostParams q;
+  q.level = level;
+  q.transforms = transforms;
+  q.motion_labels = motion_labels;
+  q.occluded = occluded;
+  q.fx = float(level.intrinsics.fx);
+  q.fy = float(level.intrinsics.fy);
+  q.cx = float(level.intrinsics.cx);
+  q.cy = float(level.intrinsics.cy);
+  q.c_intensity = float(config.cauchy_c_intensity);
+  q.c_depth = float(config.cauchy_c_depth);
+  q.alpha = float(config.alpha);
+  q.outlier_cost = float(config.outlier_cost);
+  q.out_of_view = float(config.out_of_view_cost);
+  q.missing_depth_cost = float(config.alpha) * std::log(2.f);
+  const dim3 block(kBlockX, kBlockY), grid((level.width + kBlockX - 1) / kBlockX, (level.height + kBlockY - 1) / kBlockY);
+  dataCostsKernel<<<grid, block, 0, stream>>>(q, data_cost, outlier_only);
+  MCFLOW_CUDA_CHECK_LAUNCH("dataCostsKernel");
+}
+
+}  // namespace cuda_detail
 
 }  // namespace mc_flow

@@ -35,6 +35,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/motion_estimation.h"
+#include "device_stages.h"
 #include "sampling_device.cuh"
 
 namespace mc_flow {
@@ -85,44 +86,14 @@ struct KernelParams {
 };
 
 // ----------------------------------------------------------------- SE(3) in double (as src/core/se3.cpp)
-__device__ void skew3(const double w[3], double S[9]) {
-  S[0] = 0; S[1] = -w[2]; S[2] = w[1];
-  S[3] = w[2]; S[4] = 0; S[5] = -w[0];
-  S[6] = -w[1]; S[7] = w[0]; S[8] = 0;
-}
-
-__device__ void mul3(const double A[9], const double B[9], double C[9]) {
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) C[r * 3 + c] = A[r * 3] * B[c] + A[r * 3 + 1] * B[3 + c] + A[r * 3 + 2] * B[6 + c];
-}
+using cuda_detail::mul3;
+using cuda_detail::skew3;
 
 // Rows 0..2 of exp(xi), cast to float (row-major 3x4).
 __device__ void se3ExpDevice(const double xi[6], float T[12]) {
-  const double* v = xi;
-  const double* w = xi + 3;
-  const double theta2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2], theta = sqrt(theta2);
-  double W[9], W2[9];
-  skew3(w, W);
-  mul3(W, W, W2);
-  double a, b, c;
-  if (theta < 1e-8) {
-    a = 1.0 - theta2 / 6.0;
-    b = 0.5 - theta2 / 24.0;
-    c = 1.0 / 6.0 - theta2 / 120.0;
-  } else {
-    a = sin(theta) / theta;
-    b = (1.0 - cos(theta)) / theta2;
-    c = (theta - sin(theta)) / (theta2 * theta);
-  }
-  for (int r = 0; r < 3; ++r) {
-    double t = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double identity = r == k ? 1.0 : 0.0;
-      T[r * 4 + k] = float(identity + a * W[r * 3 + k] + b * W2[r * 3 + k]);
-      t += (identity + b * W[r * 3 + k] + c * W2[r * 3 + k]) * v[k];
-    }
-    T[r * 4 + 3] = float(t);
-  }
+  double Td[12];
+  cuda_detail::se3ExpRowsDevice(xi, Td);
+  for (int k = 0; k < 12; ++k) T[k] = float(Td[k]);
 }
 
 // Left Jacobian of SE(3) (Barfoot eqs. 7.83, 7.86), cast to float (row-major 6x6).
@@ -493,8 +464,18 @@ void requireImage(const char* name, const ImageF& image, int width, int height, 
                      std::to_string(image.data.size()) + " values, expected " + sizeText(width, height, channels));
 }
 
-class CudaMotionAccumulator final : public MotionAccumulator {
+class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator {
  public:
+  /// `stream` null: the accumulator's own stream.
+  explicit CudaMotionAccumulator(cudaStream_t stream) {
+    if (stream) {
+      stream_ = stream;
+    } else {
+      own_stream_ = std::make_unique<cuda_detail::StreamHolder>();
+      stream_ = own_stream_->stream;
+    }
+  }
+
   std::string name() const override { return "cuda"; }
 
   void setLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
@@ -513,19 +494,9 @@ class CudaMotionAccumulator final : public MotionAccumulator {
       throw InputError("CUDA motion step: labels are " + sizeText(labels.width, labels.height, labels.count) +
                        " with " + std::to_string(labels.data.size()) + " values, the level is " +
                        std::to_string(W) + "x" + std::to_string(H));
-    if (labels.count - 1 > kMaxMotionLabels)
-      throw InputError("CUDA motion step: " + std::to_string(labels.count - 1) + " motion labels, at most " +
-                       std::to_string(kMaxMotionLabels));
     if (occluded && (occluded->width != W || occluded->height != H || occluded->data.size() != plane))
       throw InputError("CUDA motion step: occlusion mask is " + sizeText(occluded->width, occluded->height, 1) +
                        ", the level is " + std::to_string(W) + "x" + std::to_string(H));
-
-    width_ = W;
-    height_ = H;
-    motion_labels_ = labels.count - 1;
-    config_ = config;
-    intrinsics_ = frame2.intrinsics;
-    has_occlusion_ = occluded != nullptr;
 
     points1_.reserve(plane * 3);
     intensity1_.reserve(plane);
@@ -535,10 +506,6 @@ class CudaMotionAccumulator final : public MotionAccumulator {
     depth_grad2_.reserve(plane * 2);
     labels_.reserve(std::max<std::size_t>(plane * std::size_t(labels.count), 1));
     occluded_.reserve(plane);
-    blended_.reserve(plane);
-    blended_hessian_.reserve(plane * kUpper);
-    active_mass_.reserve(plane);
-    mass_.reserve(plane);
     upload(points1_.get(), frame1.points.ptr(), plane * 3);
     upload(intensity1_.get(), frame1.intensity.ptr(), plane);
     upload(intensity2_.get(), frame2.intensity.ptr(), plane);
@@ -548,7 +515,40 @@ class CudaMotionAccumulator final : public MotionAccumulator {
     upload(labels_.get(), labels.data.data(), plane * std::size_t(labels.count));
     if (occluded) upload(occluded_.get(), occluded->ptr(), plane);
     // The caller's images may change after this call returns: wait until the copies are done.
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_));
+    cuda_detail::DeviceLevel level;
+    level.width = W;
+    level.height = H;
+    level.intrinsics = frame2.intrinsics;
+    level.points1 = {points1_.get(), W, H, 3};
+    level.intensity1 = {intensity1_.get(), W, H, 1};
+    level.intensity2 = {intensity2_.get(), W, H, 1};
+    level.depth2 = {depth2_.get(), W, H, 1};
+    level.intensity_grad2 = {intensity_grad2_.get(), W, H, 2};
+    level.depth_grad2 = {depth_grad2_.get(), W, H, 2};
+    bind(level, labels_.get(), labels.count, occluded ? occluded_.get() : nullptr, config);
+  }
+
+  void bind(const cuda_detail::DeviceLevel& level, const float* labels, int count, const std::uint8_t* occluded,
+            const Config& config) override {
+    if (level.width <= 0 || level.height <= 0 || count < 1)
+      throw InputError("CUDA motion step: binding an empty level " + sizeText(level.width, level.height, count));
+    if (count - 1 > kMaxMotionLabels)
+      throw InputError("CUDA motion step: " + std::to_string(count - 1) + " motion labels, at most " +
+                       std::to_string(kMaxMotionLabels));
+    const std::size_t plane = std::size_t(level.width) * level.height;
+    level_ = level;
+    bound_labels_ = labels;
+    bound_occluded_ = occluded;
+    width_ = level.width;
+    height_ = level.height;
+    motion_labels_ = count - 1;
+    config_ = config;
+    intrinsics_ = level.intrinsics;
+    blended_.reserve(plane);
+    blended_hessian_.reserve(plane * kUpper);
+    active_mass_.reserve(plane);
+    mass_.reserve(plane);
   }
 
   void accumulate(const std::vector<Vector6d>& twists, MotionNormalEquations& out) override {
@@ -559,7 +559,7 @@ class CudaMotionAccumulator final : public MotionAccumulator {
                        " motion labels");
     out.reset(n);
     if (n == 0) return;
-    cudaStream_t s = stream_.stream;
+    cudaStream_t s = stream_;
 
     const std::size_t pairs = std::size_t(n) * (n - 1) / 2;
     const std::size_t label_values = std::size_t(n) * kLabelStride, pair_values = pairs * kUpper;
@@ -589,14 +589,14 @@ class CudaMotionAccumulator final : public MotionAccumulator {
     upload(motions_.get(), motions, std::size_t(n));
 
     KernelParams p;
-    p.points1 = {points1_.get(), width_, height_, 3};
-    p.intensity1 = {intensity1_.get(), width_, height_, 1};
-    p.intensity2 = {intensity2_.get(), width_, height_, 1};
-    p.depth2 = {depth2_.get(), width_, height_, 1};
-    p.intensity_grad2 = {intensity_grad2_.get(), width_, height_, 2};
-    p.depth_grad2 = {depth_grad2_.get(), width_, height_, 2};
-    p.labels = labels_.get();
-    p.occluded = has_occlusion_ ? occluded_.get() : nullptr;
+    p.points1 = level_.points1;
+    p.intensity1 = level_.intensity1;
+    p.intensity2 = level_.intensity2;
+    p.depth2 = level_.depth2;
+    p.intensity_grad2 = level_.intensity_grad2;
+    p.depth_grad2 = level_.depth_grad2;
+    p.labels = bound_labels_;
+    p.occluded = bound_occluded_;
     p.motions = motions_.get();
     p.width = width_;
     p.height = height_;
@@ -664,12 +664,15 @@ class CudaMotionAccumulator final : public MotionAccumulator {
  private:
   template <typename T>
   void upload(T* device, const T* host, std::size_t count) {
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(device, host, count * sizeof(T), cudaMemcpyHostToDevice, stream_.stream));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(device, host, count * sizeof(T), cudaMemcpyHostToDevice, stream_));
   }
 
-  cuda_detail::StreamHolder stream_;
+  std::unique_ptr<cuda_detail::StreamHolder> own_stream_;
+  cudaStream_t stream_ = nullptr;
+  cuda_detail::DeviceLevel level_;
+  const float* bound_labels_ = nullptr;
+  const std::uint8_t* bound_occluded_ = nullptr;
   int width_ = 0, height_ = 0, motion_labels_ = 0;
-  bool has_occlusion_ = false;
   Config config_;
   Intrinsics intrinsics_;
   DeviceBuffer<float> points1_, intensity1_, intensity2_, depth2_, intensity_grad2_, depth_grad2_, labels_;
@@ -688,7 +691,13 @@ class CudaMotionAccumulator final : public MotionAccumulator {
 std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator() {
   std::string why;
   if (!cudaBackendAvailable(&why)) throw BackendError("CUDA motion step requested but unavailable: " + why);
-  return std::make_unique<CudaMotionAccumulator>();
+  return std::make_unique<CudaMotionAccumulator>(nullptr);
 }
+
+namespace cuda_detail {
+std::unique_ptr<DeviceMotionAccumulator> makeDeviceMotionAccumulator(cudaStream_t stream) {
+  return std::make_unique<CudaMotionAccumulator>(stream);
+}
+}  // namespace cuda_detail
 
 }  // namespace mc_flow

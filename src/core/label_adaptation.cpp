@@ -70,10 +70,17 @@ LabelCostModel labelCostModel(const PyramidLevel& frame1, const PyramidLevel& fr
   accumulator.setLevel(frame1, frame2, u, occluded, config);
   MotionNormalEquations equations;
   accumulator.accumulate(twists, equations);
+  return costModelFromEquations(equations, n);
+}
+
+LabelCostModel costModelFromEquations(const MotionNormalEquations& equations, int motion_labels) {
+  if (equations.g.size() != 6 * motion_labels)
+    throw InputError("costModelFromEquations: normal equations of " + std::to_string(equations.g.size() / 6) +
+                     " labels, expected " + std::to_string(motion_labels));
   LabelCostModel model;
-  model.curvature.resize(std::size_t(n));
-  model.gradient.resize(std::size_t(n));
-  for (int i = 0; i < n; ++i) {
+  model.curvature.resize(std::size_t(motion_labels));
+  model.gradient.resize(std::size_t(motion_labels));
+  for (int i = 0; i < motion_labels; ++i) {
     model.curvature[std::size_t(i)] = equations.H.block<6, 6>(6 * i, 6 * i);
     model.gradient[std::size_t(i)] = equations.g.segment<6>(6 * i);
   }
@@ -89,16 +96,39 @@ double mergeCostIncrease(const Matrix6d& H_a, const Matrix6d& H_b, const Vector6
 
 double labelCost(const Config& config, int valid_pixels) { return config.label_cost * double(valid_pixels); }
 
-AdaptationStats adaptLabelCount(SoftLabels& u, std::vector<Vector6d>& twists, LabelCostModel& model, int valid_pixels,
-                                const Config& config, bool remove_small) {
+void validateRemap(const std::vector<int>& target, int old_count, int new_count) {
+  if (int(target.size()) != old_count || new_count < 1 || new_count > old_count)
+    throw InputError("label remap: " + std::to_string(target.size()) + " targets for " + std::to_string(old_count) +
+                     " planes, new count " + std::to_string(new_count));
+  for (int i = 0; i < old_count; ++i)
+    if (target[std::size_t(i)] < 0 || target[std::size_t(i)] >= new_count)
+      throw InputError("label remap: plane " + std::to_string(i) + " maps to " + std::to_string(target[std::size_t(i)]) +
+                       ", outside [0, " + std::to_string(new_count) + ")");
+  if (target.back() != new_count - 1)
+    throw InputError("label remap: the outlier plane must stay last, it maps to " + std::to_string(target.back()));
+}
+
+AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twists, LabelCostModel& model,
+                                int valid_pixels, const Config& config, bool remove_small) {
   AdaptationStats stats;
   stats.smallest_refused_merge = std::numeric_limits<double>::infinity();
-  const int n0 = u.count - 1;
+  const int n0 = labels.labelCount() - 1;
   if (int(twists.size()) != n0 || int(model.curvature.size()) != n0)
     throw InputError("adaptLabelCount: " + std::to_string(twists.size()) + " twists and " +
                      std::to_string(model.curvature.size()) + " cost models for " + std::to_string(n0) +
                      " motion labels");
   const double price = labelCost(config, valid_pixels);
+  std::vector<double> support = labels.supports();
+  // group[i]: the current label of original label i (-1: removed to the outlier label). The labels
+  // themselves change once, at the end, by one remap.
+  std::vector<int> group(static_cast<std::size_t>(n0));
+  for (int i = 0; i < n0; ++i) group[std::size_t(i)] = i;
+  auto dropLabel = [&](int drop, int into) {
+    for (int& g : group) {
+      if (g == drop) g = into;
+      if (g > drop) --g;  // the labels after `drop` (the merge target included) move down by one
+    }
+  };
   // n x n table of predicted increases; after a merge only the merged label's row and column change.
   std::vector<std::vector<double>> increase(std::size_t(n0), std::vector<double>(std::size_t(n0), 0.0));
   auto fill = [&](int a, int b) {
@@ -109,7 +139,7 @@ AdaptationStats adaptLabelCount(SoftLabels& u, std::vector<Vector6d>& twists, La
   for (int a = 0; a < n0; ++a)
     for (int b = a + 1; b < n0; ++b) fill(a, b);
   for (;;) {
-    const int n = u.count - 1;
+    const int n = int(twists.size());
     double best = std::numeric_limits<double>::infinity();
     int best_a = -1, best_b = -1;
     for (int a = 0; a < n; ++a)
@@ -123,105 +153,87 @@ AdaptationStats adaptLabelCount(SoftLabels& u, std::vector<Vector6d>& twists, La
       stats.smallest_refused_merge = best;
       break;
     }
-    const int keep = u.support(best_a) >= u.support(best_b) ? best_a : best_b;
+    const int keep = support[std::size_t(best_a)] >= support[std::size_t(best_b)] ? best_a : best_b;
     const int drop = keep == best_a ? best_b : best_a;
     const Matrix6d H = model.curvature[std::size_t(keep)] + model.curvature[std::size_t(drop)];
     twists[std::size_t(keep)] = regularised(H).ldlt().solve(model.curvature[std::size_t(keep)] * twists[std::size_t(keep)] +
                                                             model.curvature[std::size_t(drop)] * twists[std::size_t(drop)]);
     model.curvature[std::size_t(keep)] = H;
     model.gradient[std::size_t(keep)] += model.gradient[std::size_t(drop)];
-    u.mergeInto(drop, keep);
+    support[std::size_t(keep)] += support[std::size_t(drop)];
+    dropLabel(drop, keep);
+    support.erase(support.begin() + drop);
     twists.erase(twists.begin() + drop);
     model.curvature.erase(model.curvature.begin() + drop);
     model.gradient.erase(model.gradient.begin() + drop);
     increase.erase(increase.begin() + drop);
     for (auto& row : increase) row.erase(row.begin() + drop);
     const int kept = keep > drop ? keep - 1 : keep;
-    for (int c = 0; c < u.count - 1; ++c)
+    for (int c = 0; c < int(twists.size()); ++c)
       if (c != kept) fill(kept, c);
     ++stats.merged;
   }
-  if (!remove_small) return stats;
-  // Remove labels with too little support (always keep at least one motion label).
-  const double min_support = config.min_support_fraction * double(valid_pixels);
-  for (int i = u.count - 2; i >= 0; --i) {
-    if (u.count - 1 <= 1) break;
-    if (u.support(i) < min_support) {
-      u.mergeInto(i, u.outlier());
-      twists.erase(twists.begin() + i);
-      model.curvature.erase(model.curvature.begin() + i);
-      model.gradient.erase(model.gradient.begin() + i);
-      ++stats.removed;
+  if (remove_small) {
+    // Remove labels with too little support (always keep at least one motion label).
+    const double min_support = config.min_support_fraction * double(valid_pixels);
+    for (int i = int(twists.size()) - 1; i >= 0; --i) {
+      if (twists.size() <= 1) break;
+      if (support[std::size_t(i)] < min_support) {
+        dropLabel(i, -1);
+        support.erase(support.begin() + i);
+        twists.erase(twists.begin() + i);
+        model.curvature.erase(model.curvature.begin() + i);
+        model.gradient.erase(model.gradient.begin() + i);
+        ++stats.removed;
+      }
     }
   }
+  if (stats.merged + stats.removed == 0) return stats;
+  const int new_count = int(twists.size()) + 1;
+  std::vector<int> target(std::size_t(n0) + 1, new_count - 1);
+  for (int i = 0; i < n0; ++i)
+    if (group[std::size_t(i)] >= 0) target[std::size_t(i)] = group[std::size_t(i)];
+  labels.remap(target, new_count);
   return stats;
 }
 
-AdaptationStats proposeSplits(SoftLabels& u, std::vector<Vector6d>& twists, const PyramidLevel& frame1,
-                              const PyramidLevel& frame2, const ImageU8* occluded, int valid_pixels,
-                              const Config& config, MotionAccumulator& accumulator) {
+AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists, bool use_occlusion, int valid_pixels,
+                              const Config& config) {
   AdaptationStats stats;
-  const int n = u.count - 1;
+  const int n = labels.labelCount() - 1;
   const int room = config.max_labels - n;
   if (room <= 0 || config.max_splits_per_iteration <= 0) return stats;
-  const std::size_t plane = u.planeSize();
-  const ImageF& points = frame1.points;
   const double min_half = std::max(2.0 * config.min_support_fraction * double(valid_pixels), 32.0);
 
   // Each candidate's own pixels (u >= 0.5) split at its centroid across its principal axis: the two
   // halves of a segment that holds two parts are, for compact parts, its two ends.
-  std::vector<int> candidate_of_label(std::size_t(n), -1), parent;
-  std::vector<std::vector<std::size_t>> second_half;
+  const std::vector<LabelMoments> moments = labels.ownedMoments();
+  std::vector<LabelCut> cuts;
+  std::vector<double> owned;
   for (int i = 0; i < n; ++i) {
-    const float* ui = u.plane(i);
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-    double count = 0;
-    for (std::size_t k = 0; k < plane; ++k) {
-      if (ui[k] < 0.5f || !std::isfinite(points.data[k * 3 + 2])) continue;
-      const Eigen::Vector3d P(points.data[k * 3], points.data[k * 3 + 1], points.data[k * 3 + 2]);
-      mean += P;
-      scatter += P * P.transpose();
-      ++count;
-    }
-    if (count < 2 * min_half) continue;
-    mean /= count;
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(scatter / count - mean * mean.transpose());
-    const Eigen::Vector3d axis = eigen.eigenvectors().col(2);
-    std::vector<std::size_t> half;
-    for (std::size_t k = 0; k < plane; ++k) {
-      if (ui[k] < 0.5f || !std::isfinite(points.data[k * 3 + 2])) continue;
-      const Eigen::Vector3d P(points.data[k * 3], points.data[k * 3 + 1], points.data[k * 3 + 2]);
-      if ((P - mean).dot(axis) > 0) half.push_back(k);
-    }
-    if (double(half.size()) < min_half || count - double(half.size()) < min_half) continue;
-    candidate_of_label[std::size_t(i)] = int(parent.size());
-    parent.push_back(i);
-    second_half.push_back(std::move(half));
+    const LabelMoments& m = moments[std::size_t(i)];
+    if (m.count < 2 * min_half) continue;
+    const Eigen::Vector3d mean = m.sum / m.count;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(m.outer / m.count - mean * mean.transpose());
+    cuts.push_back({i, mean, eigen.eigenvectors().col(2)});
+    owned.push_back(m.count);
   }
-  if (parent.empty()) return stats;
+  if (cuts.empty()) return stats;
 
   // All candidates at once: the second halves become extra labels (hard labels barely interact), and
   // one pass gives every half's cost model at the parent's twist.
-  const int m = int(parent.size());
-  SoftLabels trial(u.width, u.height, n + m + 1, 0.f);
-  for (int i = 0; i < n; ++i) std::copy_n(u.plane(i), plane, trial.plane(i));
-  std::copy_n(u.plane(u.outlier()), plane, trial.plane(trial.outlier()));
+  const int m = int(cuts.size());
   std::vector<Vector6d> trial_twists = twists;
-  for (int c = 0; c < m; ++c) {
-    const int p = parent[std::size_t(c)];
-    for (std::size_t k : second_half[std::size_t(c)]) {
-      trial.plane(n + c)[k] = trial.plane(p)[k];
-      trial.plane(p)[k] = 0.f;
-    }
-    trial_twists.push_back(twists[std::size_t(p)]);
-  }
-  const LabelCostModel model = labelCostModel(frame1, frame2, trial, occluded, trial_twists, config, accumulator);
+  for (const LabelCut& c : cuts) trial_twists.push_back(twists[std::size_t(c.parent)]);
+  const CutTrial trial = labels.trialCuts(cuts, trial_twists, use_occlusion, config);
+  const LabelCostModel& model = trial.model;
 
   const double price = labelCost(config, valid_pixels);
   std::vector<std::pair<double, int>> gains;
   for (int c = 0; c < m; ++c) {
-    const int p = parent[std::size_t(c)];
+    const double moved = trial.moved[std::size_t(c)];
+    if (moved < min_half || owned[std::size_t(c)] - moved < min_half) continue;
+    const int p = cuts[std::size_t(c)].parent;
     const Matrix6d& H1 = model.curvature[std::size_t(p)];
     const Matrix6d& H2 = model.curvature[std::size_t(n + c)];
     const Vector6d& g1 = model.gradient[std::size_t(p)];
@@ -233,26 +245,112 @@ AdaptationStats proposeSplits(SoftLabels& u, std::vector<Vector6d>& twists, cons
   std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
   const int take = std::min({int(gains.size()), room, config.max_splits_per_iteration});
   if (take == 0) return stats;
-  // The taken second halves become labels n .. n+take-1, before the outlier label: one new labelling.
-  SoftLabels grown(u.width, u.height, u.count + take, 0.f);
-  for (int i = 0; i < n; ++i) std::copy_n(u.plane(i), plane, grown.plane(i));
-  std::copy_n(u.plane(u.outlier()), plane, grown.plane(grown.outlier()));
+  // The taken halves become labels n .. n+take-1, largest gain first: the labels change once.
+  std::vector<LabelCut> taken;
   for (int t = 0; t < take; ++t) {
     const int c = gains[std::size_t(t)].second;
-    const int p = parent[std::size_t(c)];
+    const int p = cuts[std::size_t(c)].parent;
+    taken.push_back(cuts[std::size_t(c)]);
     const Vector6d base = twists[std::size_t(p)];
     twists[std::size_t(p)] = base + gaussNewtonStep(model.curvature[std::size_t(p)], model.gradient[std::size_t(p)]);
     twists.push_back(base + gaussNewtonStep(model.curvature[std::size_t(n + c)], model.gradient[std::size_t(n + c)]));
-    float* from = grown.plane(p);
-    float* to = grown.plane(n + t);
-    for (std::size_t k : second_half[std::size_t(c)]) {
-      to[k] = from[k];
-      from[k] = 0.f;
-    }
     ++stats.split;
   }
-  u = std::move(grown);
+  labels.applyCuts(taken);
   return stats;
+}
+
+HostLabelStore::HostLabelStore(SoftLabels& u, const PyramidLevel& frame1, const PyramidLevel& frame2,
+                               const ImageU8* occluded, MotionAccumulator* accumulator)
+    : u_(u), frame1_(frame1), frame2_(frame2), occluded_(occluded), accumulator_(accumulator) {
+  if (!accumulator_) {
+    own_accumulator_ = makeCpuMotionAccumulator();
+    accumulator_ = own_accumulator_.get();
+  }
+}
+
+std::vector<double> HostLabelStore::supports() {
+  std::vector<double> out(std::size_t(std::max(0, u_.count - 1)));
+  for (int i = 0; i + 1 < u_.count; ++i) out[std::size_t(i)] = u_.support(i);
+  return out;
+}
+
+void HostLabelStore::remap(const std::vector<int>& target, int new_count) {
+  validateRemap(target, u_.count, new_count);
+  SoftLabels out(u_.width, u_.height, new_count, 0.f);
+  const std::size_t plane = u_.planeSize();
+  for (int i = 0; i < u_.count; ++i) {
+    const float* src = u_.plane(i);
+    float* dst = out.plane(target[std::size_t(i)]);
+    for (std::size_t k = 0; k < plane; ++k) dst[k] += src[k];
+  }
+  u_ = std::move(out);
+}
+
+std::vector<LabelMoments> HostLabelStore::ownedMoments() {
+  const int n = u_.count - 1;
+  std::vector<LabelMoments> out(std::size_t(std::max(0, n)));
+  const std::size_t plane = u_.planeSize();
+  const ImageF& points = frame1_.points;
+  for (int i = 0; i < n; ++i) {
+    const float* ui = u_.plane(i);
+    LabelMoments& m = out[std::size_t(i)];
+    for (std::size_t k = 0; k < plane; ++k) {
+      if (ui[k] < 0.5f || !std::isfinite(points.data[k * 3 + 2])) continue;
+      const Eigen::Vector3d P(points.data[k * 3], points.data[k * 3 + 1], points.data[k * 3 + 2]);
+      m.sum += P;
+      m.outer += P * P.transpose();
+      ++m.count;
+    }
+  }
+  return out;
+}
+
+SoftLabels HostLabelStore::withCuts(const std::vector<LabelCut>& cuts, std::vector<double>& moved) const {
+  const int n = u_.count - 1, m = int(cuts.size());
+  for (const LabelCut& c : cuts)
+    if (c.parent < 0 || c.parent >= n)
+      throw InputError("label cut: parent " + std::to_string(c.parent) + " is not a motion label (count " +
+                       std::to_string(u_.count) + ")");
+  const std::size_t plane = u_.planeSize();
+  SoftLabels grown(u_.width, u_.height, u_.count + m, 0.f);
+  for (int i = 0; i < n; ++i) std::copy_n(u_.plane(i), plane, grown.plane(i));
+  std::copy_n(u_.plane(u_.outlier()), plane, grown.plane(grown.outlier()));
+  const ImageF& points = frame1_.points;
+  moved.assign(std::size_t(m), 0.0);
+  for (int c = 0; c < m; ++c) {
+    const LabelCut& cut = cuts[std::size_t(c)];
+    float* from = grown.plane(cut.parent);
+    float* to = grown.plane(n + c);
+    for (std::size_t k = 0; k < plane; ++k) {
+      if (from[k] < 0.5f || !std::isfinite(points.data[k * 3 + 2])) continue;
+      const Eigen::Vector3d P(points.data[k * 3], points.data[k * 3 + 1], points.data[k * 3 + 2]);
+      if ((P - cut.centre).dot(cut.axis) <= 0) continue;
+      to[k] = from[k];
+      from[k] = 0.f;
+      ++moved[std::size_t(c)];
+    }
+  }
+  return grown;
+}
+
+CutTrial HostLabelStore::trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists,
+                                   bool use_occlusion, const Config& config) {
+  CutTrial trial;
+  const SoftLabels grown = withCuts(cuts, trial.moved);
+  trial.model = labelCostModel(frame1_, frame2_, grown, use_occlusion ? occluded_ : nullptr, twists, config,
+                               *accumulator_);
+  return trial;
+}
+
+void HostLabelStore::applyCuts(const std::vector<LabelCut>& cuts) {
+  std::vector<double> moved;
+  u_ = withCuts(cuts, moved);
+}
+
+LabelCostModel HostLabelStore::costModel(const std::vector<Vector6d>& twists, bool use_occlusion,
+                                         const Config& config) {
+  return labelCostModel(frame1_, frame2_, u_, use_occlusion ? occluded_ : nullptr, twists, config, *accumulator_);
 }
 
 }  // namespace mc_flow

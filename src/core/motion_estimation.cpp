@@ -252,15 +252,23 @@ std::unique_ptr<MotionAccumulator> makeMotionAccumulator(Backend resolved_backen
 MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
                                         const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator) {
-  MotionLevelStats stats;
   const int motion_labels = labels.count - 1;
-  if (motion_labels <= 0 || int(twists.size()) != motion_labels) return stats;
+  if (motion_labels <= 0 || int(twists.size()) != motion_labels) return MotionLevelStats{};
   std::unique_ptr<MotionAccumulator> own;
   if (!accumulator) {
     own = makeCpuMotionAccumulator();
     accumulator = own.get();
   }
   accumulator->setLevel(frame1, frame2, labels, occluded, config);
+  return estimateMotionsWith(*accumulator, twists, config);
+}
+
+MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::vector<Vector6d>& twists,
+                                     const Config& config) {
+  MotionLevelStats stats;
+  const int motion_labels = int(twists.size());
+  if (motion_labels <= 0) return stats;
+  MotionAccumulator* accumulator = &bound_accumulator;
   MotionNormalEquations total;
 
   // Per-label Levenberg-Marquardt with backtracking: a label whose cost rose after its last update goes back

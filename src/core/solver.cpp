@@ -16,6 +16,7 @@
 #include "mc_flow/core/occlusion.h"
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/scene_flow.h"
+#include "mc_flow/core/solve_backend.h"
 
 #ifdef _OPENMP
 #include <omp.h>
@@ -28,22 +29,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double elapsedMs(Clock::time_point since) {
   return std::chrono::duration<double, std::milli>(Clock::now() - since).count();
-}
-
-// Nearest-pixel resampling of a mask to another pyramid level (pixel-centre aligned). Levels differ by a
-// power of two (integer halving drops an odd last column/row), so the scale is 2^k, not the size ratio.
-ImageU8 resampleMask(const ImageU8& mask, int width, int height) {
-  if (mask.sameSize(width, height)) return mask;
-  ImageU8 out(width, height, 1, 0);
-  const double scale = std::exp2(std::round(std::log2(double(mask.width) / double(width))));  // source px per target px
-  for (int y = 0; y < height; ++y) {
-    const int sy = std::clamp(int(std::floor((y + 0.5) * scale)), 0, mask.height - 1);
-    for (int x = 0; x < width; ++x) {
-      const int sx = std::clamp(int(std::floor((x + 0.5) * scale)), 0, mask.width - 1);
-      out(x, y) = mask(sx, sy);
-    }
-  }
-  return out;
 }
 
 // Config::threads for the duration of one solve; the caller's OpenMP setting is restored afterwards.
@@ -69,29 +54,11 @@ class ThreadCountScope {
   int previous_ = 1;
 };
 
-// Labels of the label level carried to another pyramid level.
-SoftLabels labelsAtLevel(const SoftLabels& u, int from_level, int to_level, const Pyramid& pyramid) {
-  if (to_level == from_level) return u;
-  if (to_level < from_level) return upsampleLabels(u, pyramid[to_level].points.width, pyramid[to_level].points.height);
-  SoftLabels out = u;
-  for (int level = from_level + 1; level <= to_level; ++level)
-    out = downsampleLabels(out, pyramid[level].points.width, pyramid[level].points.height);
-  return out;
-}
-
-double meanAbsoluteChange(const SoftLabels& a, const SoftLabels& b) {
-  if (a.data.size() != b.data.size() || a.data.empty()) return 1.0;
-  double sum = 0;
-  for (std::size_t i = 0; i < a.data.size(); ++i) sum += std::fabs(a.data[i] - b.data[i]);
-  return sum / double(a.planeSize());
-}
-
 }  // namespace
 
 struct Solver::Impl {
   Config config;
-  std::unique_ptr<LabelOptimizer> optimizer;
-  std::unique_ptr<MotionAccumulator> motion;
+  std::unique_ptr<SolveBackend> backend;
   std::string backend_note;
 
   template <typename... Args>
@@ -106,14 +73,14 @@ struct Solver::Impl {
 Solver::Solver(const Config& config) : impl_(std::make_unique<Impl>()) {
   config.validate();
   impl_->config = config;
-  impl_->optimizer = makeLabelOptimizer(config.backend, &impl_->backend_note);
-  impl_->motion = makeMotionAccumulator(impl_->optimizer->name() == "cuda" ? Backend::Cuda : Backend::Cpu);
+  impl_->backend = makeSolveBackend(config.backend, &impl_->backend_note);
 }
 
 Solver::~Solver() = default;
 
 const Config& Solver::config() const { return impl_->config; }
-std::string Solver::backendName() const { return impl_->optimizer->name(); }
+std::string Solver::backendName() const { return toString(impl_->backend->kind()); }
+Backend Solver::backendKind() const { return impl_->backend->kind(); }
 
 Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K) {
   const Config& config = impl_->config;
@@ -131,7 +98,8 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
   result.width = frame1.width();
   result.height = frame1.height();
   result.intrinsics = K;
-  result.backend = impl_->optimizer->name();
+  result.backend_kind = impl_->backend->kind();
+  result.backend = toString(result.backend_kind);
   result.backend_note = impl_->backend_note;
 
   // ---- preprocessing: pyramids
@@ -155,33 +123,25 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
                      std::to_string(config.max_depth) + "] m");
   result.timings.preprocessing = elapsedMs(t);
 
-  // ---- initialisation: K-means on 3D points, hard labels at the label level
+  // ---- initialisation: K-means on 3D points (a coarse level: a few hundred points, on the host), hard
+  // labels at the label level
   t = Clock::now();
-  const PyramidLevel& L1 = pyr1[label_level];
-  const int LW = L1.points.width, LH = L1.points.height;
+  SolveBackend& backend = *impl_->backend;
+  backend.loadPyramids(pyr1, pyr2, config);
   KMeansResult kmeans = kmeansPoints(pyr1[kmeans_level].points, config.initial_labels, config.kmeans_max_iterations,
                                      config.kmeans_tolerance, config.seed);
-  if (kmeans.centres.empty()) kmeans = kmeansPoints(L1.points, config.initial_labels, config.kmeans_max_iterations,
-                                                    config.kmeans_tolerance, config.seed);
-  const ImageI32 assignment = assignToNearestCentre(L1.points, kmeans.centres);
-  const int initial_motion_labels = std::max<int>(1, int(kmeans.centres.size()));
-  SoftLabels u(LW, LH, initial_motion_labels + 1, 0.f);
-  for (int y = 0; y < LH; ++y)
-    for (int x = 0; x < LW; ++x) {
-      const int a = assignment(x, y);
-      u.at(a >= 0 ? a : u.outlier(), x, y) = 1.f;
-    }
+  if (kmeans.centres.empty()) kmeans = kmeansPoints(pyr1[label_level].points, config.initial_labels,
+                                                    config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
+  backend.initialiseLabels(label_level, kmeans.centres);
+  const int initial_motion_labels = backend.labelCount() - 1;
   // Every label starts from the dominant motion (one label over all valid pixels, coarse to fine down to the
   // label level): with a moving camera all labels then start near the truth, and a small segment that is
   // frozen at the coarse levels (too few pixels there) does not have to find a large motion from zero.
   Vector6d dominant = Vector6d::Zero();
   if (config.dominant_motion_init) {
     for (int level = levels - 1; level >= label_level; --level) {
-      const PyramidLevel& P = pyr1[level];
-      SoftLabels one(P.points.width, P.points.height, 2, 0.f);
-      for (std::size_t k = 0; k < one.planeSize(); ++k) (std::isfinite(P.points.data[k * 3 + 2]) ? one.plane(0) : one.plane(1))[k] = 1.f;
       std::vector<Vector6d> single{dominant};
-      estimateMotionsAtLevel(P, pyr2[level], one, nullptr, single, config, impl_->motion.get());
+      estimateMotionsWith(backend.motionAccumulator(level, MotionLabels::AllValidAsOne, false, config), single, config);
       dominant = single[0];
     }
   }
@@ -189,16 +149,13 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
   result.timings.initialisation = elapsedMs(t);
   impl_->progress("pyramid %d levels, labels at level %d, %d initial labels", levels, label_level, initial_motion_labels);
 
-  LabelProblem problem;
-  geometricWeights(L1, config.min_geometric_weight, problem.weight_x, problem.weight_y);
-  LabelDual dual;
-  ImageU8 occlusion(LW, LH, 1, 0);
+  const bool occlusions = config.detect_occlusions;
 
   // ---- Algorithm 1
   for (int k = 0; k < config.outer_iterations; ++k) {
     OuterIterationStats stats;
     stats.iteration = k;
-    stats.labels_before = u.count - 1;
+    stats.labels_before = backend.labelCount() - 1;
 
     // 1. motion step, coarse to fine
     t = Clock::now();
@@ -206,11 +163,8 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
     Config motion_config = config;
     if (k > 0) motion_config.motion_iterations_per_level = config.motion_iterations_refine;
     for (int level = coarsest; level >= finest; --level) {
-      const SoftLabels u_level = labelsAtLevel(u, label_level, level, pyr1);
-      const ImageU8 occ_level = resampleMask(occlusion, pyr1[level].points.width, pyr1[level].points.height);
-      const MotionLevelStats ms = estimateMotionsAtLevel(pyr1[level], pyr2[level], u_level,
-                                                         config.detect_occlusions ? &occ_level : nullptr, twists,
-                                                         motion_config, impl_->motion.get());
+      const MotionLevelStats ms = estimateMotionsWith(
+          backend.motionAccumulator(level, MotionLabels::Current, occlusions, config), twists, motion_config);
       stats.motion_iterations += ms.iterations;
     }
     result.timings.motion += elapsedMs(t);
@@ -218,44 +172,34 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
     // Labels whose motions came out alike are merged before the label step as well as after it: the
     // result is the same as merging one step later, but the label step then runs on a few labels, not 20.
     t = Clock::now();
-    const ImageU8* occlusion_used = config.detect_occlusions ? &occlusion : nullptr;
-    LabelCostModel early_model = labelCostModel(L1, pyr2[label_level], u, occlusion_used, twists, config, *impl_->motion);
-    const AdaptationStats early = adaptLabelCount(u, twists, early_model, valid_label_level, config, false);
+    LabelCostModel early_model = backend.costModel(twists, occlusions, config);
+    const AdaptationStats early = adaptLabelCount(backend, twists, early_model, valid_label_level, config, false);
     stats.merged += early.merged;
-    if (early.merged > 0) dual.reset(LW, LH, u.count);
     result.timings.adaptation += elapsedMs(t);
 
     // occlusion mask of the current motions (section 6)
     t = Clock::now();
-    if (config.detect_occlusions) {
-      const ImageF warped = warpPoints(L1.points, u, twists);
-      occlusion = detectOcclusions(warped, pyr2[label_level].depth, L1.intrinsics, config);
-    }
+    if (occlusions) backend.updateOcclusion(twists, config);
     result.timings.occlusion += elapsedMs(t);
 
     // 2. label step
     t = Clock::now();
-    computeDataCosts(L1, pyr2[label_level], twists, config.detect_occlusions ? &occlusion : nullptr, config, problem);
-    const SoftLabels u_before = u;
-    const LabelStats ls = impl_->optimizer->optimize(problem, u, dual, config.label_iterations, config.label_tolerance);
+    const LabelStepStats ls = backend.labelStep(twists, occlusions, config.label_iterations, config.label_tolerance, config);
     stats.label_iterations = ls.iterations;
     stats.energy = ls.energy;
-    stats.label_change = meanAbsoluteChange(u_before, u);
+    stats.label_change = ls.mean_change;
     result.timings.labels += elapsedMs(t);
 
     // 3. update n: merges and removals on the energy, then (while a motion step follows) splits
     t = Clock::now();
-    LabelCostModel model = labelCostModel(L1, pyr2[label_level], u, occlusion_used, twists, config, *impl_->motion);
-    const AdaptationStats as = adaptLabelCount(u, twists, model, valid_label_level, config, true);
+    LabelCostModel model = backend.costModel(twists, occlusions, config);
+    const AdaptationStats as = adaptLabelCount(backend, twists, model, valid_label_level, config, true);
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.smallest_refused_merge = as.smallest_refused_merge;
-    if (k + 1 < config.outer_iterations) {
-      stats.split = proposeSplits(u, twists, L1, pyr2[label_level], occlusion_used, valid_label_level, config,
-                                  *impl_->motion).split;
-    }
-    stats.labels_after = u.count - 1;
-    if (as.merged + as.removed + stats.split > 0) dual.reset(LW, LH, u.count);
+    if (k + 1 < config.outer_iterations)
+      stats.split = proposeSplits(backend, twists, occlusions, valid_label_level, config).split;
+    stats.labels_after = backend.labelCount() - 1;
     result.timings.adaptation += elapsedMs(t);
     result.energy = ls.energy;
     result.iterations.push_back(stats);
@@ -268,23 +212,16 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
   // ---- final label step at the processing level (also when that is the label level: labels removed in the
   // last update handed their pixels to the outlier label, and only a label step gives them back)
   SoftLabels u_final;
-  ImageU8 occlusion_final = occlusion;
   {
-    const PyramidLevel& F1 = pyr1[finest];
     t = Clock::now();
-    u_final = labelsAtLevel(u, label_level, finest, pyr1);
-    if (config.detect_occlusions)
-      occlusion_final = detectOcclusions(warpPoints(F1.points, u_final, twists), pyr2[finest].depth, F1.intrinsics, config);
+    backend.moveLabels(finest);
+    if (occlusions) backend.updateOcclusion(twists, config);
     result.timings.occlusion += elapsedMs(t);
     t = Clock::now();
-    LabelProblem final_problem;
-    geometricWeights(F1, config.min_geometric_weight, final_problem.weight_x, final_problem.weight_y);
-    computeDataCosts(F1, pyr2[finest], twists, config.detect_occlusions ? &occlusion_final : nullptr, config,
-                     final_problem);
-    LabelDual final_dual;
-    const LabelStats ls = impl_->optimizer->optimize(final_problem, u_final, final_dual, config.label_iterations_final,
-                                                     config.label_tolerance);
+    const LabelStepStats ls =
+        backend.labelStep(twists, occlusions, config.label_iterations_final, config.label_tolerance, config);
     result.energy = ls.energy;
+    u_final = backend.downloadLabels();
     result.timings.labels += elapsedMs(t);
   }
 

@@ -482,7 +482,7 @@ void MCFlowNodelet::reportBackend(const mc_flow::Result& result) {
   if (backend_reported_) return;
   backend_reported_ = true;
   const mc_flow::Backend requested = solver_->config().backend;
-  if (result.backend == "cuda" || requested == mc_flow::Backend::Cpu) {
+  if (result.backend_kind == mc_flow::Backend::Cuda || requested == mc_flow::Backend::Cpu) {
     NODELET_INFO("solver backend: %s (%s)", result.backend.c_str(), result.backend_note.c_str());
   } else if (requested == mc_flow::Backend::Auto) {
     // The usual case on a machine without an NVIDIA GPU: the CUDA runtime's own words ("driver version is

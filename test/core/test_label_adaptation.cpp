@@ -36,6 +36,14 @@ LabelCostModel uniformModel(int labels, const Matrix6d& H) {
 
 }  // namespace
 
+// Merging and removal read only the labels: no pyramid level is needed.
+static AdaptationStats adaptOnHost(SoftLabels& u, std::vector<Vector6d>& twists, LabelCostModel& model, int valid_pixels,
+                            const Config& config) {
+  const PyramidLevel unused;
+  HostLabelStore store(u, unused, unused, nullptr);
+  return adaptLabelCount(store, twists, model, valid_pixels, config);
+}
+
 TEST(LabelAdaptation, MergeIncreaseIsTheParallelSumOfTheCurvatures) {
   Matrix6d H = Matrix6d::Identity();
   H(0, 1) = H(1, 0) = 0.3;
@@ -47,6 +55,38 @@ TEST(LabelAdaptation, MergeIncreaseIsTheParallelSumOfTheCurvatures) {
   EXPECT_NEAR(mergeCostIncrease(2 * H, 6 * H, a, b), 1.5 * d.dot(H * d), 1e-9);
   EXPECT_NEAR(mergeCostIncrease(2 * H, 6 * H, a, b), mergeCostIncrease(6 * H, 2 * H, b, a), 1e-12);
   EXPECT_NEAR(mergeCostIncrease(H, H, a, a), 0.0, 1e-15);
+}
+
+// The kept label comes after the dropped one (it has the larger support), and a later label stays apart:
+// every pixel must end on the plane of its label after the indices shift.
+TEST(LabelAdaptation, MergeIntoALaterLabelKeepsEveryPixelOnItsLabel) {
+  SoftLabels u;
+  ImageF points;
+  makeBands(u, points, 40, 10);  // bands of 14, 13 and 13 columns
+  std::vector<int> label_of_column(40);
+  for (int x = 0; x < 40; ++x) label_of_column[std::size_t(x)] = x < 12 ? 0 : (x < 27 && x >= 14 ? 1 : 2);
+  for (int y = 0; y < 10; ++y)
+    for (int x = 0; x < 40; ++x)
+      for (int i = 0; i < 4; ++i) u.at(i, x, y) = i == label_of_column[std::size_t(x)] ? 1.f : 0.f;
+  ASSERT_GT(u.support(2), u.support(0));  // 15 columns against 12
+  std::vector<Vector6d> twists(3, Vector6d::Zero());
+  twists[0](0) = 0.020;
+  twists[1](0) = -0.03;
+  twists[2](0) = 0.0201;  // merges with label 0 and keeps its place (larger support)
+  LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
+  Config config;
+  config.label_cost = 0.02;
+  const AdaptationStats st = adaptOnHost(u, twists, model, 400, config);
+  ASSERT_EQ(st.merged, 1);
+  ASSERT_EQ(u.count, 3);
+  ASSERT_EQ(twists.size(), 2u);
+  EXPECT_NEAR(twists[0](0), -0.03, 1e-9);  // the untouched label is now label 0
+  for (int y = 0; y < 10; ++y)
+    for (int x = 0; x < 40; ++x) {
+      const int label = label_of_column[std::size_t(x)];
+      const int expected = label == 1 ? 0 : 1;
+      EXPECT_EQ(u.at(expected, x, y), 1.f) << "pixel " << x << "," << y << " of label " << label;
+    }
 }
 
 TEST(LabelAdaptation, MergesWhenSharingAMotionCostsLessThanALabel) {
@@ -61,7 +101,7 @@ TEST(LabelAdaptation, MergesWhenSharingAMotionCostsLessThanALabel) {
   LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
   Config config;
   config.label_cost = 0.02;  // x 300 valid pixels = 6
-  const AdaptationStats st = adaptLabelCount(u, twists, model, 300, config);
+  const AdaptationStats st = adaptOnHost(u, twists, model, 300, config);
   EXPECT_EQ(st.merged, 1);
   EXPECT_EQ(st.removed, 0);
   ASSERT_EQ(u.count, 3);
@@ -74,7 +114,7 @@ TEST(LabelAdaptation, MergesWhenSharingAMotionCostsLessThanALabel) {
   config.label_cost = 1.0;
   model = uniformModel(2, 1e5 * Matrix6d::Identity());
   model.curvature[0] *= 2;
-  EXPECT_EQ(adaptLabelCount(u, twists, model, 300, config).merged, 1);
+  EXPECT_EQ(adaptOnHost(u, twists, model, 300, config).merged, 1);
   EXPECT_EQ(u.count, 2);
 }
 
@@ -93,7 +133,7 @@ TEST(LabelAdaptation, DirectionsTheDataDoesNotConstrainDoNotKeepLabelsApart) {
   std::vector<Vector6d> twists{a, b, c};
   LabelCostModel model = uniformModel(3, H);
   Config config;
-  const AdaptationStats st = adaptLabelCount(u, twists, model, 300, config);
+  const AdaptationStats st = adaptOnHost(u, twists, model, 300, config);
   EXPECT_EQ(st.merged, 1);
   ASSERT_EQ(twists.size(), 2u);
   EXPECT_NEAR(twists[1](3), 0.05, 1e-9);
@@ -110,7 +150,7 @@ TEST(LabelAdaptation, MergedMotionLeansTowardsTheBetterConstrainedLabel) {
   LabelCostModel model = uniformModel(3, 100 * Matrix6d::Identity());
   model.curvature[1] *= 3;  // label 1's pixels pin the motion three times as hard
   Config config;
-  ASSERT_EQ(adaptLabelCount(u, twists, model, 300, config).merged, 1);
+  ASSERT_EQ(adaptOnHost(u, twists, model, 300, config).merged, 1);
   EXPECT_NEAR(twists[0](2), 0.003, 1e-6);
 }
 
@@ -134,7 +174,7 @@ TEST(LabelAdaptation, TinyLabelsGoToTheOutlierLabel) {
   LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
   Config config;
   config.min_support_fraction = 0.05;  // 15 of 300 pixels
-  const AdaptationStats st = adaptLabelCount(u, twists, model, 300, config);
+  const AdaptationStats st = adaptOnHost(u, twists, model, 300, config);
   EXPECT_EQ(st.merged, 0);
   EXPECT_EQ(st.removed, 1);
   ASSERT_EQ(u.count, 3);
@@ -149,7 +189,7 @@ TEST(LabelAdaptation, MismatchedInputsAreRefused) {
   makeBands(u, points);
   std::vector<Vector6d> twists(2, Vector6d::Zero());
   LabelCostModel model = uniformModel(3, Matrix6d::Identity());
-  EXPECT_THROW(adaptLabelCount(u, twists, model, 300, Config()), InputError);
+  EXPECT_THROW(adaptOnHost(u, twists, model, 300, Config()), InputError);
 }
 
 TEST(LabelAdaptation, CentroidsAreSupportWeighted) {
@@ -226,9 +266,8 @@ TEST(LabelSplits, OneLabelOverTheTwoArmLinksIsSplitTowardsTheirOwnMotions) {
   Config config;
   estimateMotionsAtLevel(s.pyr1[s.level], s.pyr2[s.level], u, nullptr, twists, config);
   const Vector6d blended = twists[0];
-  auto accumulator = makeCpuMotionAccumulator();
-  const AdaptationStats st = proposeSplits(u, twists, s.pyr1[s.level], s.pyr2[s.level], nullptr,
-                                           s.pyr1[s.level].validCount(), config, *accumulator);
+  HostLabelStore store(u, s.pyr1[s.level], s.pyr2[s.level], nullptr);
+  const AdaptationStats st = proposeSplits(store, twists, false, s.pyr1[s.level].validCount(), config);
   ASSERT_EQ(st.split, 1);
   ASSERT_EQ(u.count, 3);
   ASSERT_EQ(twists.size(), 2u);
@@ -257,9 +296,8 @@ TEST(LabelSplits, ALabelWhoseMotionExplainsItIsNotSplit) {
   for (std::size_t k = 0; k < s.parts.size(); ++k) (s.parts[k] == box ? u.plane(0) : u.plane(1))[k] = 1.f;
   std::vector<Vector6d> twists{trueTwist(s.pair, "box")};
   Config config;
-  auto accumulator = makeCpuMotionAccumulator();
-  const AdaptationStats st = proposeSplits(u, twists, s.pyr1[s.level], s.pyr2[s.level], nullptr,
-                                           s.pyr1[s.level].validCount(), config, *accumulator);
+  HostLabelStore store(u, s.pyr1[s.level], s.pyr2[s.level], nullptr);
+  const AdaptationStats st = proposeSplits(store, twists, false, s.pyr1[s.level].validCount(), config);
   EXPECT_EQ(st.split, 0);
   EXPECT_EQ(u.count, 2);
 }

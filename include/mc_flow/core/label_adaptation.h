@@ -10,6 +10,7 @@
  */
 #pragma once
 
+#include <memory>
 #include <vector>
 
 #include "mc_flow/core/config.h"
@@ -36,10 +37,62 @@ struct LabelCostModel {
   std::vector<Vector6d> gradient;   ///< g_i
 };
 
+/// @brief What a label owns (u_i >= 0.5, valid depth): pixel count, sum of P, sum of P P^T [m, m^2].
+struct LabelMoments {
+  double count = 0;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
+};
+
+/// @brief A cut of label `parent`: its owned pixels (u >= 0.5, valid depth) with (P - centre) . axis > 0
+/// move to a new label (u value carried over, parent set to 0).
+struct LabelCut {
+  int parent = 0;
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
+};
+
+/// @brief What a set of cuts would do: the pixels each moves, and the cost model with all of them applied.
+struct CutTrial {
+  std::vector<double> moved;
+  LabelCostModel model;
+};
+
+/// @brief The label operations the label-count update needs, wherever the labels live (host or device).
+/// Motion labels are 0..labelCount()-2, the outlier label is the last plane.
+class LabelStore {
+ public:
+  virtual ~LabelStore() = default;
+  /// @brief Label planes, the outlier label included.
+  virtual int labelCount() const = 0;
+  /// @brief Sum of u_i over the pixels, per motion label.
+  virtual std::vector<double> supports() = 0;
+  /// @brief New plane j = sum of the old planes i with target[i] == j, added in ascending i. `target` has
+  /// one entry per old plane (the outlier included) with values in [0, new_count); the last old plane must
+  /// map to new_count - 1 (the outlier stays last). Resets the dual variables when the count changes.
+  virtual void remap(const std::vector<int>& target, int new_count) = 0;
+  /// @brief Moments of every motion label's owned pixels.
+  virtual std::vector<LabelMoments> ownedMoments() = 0;
+  /// @brief Without changing the labels: the pixels each cut would move, and the cost model of the labelling
+  /// with all cuts applied (cut c as motion label labelCount()-1+c) at `twists` (one per label of that
+  /// labelling).
+  virtual CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists,
+                             bool use_occlusion, const Config& config) = 0;
+  /// @brief Applies the cuts; cut c becomes motion label labelCount()-1+c (before the outlier label).
+  /// Resets the dual variables.
+  virtual void applyCuts(const std::vector<LabelCut>& cuts) = 0;
+  /// @brief One pass over the pixels: the cost model of every motion label at `twists`, with the occlusion
+  /// mask of the labels' level when `use_occlusion`.
+  virtual LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) = 0;
+};
+
 /// @brief One pass over the level's pixels: the cost model of every motion label of `u` at `twists`.
 LabelCostModel labelCostModel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& u,
                               const ImageU8* occluded, const std::vector<Vector6d>& twists, const Config& config,
                               MotionAccumulator& accumulator);
+
+/// @brief The cost model of `motion_labels` labels from the diagonal blocks of one accumulation.
+LabelCostModel costModelFromEquations(const MotionNormalEquations& equations, int motion_labels);
 
 /// @brief Predicted data-cost increase when labels a and b share one motion (the best one for both):
 /// (xi_a - xi_b)^T H_a (H_a + H_b)^-1 H_b (xi_a - xi_b). It measures how differently the two motions move
@@ -52,18 +105,47 @@ double labelCost(const Config& config, int valid_pixels);
 /// @brief Merges, cheapest first, every pair whose predicted increase is below the label cost; the merged
 /// label takes the union's best motion (H_a + H_b)^-1 (H_a xi_a + H_b xi_b) and model H_a + H_b, so the
 /// n x n table is updated, not recomputed. Then, when `remove_small`, labels with support below
-/// min_support_fraction * valid_pixels go to the outlier label. Keeps u, twists and model consistent.
-AdaptationStats adaptLabelCount(SoftLabels& u, std::vector<Vector6d>& twists, LabelCostModel& model, int valid_pixels,
-                                const Config& config, bool remove_small = true);
+/// min_support_fraction * valid_pixels go to the outlier label. The labels change once, by one remap.
+/// Keeps the labels, twists and model consistent.
+AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twists, LabelCostModel& model,
+                                int valid_pixels, const Config& config, bool remove_small = true);
 
 /// @brief Proposes to split each large label in two along its principal 3D axis, predicts the data-cost
 /// decrease of giving each half its own Gauss-Newton motion (one pass over the pixels for all
 /// candidates), and splits those whose decrease exceeds the label cost (largest first, at most
 /// max_splits_per_iteration). The halves start from their Gauss-Newton motions; the next motion step
 /// refines them.
-AdaptationStats proposeSplits(SoftLabels& u, std::vector<Vector6d>& twists, const PyramidLevel& frame1,
-                              const PyramidLevel& frame2, const ImageU8* occluded, int valid_pixels,
-                              const Config& config, MotionAccumulator& accumulator);
+AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists, bool use_occlusion, int valid_pixels,
+                              const Config& config);
+
+/// @brief A LabelStore over host soft labels at one pyramid level (the CPU backend's, and the tests').
+class HostLabelStore final : public LabelStore {
+ public:
+  /// `occluded` may be null; `accumulator` null = a CPU one. All must outlive the store.
+  HostLabelStore(SoftLabels& u, const PyramidLevel& frame1, const PyramidLevel& frame2, const ImageU8* occluded,
+                 MotionAccumulator* accumulator = nullptr);
+  int labelCount() const override { return u_.count; }
+  std::vector<double> supports() override;
+  void remap(const std::vector<int>& target, int new_count) override;
+  std::vector<LabelMoments> ownedMoments() override;
+  CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
+                     const Config& config) override;
+  void applyCuts(const std::vector<LabelCut>& cuts) override;
+  LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override;
+
+ private:
+  SoftLabels& u_;
+  const PyramidLevel& frame1_;
+  const PyramidLevel& frame2_;
+  const ImageU8* occluded_;
+  /// The labels with `cuts` applied (count + cuts planes) and the pixels each moved.
+  SoftLabels withCuts(const std::vector<LabelCut>& cuts, std::vector<double>& moved) const;
+  std::unique_ptr<MotionAccumulator> own_accumulator_;
+  MotionAccumulator* accumulator_;
+};
+
+/// @brief Checks a remap target (sizes, ranges, the outlier staying last); throws InputError naming the value.
+void validateRemap(const std::vector<int>& target, int old_count, int new_count);
 
 /// @brief Support-weighted centroid of each motion label's points (points: 3 channel, NaN invalid).
 std::vector<Eigen::Vector3d> labelCentroids(const SoftLabels& u, const ImageF& points);

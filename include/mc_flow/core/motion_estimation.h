@@ -68,6 +68,11 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
                                         const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator = nullptr);
 
+/// @brief The same IRLS with an accumulator already bound to a level (setLevel called, or a backend's
+/// device-resident one); `twists` holds one twist per motion label of that binding.
+MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::vector<Vector6d>& twists,
+                                     const Config& config);
+
 /// @brief Robust per-pixel data cost of one residual pair (normalised Cauchy, used by both steps):
 /// ln(1 + (rI/cI)^2) + alpha * ln(1 + (rZ/cZ)^2).
 inline double cauchyCost(double r, double c) { const double q = r / c; return std::log1p(q * q); }

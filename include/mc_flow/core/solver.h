@@ -59,7 +59,8 @@ struct Result {
   double energy = 0;             ///< final E(u) (processing level)
   int processing_width = 0, processing_height = 0;
   int pyramid_levels = 0;
-  std::string backend;           ///< "cpu" or "cuda"
+  Backend backend_kind = Backend::Cpu;  ///< the backend that ran (Cpu or Cuda, never Auto)
+  std::string backend;           ///< toString(backend_kind): "cpu" or "cuda"
   std::string backend_note;      ///< why Auto chose what it chose
 };
 
@@ -79,6 +80,8 @@ class Solver {
 
   const Config& config() const;
   std::string backendName() const;
+  /// @brief The resolved backend (Cpu or Cuda).
+  Backend backendKind() const;
 
  private:
   struct Impl;

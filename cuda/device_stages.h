@@ -1,0 +1,155 @@
+// The device side of the solve's stages, for cuda/solve_backend.cu: each stage's .cu file (the same name as
+// its CPU counterpart in src/core) exposes one launcher or engine here. Everything works on device pointers
+// on the caller's stream; nothing here synchronises except where a function returns host numbers.
+// Included by cuda/*.cu only.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "mc_flow/core/config.h"
+#include "mc_flow/core/image.h"
+#include "mc_flow/core/label_adaptation.h"
+#include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/motion_estimation.h"
+#include "mc_flow/core/se3.h"
+#include "sampling_device.cuh"
+
+namespace mc_flow {
+namespace cuda_detail {
+
+/// @brief One pyramid level of both frames on the device (what the motion, label and occlusion stages read).
+struct DeviceLevel {
+  int width = 0, height = 0;
+  Intrinsics intrinsics;
+  DeviceImage points1, intensity1, intensity2, depth2, intensity_grad2, depth_grad2;
+};
+
+// ---------------------------------------------------------------- SE(3) in double (as src/core/se3.cpp)
+__device__ __forceinline__ void skew3(const double w[3], double S[9]) {
+  S[0] = 0; S[1] = -w[2]; S[2] = w[1];
+  S[3] = w[2]; S[4] = 0; S[5] = -w[0];
+  S[6] = -w[1]; S[7] = w[0]; S[8] = 0;
+}
+
+__device__ __forceinline__ void mul3(const double A[9], const double B[9], double C[9]) {
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) C[r * 3 + c] = A[r * 3] * B[c] + A[r * 3 + 1] * B[3 + c] + A[r * 3 + 2] * B[6 + c];
+}
+
+/// @brief Rows 0..2 of exp(xi) (row-major 3x4), in double.
+__device__ __forceinline__ void se3ExpRowsDevice(const double xi[6], double T[12]) {
+  const double* v = xi;
+  const double* w = xi + 3;
+  const double theta2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2], theta = sqrt(theta2);
+  double W[9], W2[9];
+  skew3(w, W);
+  mul3(W, W, W2);
+  double a, b, c;
+  if (theta < 1e-8) {
+    a = 1.0 - theta2 / 6.0;
+    b = 0.5 - theta2 / 24.0;
+    c = 1.0 / 6.0 - theta2 / 120.0;
+  } else {
+    a = sin(theta) / theta;
+    b = (1.0 - cos(theta)) / theta2;
+    c = (theta - sin(theta)) / (theta2 * theta);
+  }
+  for (int r = 0; r < 3; ++r) {
+    double t = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double identity = r == k ? 1.0 : 0.0;
+      T[r * 4 + k] = identity + a * W[r * 3 + k] + b * W2[r * 3 + k];
+      t += (identity + b * W[r * 3 + k] + c * W2[r * 3 + k]) * v[k];
+    }
+    T[r * 4 + 3] = t;
+  }
+}
+
+/// @brief A rigid motion as the per-pixel kernels use it: rows 0..2 of exp(xi) in float (row-major 3x4).
+struct DeviceTransform {
+  float m[12];
+};
+DeviceTransform deviceTransform(const Vector6d& twist);
+
+// ---------------------------------------------------------------- motion step (motion_estimation.cu)
+/// @brief The motion step's accumulator on device-resident data (no uploads but the twists).
+class DeviceMotionAccumulator : public MotionAccumulator {
+ public:
+  /// @brief Binds a level, its labels (count planes, the last the outlier) and an optional occlusion mask;
+  /// the device memory must stay unchanged while accumulate() is used.
+  virtual void bind(const DeviceLevel& level, const float* labels, int count, const std::uint8_t* occluded,
+                    const Config& config) = 0;
+};
+std::unique_ptr<DeviceMotionAccumulator> makeDeviceMotionAccumulator(cudaStream_t stream);
+
+// ---------------------------------------------------------------- label step (label_optimization.cu)
+/// @brief The label problem on the device (see LabelProblem).
+struct DeviceLabelProblem {
+  int width = 0, height = 0, count = 0;
+  const float* data_cost = nullptr;
+  const float* weight_x = nullptr;
+  const float* weight_y = nullptr;
+  const std::uint8_t* outlier_only = nullptr;
+  Regularizer regularizer = Regularizer::Quadratic;
+  double lambda = 1.0;
+};
+
+/// @brief The primal-dual iteration on device-resident u and p (see LabelOptimizer::optimize).
+class DevicePrimalDual {
+ public:
+  virtual ~DevicePrimalDual() = default;
+  virtual LabelStats run(const DeviceLabelProblem& problem, float* u, float* p, int iterations, double tolerance) = 0;
+};
+std::unique_ptr<DevicePrimalDual> makeDevicePrimalDual(cudaStream_t stream);
+
+/// @brief geometricWeights of the level into weight_x / weight_y (one plane each).
+void launchGeometricWeights(const DeviceLevel& level, double min_weight, float* weight_x, float* weight_y,
+                            cudaStream_t stream);
+/// @brief computeDataCosts: count = transforms + 1 planes of data costs and the outlier-only mask.
+void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms, int motion_labels,
+                     const std::uint8_t* occluded, const Config& config, float* data_cost,
+                     std::uint8_t* outlier_only, cudaStream_t stream);
+
+// ---------------------------------------------------------------- soft labels (soft_labels.cu)
+/// @brief Hard labels from the nearest of `centre_count` centres (xyz floats); invalid points -> outlier.
+void launchAssignToCentres(const DeviceImage& points, const float* centres, int centre_count, float* u,
+                           cudaStream_t stream);
+/// @brief Two planes: 1 on plane 0 where the point is valid, else on plane 1.
+void launchAllValidAsOne(const DeviceImage& points, float* u, cudaStream_t stream);
+/// @brief downsampleLabels: 2x2 means (clamped) of `count` planes.
+void launchDownsampleLabels(const float* in, int width, int height, int count, float* out, int out_width,
+                            int out_height, cudaStream_t stream);
+/// @brief upsampleLabels: pixel-centre aligned bilinear, renormalised, empty pixels to the outlier label.
+void launchUpsampleLabels(const float* in, int width, int height, int count, float* out, int out_width,
+                          int out_height, cudaStream_t stream);
+/// @brief Nearest-pixel resampling of a mask between pyramid levels.
+void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint8_t* out, int out_width,
+                        int out_height, cudaStream_t stream);
+/// @brief out plane j = sum of the in planes i with target[i] == j, in ascending i (target on the device).
+void launchRemapLabels(const float* in, std::size_t plane, int count, const int* target, int new_count, float* out,
+                       cudaStream_t stream);
+/// @brief Per motion label of `u` (count planes): sum of u (double), in a fixed order.
+void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, double* out, cudaStream_t stream);
+/// @brief Per motion label: owned-pixel moments, 10 doubles (count, sum xyz, sum xx xy xz yy yz zz).
+void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, double* out,
+                        cudaStream_t stream);
+/// @brief Cuts (parent, centre xyz, axis xyz as doubles; 7 values each) appended as planes
+/// [motion_labels, motion_labels + cuts) of `out` (count + cuts planes); counts the moved pixels per cut.
+void launchCutLabels(const float* in, const DeviceImage& points, int count, const double* cuts, int cut_count,
+                     float* out, unsigned long long* moved, cudaStream_t stream);
+/// @brief Sum over planes of |a - b| per pixel, added into one double (fixed order).
+void launchAbsoluteChange(const float* a, const float* b, std::size_t values, double* out, cudaStream_t stream);
+
+// ---------------------------------------------------------------- occlusion (occlusion.cu)
+/// @brief detectOcclusions(warpPoints(points, u, twists), depth2, K) at one level into `occluded`.
+/// `motions` holds 18 doubles per motion label (the twist, then rows 0..2 of its exp); `counts` (one int per
+/// pixel) and `targets` (one per pixel) are scratch.
+void launchOcclusion(const DeviceLevel& level, const float* u, int count, const double* motions, const Config& config,
+                     int* counts, long long* targets, float* warped_z, std::uint8_t* occluded, cudaStream_t stream);
+
+}  // namespace cuda_detail
+}  // namespace mc_flow

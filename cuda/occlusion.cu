@@ -1,0 +1,126 @@
+// Occlusion mask of the device-resident solve: warpPoints (src/core/scene_flow.cpp) followed by
+// detectOcclusions (src/core/occlusion.cpp, the reference) at one pyramid level. The warp runs in double
+// as on the CPU; the per-target counts are integer atomics (order-independent), so the mask is the CPU's
+// up to the last bit of the blended twists' sums.
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+#include "cuda_check.h"
+#include "device_stages.h"
+
+namespace mc_flow {
+namespace cuda_detail {
+
+namespace {
+
+constexpr int kThreads = 256;
+constexpr double kMinMotionMass = 1e-3;  // as src/core/scene_flow.cpp
+
+struct OcclusionParams {
+  DeviceLevel level;
+  const float* u;
+  int count;
+  const double* motions;  // 18 per motion label: twist, rows 0..2 of exp(twist)
+  float kz, ko;
+};
+
+// Warps one pixel with its interpolated motion; writes the target pixel (-1: behind the camera or out of view;
+// -2: no valid point) and the warped depth.
+__global__ void warpKernel(const OcclusionParams q, long long* __restrict__ targets, float* __restrict__ warped_z,
+                           int* __restrict__ counts) {
+  const int W = q.level.width, H = q.level.height;
+  const std::size_t plane = std::size_t(W) * H;
+  const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (idx >= plane) return;
+  const int x = int(idx % std::size_t(W)), y = int(idx / std::size_t(W));
+  const DeviceImage& pts = q.level.points1;
+  const float P[3] = {pts.at(x, y, 0), pts.at(x, y, 1), pts.at(x, y, 2)};
+  if (!(isfinite(P[0]) && isfinite(P[1]) && isfinite(P[2]))) {
+    targets[idx] = -2;
+    return;
+  }
+  const int m = q.count - 1;
+  double Q[3] = {P[0], P[1], P[2]};
+  if (m > 0) {
+    double mass = 0, xi[6] = {0, 0, 0, 0, 0, 0};
+    int nonzero = 0, last = 0;
+    for (int i = 0; i < m; ++i) {
+      const double v = q.u[i * plane + idx];
+      if (v == 0.0) continue;
+      mass += v;
+      for (int c = 0; c < 6; ++c) xi[c] += v * q.motions[18 * i + c];
+      ++nonzero;
+      last = i;
+    }
+    double T[12];
+    const double* transform = T;
+    if (mass < kMinMotionMass) {
+      int label = 0;  // the motion label with the largest value, the lowest index on ties
+      for (int i = 1; i < m; ++i)
+        if (q.u[i * plane + idx] > q.u[label * plane + idx]) label = i;
+      transform = q.motions + 18 * label + 6;
+    } else if (nonzero == 1) {
+      transform = q.motions + 18 * last + 6;
+    } else {
+      for (int c = 0; c < 6; ++c) xi[c] /= mass;
+      se3ExpRowsDevice(xi, T);
+    }
+    for (int r = 0; r < 3; ++r)
+      Q[r] = transform[4 * r] * double(P[0]) + transform[4 * r + 1] * double(P[1]) + transform[4 * r + 2] * double(P[2]) +
+             transform[4 * r + 3];
+  }
+  const float Qf[3] = {float(Q[0]), float(Q[1]), float(Q[2])};
+  warped_z[idx] = Qf[2];
+  long long target = -1;
+  if (Qf[2] > 0.f) {
+    const Intrinsics& K = q.level.intrinsics;
+    const double u = K.fx * Qf[0] / Qf[2] + K.cx, v = K.fy * Qf[1] / Qf[2] + K.cy;
+    const double ur = floor(u + 0.5), vr = floor(v + 0.5);
+    if (ur >= 0 && vr >= 0 && ur < W && vr < H) target = (long long)(vr) * W + (long long)(ur);
+  }
+  targets[idx] = target;
+  if (target >= 0) atomicAdd(counts + target, 1);
+}
+
+__global__ void occlusionTestKernel(const OcclusionParams q, const long long* __restrict__ targets,
+                                    const float* __restrict__ warped_z, const int* __restrict__ counts,
+                                    std::uint8_t* __restrict__ occluded) {
+  const std::size_t plane = std::size_t(q.level.width) * q.level.height;
+  const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (idx >= plane) return;
+  const long long t = targets[idx];
+  std::uint8_t mask = 0;
+  if (t == -1) {
+    mask = 255;  // out of view (or behind the camera) in frame 2
+  } else if (t >= 0) {
+    const float z2 = q.level.depth2.data[t];
+    // z-buffer form of the depth test: positive when the warped point lies behind what frame 2 sees.
+    const float depth_change = isfinite(z2) && z2 > 0.f ? __fsub_rn(warped_z[idx], z2) : 0.f;
+    if (__fadd_rn(float(counts[t]), __fmul_rn(q.kz, depth_change)) > q.ko) mask = 255;
+  }
+  occluded[idx] = mask;
+}
+
+}  // namespace
+
+void launchOcclusion(const DeviceLevel& level, const float* u, int count, const double* motions, const Config& config,
+                     int* counts, long long* targets, float* warped_z, std::uint8_t* occluded, cudaStream_t stream) {
+  OcclusionParams q;
+  q.level = level;
+  q.u = u;
+  q.count = count;
+  q.motions = motions;
+  q.kz = float(config.occlusion_kz);
+  q.ko = float(config.occlusion_ko);
+  const std::size_t plane = std::size_t(level.width) * level.height;
+  const unsigned blocks = unsigned((plane + kThreads - 1) / kThreads);
+  MCFLOW_CUDA_CHECK(cudaMemsetAsync(counts, 0, plane * sizeof(int), stream));
+  warpKernel<<<blocks, kThreads, 0, stream>>>(q, targets, warped_z, counts);
+  MCFLOW_CUDA_CHECK_LAUNCH("warpKernel");
+  occlusionTestKernel<<<blocks, kThreads, 0, stream>>>(q, targets, warped_z, counts, occluded);
+  MCFLOW_CUDA_CHECK_LAUNCH("occlusionTestKernel");
+}
+
+}  // namespace cuda_detail
+}  // namespace mc_flow

@@ -1,0 +1,301 @@
+// Soft-label operations of the device-resident solve (src/core/soft_labels.cpp, kmeans.cpp's assignment and
+// the HostLabelStore of label_adaptation.cpp are the references): initial hard labels, resampling between
+// pyramid levels, remapping planes (merges, removals), per-label supports and owned-pixel moments, cuts.
+// Sums run in a fixed order (one block per label, a fixed tree), so repeated solves are bit-identical.
+#include <cuda_runtime.h>
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+
+#include "cuda_check.h"
+#include "device_stages.h"
+#include "mc_flow/core/error.h"
+
+namespace mc_flow {
+namespace cuda_detail {
+
+namespace {
+
+constexpr int kBlockX = 32, kBlockY = 8;
+constexpr int kReduceThreads = 256;
+constexpr int kMaxRemapPlanes = 512;
+constexpr int kMomentValues = 10;
+
+dim3 gridFor(int width, int height) {
+  return dim3(unsigned((width + kBlockX - 1) / kBlockX), unsigned((height + kBlockY - 1) / kBlockY));
+}
+
+__device__ __forceinline__ bool validPoint(const DeviceImage& points, int x, int y) {
+  return isfinite(points.at(x, y, 0)) && isfinite(points.at(x, y, 1)) && isfinite(points.at(x, y, 2));
+}
+
+// Sums `values` doubles per thread over the block into the first thread's slots, in a fixed order.
+__device__ void blockSum(double* shared, int values) {
+  for (int stride = blockDim.x / 2; stride > 0; stride >>= 1) {
+    __syncthreads();
+    if (int(threadIdx.x) < stride)
+      for (int v = 0; v < values; ++v) shared[threadIdx.x * values + v] += shared[(threadIdx.x + stride) * values + v];
+  }
+  __syncthreads();
+}
+
+__global__ void assignKernel(const DeviceImage points, const float* __restrict__ centres, int centre_count, int count,
+                             float* __restrict__ u) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= points.width || y >= points.height) return;
+  const std::size_t plane = std::size_t(points.width) * points.height, idx = std::size_t(y) * points.width + x;
+  int label = count - 1;
+  if (centre_count > 0 && validPoint(points, x, y)) {
+    const float p[3] = {points.at(x, y, 0), points.at(x, y, 1), points.at(x, y, 2)};
+    float best = INFINITY;
+    label = 0;
+    for (int c = 0; c < centre_count; ++c) {
+      const float dx = __fsub_rn(p[0], centres[3 * c]), dy = __fsub_rn(p[1], centres[3 * c + 1]),
+                  dz = __fsub_rn(p[2], centres[3 * c + 2]);
+      const float d = __fadd_rn(__fadd_rn(__fmul_rn(dx, dx), __fmul_rn(dy, dy)), __fmul_rn(dz, dz));
+      if (d < best) {
+        best = d;
+        label = c;
+      }
+    }
+  }
+  for (int i = 0; i < count; ++i) u[i * plane + idx] = i == label ? 1.f : 0.f;
+}
+
+__global__ void allValidAsOneKernel(const DeviceImage points, float* __restrict__ u) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= points.width || y >= points.height) return;
+  const std::size_t plane = std::size_t(points.width) * points.height, idx = std::size_t(y) * points.width + x;
+  const bool valid = isfinite(points.at(x, y, 2));
+  u[idx] = valid ? 1.f : 0.f;
+  u[plane + idx] = valid ? 0.f : 1.f;
+}
+
+__global__ void downsampleKernel(const float* __restrict__ in, int w, int h, int count, float* __restrict__ out,
+                                 int ow, int oh) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= ow || y >= oh) return;
+  const int y0 = min(2 * y, h - 1), y1 = min(2 * y + 1, h - 1), x0 = min(2 * x, w - 1), x1 = min(2 * x + 1, w - 1);
+  const std::size_t plane = std::size_t(w) * h, out_plane = std::size_t(ow) * oh;
+  for (int i = 0; i < count; ++i) {
+    const float* src = in + i * plane;
+    const float s = __fadd_rn(__fadd_rn(__fadd_rn(src[std::size_t(y0) * w + x0], src[std::size_t(y0) * w + x1]),
+                                        src[std::size_t(y1) * w + x0]),
+                              src[std::size_t(y1) * w + x1]);
+    out[i * out_plane + std::size_t(y) * ow + x] = __fmul_rn(0.25f, s);
+  }
+}
+
+// Tap of upsampleLabels: coarse coordinate of a fine pixel centre (computed in double as on the CPU).
+__device__ __forceinline__ void tap(int fine_x, int coarse, double ratio, int& i0, int& i1, float& a) {
+  const double c = fmin(fmax((fine_x + 0.5) * ratio - 0.5, 0.0), double(coarse - 1));
+  i0 = int(c);
+  i1 = min(i0 + 1, coarse - 1);
+  a = float(c - i0);
+}
+
+__global__ void upsampleKernel(const float* __restrict__ in, int w, int h, int count, float* __restrict__ out,
+                               int ow, int oh, double ratio_x, double ratio_y) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= ow || y >= oh) return;
+  int x0, x1, y0, y1;
+  float ax, ay;
+  tap(x, w, ratio_x, x0, x1, ax);
+  tap(y, h, ratio_y, y0, y1, ay);
+  const std::size_t plane = std::size_t(w) * h, out_plane = std::size_t(ow) * oh, o = std::size_t(y) * ow + x;
+  float sum = 0.f;
+  for (int i = 0; i < count; ++i) {
+    const float* r0 = in + i * plane + std::size_t(y0) * w;
+    const float* r1 = in + i * plane + std::size_t(y1) * w;
+    const float top = __fadd_rn(r0[x0], __fmul_rn(ax, __fsub_rn(r0[x1], r0[x0])));
+    const float bottom = __fadd_rn(r1[x0], __fmul_rn(ax, __fsub_rn(r1[x1], r1[x0])));
+    const float v = __fadd_rn(top, __fmul_rn(ay, __fsub_rn(bottom, top)));
+    out[i * out_plane + o] = v;
+    sum = __fadd_rn(sum, v);
+  }
+  // Renormalised as on the CPU; a pixel without mass goes to the outlier label.
+  const float scale = sum > 0.f ? __fdiv_rn(1.f, sum) : 0.f;
+  for (int i = 0; i < count; ++i) out[i * out_plane + o] = __fmul_rn(out[i * out_plane + o], scale);
+  if (scale == 0.f) out[std::size_t(count - 1) * out_plane + o] = 1.f;
+}
+
+__global__ void resampleMaskKernel(const std::uint8_t* __restrict__ in, int w, int h, std::uint8_t* __restrict__ out,
+                                   int ow, int oh, double scale) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= ow || y >= oh) return;
+  const int sy = min(max(int(floor((y + 0.5) * scale)), 0), h - 1);
+  const int sx = min(max(int(floor((x + 0.5) * scale)), 0), w - 1);
+  out[std::size_t(y) * ow + x] = in[std::size_t(sy) * w + sx];
+}
+
+struct RemapTable {
+  int target[kMaxRemapPlanes];
+};
+
+__global__ void remapKernel(const float* __restrict__ in, std::size_t plane, int count, const RemapTable table,
+                            int new_count, float* __restrict__ out) {
+  const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (idx >= plane) return;
+  for (int j = 0; j < new_count; ++j) {
+    float sum = 0.f;
+    for (int i = 0; i < count; ++i)
+      if (table.target[i] == j) sum = __fadd_rn(sum, in[i * plane + idx]);
+    out[j * plane + idx] = sum;
+  }
+}
+
+// One block per motion label.
+__global__ void supportsKernel(const float* __restrict__ u, std::size_t plane, double* __restrict__ out) {
+  __shared__ double partial[kReduceThreads];
+  const float* ui = u + blockIdx.x * plane;
+  double s = 0;
+  for (std::size_t k = threadIdx.x; k < plane; k += blockDim.x) s += ui[k];
+  partial[threadIdx.x] = s;
+  blockSum(partial, 1);
+  if (threadIdx.x == 0) out[blockIdx.x] = partial[0];
+}
+
+// One block per motion label: count, sum P, sum P P^T (xx xy xz yy yz zz) of its owned pixels.
+__global__ void momentsKernel(const float* __restrict__ u, const DeviceImage points, double* __restrict__ out) {
+  __shared__ double partial[kReduceThreads * kMomentValues];
+  const std::size_t plane = std::size_t(points.width) * points.height;
+  const float* ui = u + blockIdx.x * plane;
+  double m[kMomentValues] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
+  for (std::size_t k = threadIdx.x; k < plane; k += blockDim.x) {
+    const float z = points.data[k * 3 + 2];
+    if (ui[k] < 0.5f || !isfinite(z)) continue;
+    const double P[3] = {points.data[k * 3], points.data[k * 3 + 1], z};
+    m[0] += 1;
+    m[1] += P[0];
+    m[2] += P[1];
+    m[3] += P[2];
+    m[4] += P[0] * P[0];
+    m[5] += P[0] * P[1];
+    m[6] += P[0] * P[2];
+    m[7] += P[1] * P[1];
+    m[8] += P[1] * P[2];
+    m[9] += P[2] * P[2];
+  }
+  for (int v = 0; v < kMomentValues; ++v) partial[threadIdx.x * kMomentValues + v] = m[v];
+  blockSum(partial, kMomentValues);
+  if (threadIdx.x < kMomentValues) out[blockIdx.x * kMomentValues + threadIdx.x] = partial[threadIdx.x];
+}
+
+__global__ void cutKernel(const float* __restrict__ in, const DeviceImage points, int count,
+                          const double* __restrict__ cuts, int cut_count, float* __restrict__ out,
+                          unsigned long long* __restrict__ moved) {
+  const std::size_t plane = std::size_t(points.width) * points.height;
+  const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (idx >= plane) return;
+  const int motion = count - 1;
+  for (int i = 0; i < motion; ++i) out[i * plane + idx] = in[i * plane + idx];
+  for (int c = 0; c < cut_count; ++c) out[(motion + c) * plane + idx] = 0.f;
+  out[std::size_t(motion + cut_count) * plane + idx] = in[std::size_t(motion) * plane + idx];
+  const float z = points.data[idx * 3 + 2];
+  if (!isfinite(z)) return;
+  const double P[3] = {points.data[idx * 3], points.data[idx * 3 + 1], z};
+  for (int c = 0; c < cut_count; ++c) {
+    const double* cut = cuts + 7 * c;
+    const int parent = int(cut[0]);
+    float* from = out + std::size_t(parent) * plane + idx;
+    if (*from < 0.5f) continue;
+    const double side = (P[0] - cut[1]) * cut[4] + (P[1] - cut[2]) * cut[5] + (P[2] - cut[3]) * cut[6];
+    if (side <= 0) continue;
+    out[std::size_t(motion + c) * plane + idx] = *from;
+    *from = 0.f;
+    atomicAdd(moved + c, 1ull);  // integer counts: the order does not matter
+  }
+}
+
+__global__ void absoluteChangeKernel(const float* __restrict__ a, const float* __restrict__ b, std::size_t values,
+                                     double* __restrict__ out) {
+  __shared__ double partial[kReduceThreads];
+  double s = 0;
+  for (std::size_t k = threadIdx.x; k < values; k += blockDim.x) s += fabs(double(a[k]) - double(b[k]));
+  partial[threadIdx.x] = s;
+  blockSum(partial, 1);
+  if (threadIdx.x == 0) *out = partial[0];
+}
+
+// Source pixels per target pixel between two pyramid levels: a power of two (integer halving drops an odd
+// last column/row, so the size ratio is not exact).
+double levelScale(int from, int to) { return std::exp2(std::round(std::log2(double(from) / double(to)))); }
+
+}  // namespace
+
+void launchAssignToCentres(const DeviceImage& points, const float* centres, int centre_count, float* u,
+                           cudaStream_t stream) {
+  const int count = (centre_count > 0 ? centre_count : 1) + 1;
+  assignKernel<<<gridFor(points.width, points.height), dim3(kBlockX, kBlockY), 0, stream>>>(points, centres,
+                                                                                             centre_count, count, u);
+  MCFLOW_CUDA_CHECK_LAUNCH("assignKernel");
+}
+
+void launchAllValidAsOne(const DeviceImage& points, float* u, cudaStream_t stream) {
+  allValidAsOneKernel<<<gridFor(points.width, points.height), dim3(kBlockX, kBlockY), 0, stream>>>(points, u);
+  MCFLOW_CUDA_CHECK_LAUNCH("allValidAsOneKernel");
+}
+
+void launchDownsampleLabels(const float* in, int width, int height, int count, float* out, int out_width,
+                            int out_height, cudaStream_t stream) {
+  downsampleKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(in, width, height, count,
+                                                                                          out, out_width, out_height);
+  MCFLOW_CUDA_CHECK_LAUNCH("downsampleKernel");
+}
+
+void launchUpsampleLabels(const float* in, int width, int height, int count, float* out, int out_width,
+                          int out_height, cudaStream_t stream) {
+  upsampleKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(
+      in, width, height, count, out, out_width, out_height, 1.0 / levelScale(out_width, width),
+      1.0 / levelScale(out_height, height));
+  MCFLOW_CUDA_CHECK_LAUNCH("upsampleKernel");
+}
+
+void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint8_t* out, int out_width,
+                        int out_height, cudaStream_t stream) {
+  resampleMaskKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(
+      in, width, height, out, out_width, out_height, levelScale(width, out_width));
+  MCFLOW_CUDA_CHECK_LAUNCH("resampleMaskKernel");
+}
+
+void launchRemapLabels(const float* in, std::size_t plane, int count, const int* target, int new_count, float* out,
+                       cudaStream_t stream) {
+  if (count > kMaxRemapPlanes)
+    throw InputError("CUDA label remap: " + std::to_string(count) + " planes, at most " +
+                     std::to_string(kMaxRemapPlanes));
+  RemapTable table{};
+  for (int i = 0; i < count; ++i) table.target[i] = target[i];
+  remapKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(in, plane, count, table, new_count, out);
+  MCFLOW_CUDA_CHECK_LAUNCH("remapKernel");
+}
+
+void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, double* out, cudaStream_t stream) {
+  if (motion_labels <= 0) return;
+  supportsKernel<<<unsigned(motion_labels), kReduceThreads, 0, stream>>>(u, plane, out);
+  MCFLOW_CUDA_CHECK_LAUNCH("supportsKernel");
+}
+
+void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, double* out,
+                        cudaStream_t stream) {
+  if (motion_labels <= 0) return;
+  momentsKernel<<<unsigned(motion_labels), kReduceThreads, 0, stream>>>(u, points, out);
+  MCFLOW_CUDA_CHECK_LAUNCH("momentsKernel");
+}
+
+void launchCutLabels(const float* in, const DeviceImage& points, int count, const double* cuts, int cut_count,
+                     float* out, unsigned long long* moved, cudaStream_t stream) {
+  unsigned long long* counts = moved;
+  MCFLOW_CUDA_CHECK(cudaMemsetAsync(counts, 0, std::size_t(cut_count) * sizeof(unsigned long long), stream));
+  const std::size_t plane = std::size_t(points.width) * points.height;
+  cutKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(in, points, count, cuts, cut_count, out, counts);
+  MCFLOW_CUDA_CHECK_LAUNCH("cutKernel");
+}
+
+void launchAbsoluteChange(const float* a, const float* b, std::size_t values, double* out, cudaStream_t stream) {
+  absoluteChangeKernel<<<1, kReduceThreads, 0, stream>>>(a, b, values, out);
+  MCFLOW_CUDA_CHECK_LAUNCH("absoluteChangeKernel");
+}
+
+}  // namespace cuda_detail
+}  // namespace mc_flow

@@ -1,0 +1,484 @@
+// The CUDA backend of the solve's stages (src/core/solve_backend.cpp is the CPU one): the two pyramids go up
+// once per pair, and from there the labels, the dual variables, the data costs, the weights and the occlusion
+// mask live on the device until the final labels come down. Every stage runs on the backend's one stream;
+// the host reads only what a decision needs (supports, moments, normal equations, energies, counts).
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cuda_check.h"
+#include "device_stages.h"
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/solve_backend.h"
+
+namespace mc_flow {
+
+namespace cuda_detail {
+DeviceTransform deviceTransform(const Vector6d& twist) {
+  const Eigen::Matrix<float, 3, 4> T = se3Exp(twist).topRows<3>().cast<float>();
+  DeviceTransform out;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) out.m[r * 4 + c] = T(r, c);
+  return out;
+}
+}  // namespace cuda_detail
+
+namespace {
+
+using cuda_detail::DeviceBuffer;
+using cuda_detail::DeviceLevel;
+
+/// Page-locked host memory that only grows: the small uploads and downloads of the decisions.
+class PinnedBytes {
+ public:
+  PinnedBytes() = default;
+  PinnedBytes(const PinnedBytes&) = delete;
+  PinnedBytes& operator=(const PinnedBytes&) = delete;
+  ~PinnedBytes() {
+    if (data_) cudaFreeHost(data_);
+  }
+  template <typename T>
+  T* as(std::size_t count) {
+    const std::size_t bytes = count * sizeof(T);
+    if (bytes > capacity_) {
+      if (data_) MCFLOW_CUDA_CHECK(cudaFreeHost(data_));
+      data_ = nullptr;
+      capacity_ = 0;
+      MCFLOW_CUDA_CHECK(cudaMallocHost(&data_, bytes));
+      capacity_ = bytes;
+    }
+    return static_cast<T*>(data_);
+  }
+
+ private:
+  void* data_ = nullptr;
+  std::size_t capacity_ = 0;
+};
+
+struct LevelBuffers {
+  DeviceBuffer<float> points1, intensity1, intensity2, depth2, intensity_grad2, depth_grad2;
+};
+
+class CudaSolveBackend final : public SolveBackend {
+ public:
+  CudaSolveBackend()
+      : accumulator_(cuda_detail::makeDeviceMotionAccumulator(stream_.stream)),
+        primal_dual_(cuda_detail::makeDevicePrimalDual(stream_.stream)) {}
+
+  Backend kind() const override { return Backend::Cuda; }
+
+  void loadPyramids(const Pyramid& frame1, const Pyramid& frame2, const Config& config) override {
+    (void)config;
+    if (frame1.size() != frame2.size() || frame1.size() == 0)
+      throw InputError("loadPyramids: pyramids of " + std::to_string(frame1.size()) + " and " +
+                       std::to_string(frame2.size()) + " levels");
+    const int levels = frame1.size();
+    while (int(buffers_.size()) < levels) buffers_.push_back(std::make_unique<LevelBuffers>());
+    levels_.assign(std::size_t(levels), DeviceLevel{});
+    for (int l = 0; l < levels; ++l) {
+      const PyramidLevel& a = frame1[l];
+      const PyramidLevel& b = frame2[l];
+      const int W = a.points.width, H = a.points.height;
+      const std::size_t plane = std::size_t(W) * H;
+      LevelBuffers& d = *buffers_[std::size_t(l)];
+      upload(d.points1, a.points.data, plane * 3);
+      upload(d.intensity1, a.intensity.data, plane);
+      upload(d.intensity2, b.intensity.data, plane);
+      upload(d.depth2, b.depth.data, plane);
+      upload(d.intensity_grad2, b.intensity_grad.data, plane * 2);
+      upload(d.depth_grad2, b.depth_grad.data, plane * 2);
+      DeviceLevel& v = levels_[std::size_t(l)];
+      v.width = W;
+      v.height = H;
+      v.intrinsics = a.intrinsics;
+      v.points1 = {d.points1.get(), W, H, 3};
+      v.intensity1 = {d.intensity1.get(), W, H, 1};
+      v.intensity2 = {d.intensity2.get(), W, H, 1};
+      v.depth2 = {d.depth2.get(), W, H, 1};
+      v.intensity_grad2 = {d.intensity_grad2.get(), W, H, 2};
+      v.depth_grad2 = {d.depth_grad2.get(), W, H, 2};
+    }
+    count_ = 0;
+    level_ = 0;
+    weights_level_ = -1;
+  }
+
+  void initialiseLabels(int level, const std::vector<Eigen::Vector3f>& centres) override {
+    const DeviceLevel& L = levelAt(level);
+    const int centre_count = int(centres.size());
+    float* staged = pinned_.as<float>(std::max<std::size_t>(std::size_t(centre_count) * 3, 1));
+    for (int c = 0; c < centre_count; ++c)
+      for (int k = 0; k < 3; ++k) staged[3 * c + k] = centres[std::size_t(c)](k);
+    centres_.reserve(std::max<std::size_t>(std::size_t(centre_count) * 3, 1));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(centres_.get(), staged, std::size_t(centre_count) * 3 * sizeof(float),
+                                      cudaMemcpyHostToDevice, stream_.stream));
+    level_ = level;
+    count_ = std::max(1, centre_count) + 1;
+    reserveLabels(plane(), count_);
+    cuda_detail::launchAssignToCentres(L.points1, centres_.get(), centre_count, labels(), stream_.stream);
+    clearOcclusionAndDual();
+    // The staging buffer is reused by the next small transfer: wait for this one.
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
+  }
+
+  int labelLevel() const override { return level_; }
+
+  void moveLabels(int level) override {
+    const DeviceLevel& to = levelAt(level);
+    if (level != level_) {
+      int w = levels_[std::size_t(level_)].width, h = levels_[std::size_t(level_)].height;
+      reserveLabels(std::size_t(to.width) * to.height, count_);  // may move the labels to the other buffer
+      if (level < level_) {
+        cuda_detail::launchUpsampleLabels(labels(), w, h, count_, scratch(), to.width, to.height, stream_.stream);
+        swapLabels();
+      } else {
+        for (int l = level_ + 1; l <= level; ++l) {
+          const DeviceLevel& next = levels_[std::size_t(l)];
+          cuda_detail::launchDownsampleLabels(labels(), w, h, count_, scratch(), next.width, next.height,
+                                              stream_.stream);
+          swapLabels();
+          w = next.width;
+          h = next.height;
+        }
+      }
+      level_ = level;
+    }
+    clearOcclusionAndDual();
+  }
+
+  MotionAccumulator& motionAccumulator(int level, MotionLabels which, bool use_occlusion,
+                                       const Config& config) override {
+    const DeviceLevel& L = levelAt(level);
+    const std::size_t level_plane = std::size_t(L.width) * L.height;
+    const float* bound_labels = nullptr;
+    int bound_count = 0;
+    cudaStream_t s = stream_.stream;
+    if (which == MotionLabels::AllValidAsOne) {
+      level_labels_[0].reserve(level_plane * 2);
+      cuda_detail::launchAllValidAsOne(L.points1, level_labels_[0].get(), s);
+      bound_labels = level_labels_[0].get();
+      bound_count = 2;
+    } else if (level == level_) {
+      bound_labels = labels();
+      bound_count = count_;
+    } else {
+      bound_count = count_;
+      const DeviceLevel& from = levels_[std::size_t(level_)];
+      if (level < level_) {
+        level_labels_[0].reserve(level_plane * std::size_t(count_));
+        cuda_detail::launchUpsampleLabels(labels(), from.width, from.height, count_, level_labels_[0].get(), L.width,
+                                          L.height, s);
+        bound_labels = level_labels_[0].get();
+      } else {
+        const float* src = labels();
+        int w = from.width, h = from.height, slot = 0;
+        for (int l = level_ + 1; l <= level; ++l) {
+          const DeviceLevel& next = levels_[std::size_t(l)];
+          level_labels_[slot].reserve(std::size_t(next.width) * next.height * std::size_t(count_));
+          cuda_detail::launchDownsampleLabels(src, w, h, count_, level_labels_[slot].get(), next.width, next.height, s);
+          src = level_labels_[slot].get();
+          slot = 1 - slot;
+          w = next.width;
+          h = next.height;
+        }
+        bound_labels = src;
+      }
+    }
+    const std::uint8_t* bound_occlusion = nullptr;
+    if (use_occlusion) {
+      if (level == level_) {
+        bound_occlusion = occlusion_.get();
+      } else {
+        level_occlusion_.reserve(level_plane);
+        const DeviceLevel& from = levels_[std::size_t(level_)];
+        cuda_detail::launchResampleMask(occlusion_.get(), from.width, from.height, level_occlusion_.get(), L.width,
+                                        L.height, s);
+        bound_occlusion = level_occlusion_.get();
+      }
+    }
+    accumulator_->bind(L, bound_labels, bound_count, bound_occlusion, config);
+    return *accumulator_;
+  }
+
+  void updateOcclusion(const std::vector<Vector6d>& twists, const Config& config) override {
+    requireTwists("updateOcclusion", twists);
+    const DeviceLevel& L = levels_[std::size_t(level_)];
+    const std::size_t n = twists.size();
+    double* staged = pinned_.as<double>(std::max<std::size_t>(n * 18, 1));
+    for (std::size_t i = 0; i < n; ++i) {
+      const Eigen::Matrix4d T = se3Exp(twists[i]);
+      for (int k = 0; k < 6; ++k) staged[18 * i + std::size_t(k)] = twists[i](k);
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 4; ++c) staged[18 * i + 6 + std::size_t(r * 4 + c)] = T(r, c);
+    }
+    motions_.reserve(std::max<std::size_t>(n * 18, 1));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(motions_.get(), staged, n * 18 * sizeof(double), cudaMemcpyHostToDevice,
+                                      stream_.stream));
+    const std::size_t p = plane();
+    counts_.reserve(p);
+    targets_.reserve(p);
+    warped_z_.reserve(p);
+    cuda_detail::launchOcclusion(L, labels(), count_, motions_.get(), config, counts_.get(), targets_.get(),
+                                 warped_z_.get(), occlusion_.get(), stream_.stream);
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));  // the staging buffer is reused next
+  }
+
+  LabelStepStats labelStep(const std::vector<Vector6d>& twists, bool use_occlusion, int iterations, double tolerance,
+                           const Config& config) override {
+    requireTwists("labelStep", twists);
+    const DeviceLevel& L = levels_[std::size_t(level_)];
+    const std::size_t p = plane();
+    cudaStream_t s = stream_.stream;
+    if (weights_level_ != level_) {
+      weight_x_.reserve(p);
+      weight_y_.reserve(p);
+      cuda_detail::launchGeometricWeights(L, config.min_geometric_weight, weight_x_.get(), weight_y_.get(), s);
+      weights_level_ = level_;
+    }
+    const std::size_t n = twists.size();
+    auto* staged = pinned_.as<cuda_detail::DeviceTransform>(std::max<std::size_t>(n, 1));
+    for (std::size_t i = 0; i < n; ++i) staged[i] = cuda_detail::deviceTransform(twists[i]);
+    transforms_.reserve(std::max<std::size_t>(n, 1));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(transforms_.get(), staged, n * sizeof(cuda_detail::DeviceTransform),
+                                      cudaMemcpyHostToDevice, s));
+    data_cost_.reserve(p * std::size_t(count_));
+    outlier_only_.reserve(p);
+    cuda_detail::launchDataCosts(L, transforms_.get(), int(n), use_occlusion ? occlusion_.get() : nullptr, config,
+                                 data_cost_.get(), outlier_only_.get(), s);
+    const std::size_t values = p * std::size_t(count_);
+    before_.reserve(values);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(before_.get(), labels(), values * sizeof(float), cudaMemcpyDeviceToDevice, s));
+
+    cuda_detail::DeviceLabelProblem problem;
+    problem.width = L.width;
+    problem.height = L.height;
+    problem.count = count_;
+    problem.data_cost = data_cost_.get();
+    problem.weight_x = weight_x_.get();
+    problem.weight_y = weight_y_.get();
+    problem.outlier_only = outlier_only_.get();
+    problem.regularizer = config.regularizer;
+    problem.lambda = config.lambda();
+    const LabelStats ls = primal_dual_->run(problem, labels(), dual_.get(), iterations, tolerance);
+
+    scalar_.reserve(1);
+    cuda_detail::launchAbsoluteChange(labels(), before_.get(), values, scalar_.get(), s);
+    double* change = pinned_.as<double>(1);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(change, scalar_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    LabelStepStats out;
+    out.iterations = ls.iterations;
+    out.energy = ls.energy;
+    out.mean_change = *change / double(p);
+    return out;
+  }
+
+  SoftLabels downloadLabels() override {
+    const DeviceLevel& L = levels_[std::size_t(level_)];
+    SoftLabels u(L.width, L.height, count_, 0.f);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u.data.data(), labels(), u.data.size() * sizeof(float), cudaMemcpyDeviceToHost,
+                                      stream_.stream));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
+    return u;
+  }
+
+  // ---- LabelStore
+  int labelCount() const override { return count_; }
+
+  std::vector<double> supports() override {
+    const int n = count_ - 1;
+    std::vector<double> out(std::size_t(std::max(0, n)));
+    if (n <= 0) return out;
+    scalar_.reserve(std::size_t(n));
+    cuda_detail::launchLabelSupports(labels(), plane(), n, scalar_.get(), stream_.stream);
+    download(out.data(), scalar_.get(), std::size_t(n));
+    return out;
+  }
+
+  void remap(const std::vector<int>& target, int new_count) override {
+    validateRemap(target, count_, new_count);
+    const std::size_t p = plane();
+    reserveLabels(p, std::max(count_, new_count));
+    cuda_detail::launchRemapLabels(labels(), p, count_, target.data(), new_count, scratch(), stream_.stream);
+    swapLabels();
+    if (new_count != count_) zeroDual(p, new_count);
+    count_ = new_count;
+  }
+
+  std::vector<LabelMoments> ownedMoments() override {
+    const int n = count_ - 1;
+    std::vector<LabelMoments> out(std::size_t(std::max(0, n)));
+    if (n <= 0) return out;
+    std::vector<double> values(std::size_t(n) * 10);
+    scalar_.reserve(values.size());
+    cuda_detail::launchOwnedMoments(labels(), levels_[std::size_t(level_)].points1, n, scalar_.get(), stream_.stream);
+    download(values.data(), scalar_.get(), values.size());
+    for (int i = 0; i < n; ++i) {
+      const double* v = values.data() + 10 * i;
+      LabelMoments& m = out[std::size_t(i)];
+      m.count = v[0];
+      m.sum = Eigen::Vector3d(v[1], v[2], v[3]);
+      m.outer << v[4], v[5], v[6], v[5], v[7], v[8], v[6], v[8], v[9];
+    }
+    return out;
+  }
+
+  CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
+                     const Config& config) override {
+    const int m = int(cuts.size());
+    CutTrial trial;
+    trial.moved.assign(std::size_t(m), 0.0);
+    if (int(twists.size()) != count_ - 1 + m)
+      throw InputError("CUDA backend trialCuts: " + std::to_string(twists.size()) + " twists for " +
+                       std::to_string(count_ - 1 + m) + " motion labels");
+    // The trial labelling goes to the scratch buffer; the labels stay as they are.
+    cutInto(cuts);
+    const DeviceLevel& L = levels_[std::size_t(level_)];
+    accumulator_->bind(L, scratch(), count_ + m, use_occlusion ? occlusion_.get() : nullptr, config);
+    MotionNormalEquations equations;
+    accumulator_->accumulate(twists, equations);
+    trial.model = costModelFromEquations(equations, count_ - 1 + m);
+    std::vector<unsigned long long> counts(static_cast<std::size_t>(m));
+    if (m > 0) download(counts.data(), moved_.get(), counts.size());
+    for (int c = 0; c < m; ++c) trial.moved[std::size_t(c)] = double(counts[std::size_t(c)]);
+    return trial;
+  }
+
+  void applyCuts(const std::vector<LabelCut>& cuts) override {
+    if (cuts.empty()) return;
+    cutInto(cuts);
+    swapLabels();
+    count_ += int(cuts.size());
+    zeroDual(plane(), count_);
+  }
+
+  LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
+    requireTwists("costModel", twists);
+    MotionAccumulator& accumulator = motionAccumulator(level_, MotionLabels::Current, use_occlusion, config);
+    MotionNormalEquations equations;
+    accumulator.accumulate(twists, equations);
+    return costModelFromEquations(equations, count_ - 1);
+  }
+
+ private:
+  const DeviceLevel& levelAt(int level) const {
+    if (level < 0 || level >= int(levels_.size()))
+      throw InputError("CUDA backend: pyramid level " + std::to_string(level) + " outside [0, " +
+                       std::to_string(levels_.size()) + ")");
+    return levels_[std::size_t(level)];
+  }
+  std::size_t plane() const {
+    const DeviceLevel& L = levels_[std::size_t(level_)];
+    return std::size_t(L.width) * L.height;
+  }
+  void requireTwists(const char* what, const std::vector<Vector6d>& twists) const {
+    if (int(twists.size()) != count_ - 1)
+      throw InputError(std::string("CUDA backend ") + what + ": " + std::to_string(twists.size()) + " twists for " +
+                       std::to_string(count_ - 1) + " motion labels");
+  }
+
+  float* labels() { return label_buffers_[current_].get(); }
+  float* scratch() { return label_buffers_[1 - current_].get(); }
+  void swapLabels() { current_ = 1 - current_; }
+  void reserveLabels(std::size_t p, int count) {
+    const std::size_t values = p * std::size_t(count);
+    if (values > label_buffers_[current_].capacity()) {
+      // Growing loses the contents: keep them through the other buffer.
+      DeviceBuffer<float>& other = label_buffers_[1 - current_];
+      other.reserve(values);
+      if (count_ > 0)
+        MCFLOW_CUDA_CHECK(cudaMemcpyAsync(other.get(), labels(), plane() * std::size_t(count_) * sizeof(float),
+                                          cudaMemcpyDeviceToDevice, stream_.stream));
+      swapLabels();
+      label_buffers_[1 - current_].reserve(values);
+    }
+    label_buffers_[1 - current_].reserve(values);
+  }
+  // Writes the labels with `cuts` applied into the scratch buffer and counts the moved pixels into moved_.
+  void cutInto(const std::vector<LabelCut>& cuts) {
+    const int m = int(cuts.size());
+    if (m == 0) return;
+    for (const LabelCut& c : cuts)
+      if (c.parent < 0 || c.parent >= count_ - 1)
+        throw InputError("label cut: parent " + std::to_string(c.parent) + " is not a motion label (count " +
+                         std::to_string(count_) + ")");
+    double* staged = pinned_.as<double>(std::size_t(m) * 7);
+    for (int c = 0; c < m; ++c) {
+      const LabelCut& cut = cuts[std::size_t(c)];
+      double* v = staged + 7 * c;
+      v[0] = cut.parent;
+      for (int k = 0; k < 3; ++k) {
+        v[1 + k] = cut.centre(k);
+        v[4 + k] = cut.axis(k);
+      }
+    }
+    cuts_.reserve(std::size_t(m) * 7);
+    moved_.reserve(std::size_t(m));
+    cudaStream_t s = stream_.stream;
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(cuts_.get(), staged, std::size_t(m) * 7 * sizeof(double), cudaMemcpyHostToDevice, s));
+    reserveLabels(plane(), count_ + m);  // may move the labels to the other buffer
+    cuda_detail::launchCutLabels(labels(), levels_[std::size_t(level_)].points1, count_, cuts_.get(), m, scratch(),
+                                 moved_.get(), s);
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));  // the staging buffer is reused next
+  }
+
+  void zeroDual(std::size_t p, int count) {
+    dual_.reserve(p * std::size_t(count) * 2);
+    MCFLOW_CUDA_CHECK(cudaMemsetAsync(dual_.get(), 0, p * std::size_t(count) * 2 * sizeof(float), stream_.stream));
+  }
+  void clearOcclusionAndDual() {
+    const std::size_t p = plane();
+    occlusion_.reserve(p);
+    MCFLOW_CUDA_CHECK(cudaMemsetAsync(occlusion_.get(), 0, p, stream_.stream));
+    zeroDual(p, count_);
+  }
+
+  template <typename T>
+  void upload(DeviceBuffer<T>& buffer, const std::vector<T>& host, std::size_t count) {
+    if (host.size() != count)
+      throw InputError("CUDA backend: a pyramid image holds " + std::to_string(host.size()) + " values, expected " +
+                       std::to_string(count));
+    buffer.reserve(std::max<std::size_t>(count, 1));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(buffer.get(), host.data(), count * sizeof(T), cudaMemcpyHostToDevice,
+                                      stream_.stream));
+  }
+  template <typename T>
+  void download(T* host, const T* device, std::size_t count) {
+    T* staged = pinned_.as<T>(count);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(staged, device, count * sizeof(T), cudaMemcpyDeviceToHost, stream_.stream));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
+    std::copy_n(staged, count, host);
+  }
+
+  cuda_detail::StreamHolder stream_;
+  PinnedBytes pinned_;
+  std::vector<std::unique_ptr<LevelBuffers>> buffers_;
+  std::vector<DeviceLevel> levels_;
+  DeviceBuffer<float> label_buffers_[2], level_labels_[2], before_, data_cost_, weight_x_, weight_y_, centres_,
+      warped_z_;
+  DeviceBuffer<std::uint8_t> occlusion_, level_occlusion_, outlier_only_;
+  DeviceBuffer<float> dual_;
+  DeviceBuffer<double> scalar_, motions_, cuts_;
+  DeviceBuffer<cuda_detail::DeviceTransform> transforms_;
+  DeviceBuffer<int> counts_;
+  DeviceBuffer<long long> targets_;
+  DeviceBuffer<unsigned long long> moved_;
+  int current_ = 0, count_ = 0, level_ = 0, weights_level_ = -1;
+  // Declared last: destroyed first, before the stream and the buffers they work on.
+  std::unique_ptr<cuda_detail::DeviceMotionAccumulator> accumulator_;
+  std::unique_ptr<cuda_detail::DevicePrimalDual> primal_dual_;
+};
+
+}  // namespace
+
+std::unique_ptr<SolveBackend> makeCudaSolveBackend() {
+  std::string why;
+  if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);
+  return std::make_unique<CudaSolveBackend>();
+}
+
+}  // namespace mc_flow

@@ -1,0 +1,197 @@
+// The CPU backend of the solve's stages: the stage functions of src/core on host images (the reference
+// for cuda/solve_backend.cu), and the backend selection.
+#include "mc_flow/core/solve_backend.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/kmeans.h"
+#include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/occlusion.h"
+#include "mc_flow/core/scene_flow.h"
+
+namespace mc_flow {
+
+namespace {
+
+// Nearest-pixel resampling of a mask to another pyramid level (pixel-centre aligned). Levels differ by a
+// power of two (integer halving drops an odd last column/row), so the scale is 2^k, not the size ratio.
+ImageU8 resampleMask(const ImageU8& mask, int width, int height) {
+  if (mask.sameSize(width, height)) return mask;
+  ImageU8 out(width, height, 1, 0);
+  const double scale = std::exp2(std::round(std::log2(double(mask.width) / double(width))));  // source px per target px
+  for (int y = 0; y < height; ++y) {
+    const int sy = std::clamp(int(std::floor((y + 0.5) * scale)), 0, mask.height - 1);
+    for (int x = 0; x < width; ++x) {
+      const int sx = std::clamp(int(std::floor((x + 0.5) * scale)), 0, mask.width - 1);
+      out(x, y) = mask(sx, sy);
+    }
+  }
+  return out;
+}
+
+// Labels of one pyramid level carried to another.
+SoftLabels labelsAtLevel(const SoftLabels& u, int from_level, int to_level, const Pyramid& pyramid) {
+  if (to_level == from_level) return u;
+  if (to_level < from_level) return upsampleLabels(u, pyramid[to_level].points.width, pyramid[to_level].points.height);
+  SoftLabels out = u;
+  for (int level = from_level + 1; level <= to_level; ++level)
+    out = downsampleLabels(out, pyramid[level].points.width, pyramid[level].points.height);
+  return out;
+}
+
+class CpuSolveBackend final : public SolveBackend {
+ public:
+  CpuSolveBackend() : accumulator_(makeCpuMotionAccumulator()), optimizer_(makeCpuLabelOptimizer()) {}
+
+  Backend kind() const override { return Backend::Cpu; }
+
+  void loadPyramids(const Pyramid& frame1, const Pyramid& frame2, const Config& config) override {
+    if (frame1.size() != frame2.size() || frame1.size() == 0)
+      throw InputError("loadPyramids: pyramids of " + std::to_string(frame1.size()) + " and " +
+                       std::to_string(frame2.size()) + " levels");
+    pyr1_ = &frame1;
+    pyr2_ = &frame2;
+    (void)config;
+    u_ = SoftLabels();
+    level_ = 0;
+    occlusion_ = ImageU8();
+    dual_ = LabelDual();
+    weights_level_ = -1;
+  }
+
+  void initialiseLabels(int level, const std::vector<Eigen::Vector3f>& centres) override {
+    const PyramidLevel& L = (*pyr1_)[level];
+    const ImageI32 assignment = assignToNearestCentre(L.points, centres);
+    const int motion_labels = std::max<int>(1, int(centres.size()));
+    u_ = SoftLabels(L.points.width, L.points.height, motion_labels + 1, 0.f);
+    for (std::size_t k = 0; k < assignment.data.size(); ++k) {
+      const int a = assignment.data[k];
+      u_.plane(a >= 0 ? a : u_.outlier())[k] = 1.f;
+    }
+    level_ = level;
+    occlusion_ = ImageU8(L.points.width, L.points.height, 1, 0);
+    dual_ = LabelDual();
+  }
+
+  int labelLevel() const override { return level_; }
+
+  void moveLabels(int level) override {
+    u_ = labelsAtLevel(u_, level_, level, *pyr1_);
+    level_ = level;
+    occlusion_ = ImageU8(u_.width, u_.height, 1, 0);
+    dual_ = LabelDual();
+  }
+
+  MotionAccumulator& motionAccumulator(int level, MotionLabels which, bool use_occlusion,
+                                       const Config& config) override {
+    const PyramidLevel& P = (*pyr1_)[level];
+    if (which == MotionLabels::AllValidAsOne) {
+      level_labels_ = SoftLabels(P.points.width, P.points.height, 2, 0.f);
+      for (std::size_t k = 0; k < level_labels_.planeSize(); ++k)
+        level_labels_.plane(std::isfinite(P.points.data[k * 3 + 2]) ? 0 : 1)[k] = 1.f;
+    } else {
+      level_labels_ = labelsAtLevel(u_, level_, level, *pyr1_);
+    }
+    if (use_occlusion) level_occlusion_ = resampleMask(occlusion_, P.points.width, P.points.height);
+    accumulator_->setLevel(P, (*pyr2_)[level], level_labels_, use_occlusion ? &level_occlusion_ : nullptr, config);
+    return *accumulator_;
+  }
+
+  void updateOcclusion(const std::vector<Vector6d>& twists, const Config& config) override {
+    const PyramidLevel& L = (*pyr1_)[level_];
+    occlusion_ = detectOcclusions(warpPoints(L.points, u_, twists), (*pyr2_)[level_].depth, L.intrinsics, config);
+  }
+
+  LabelStepStats labelStep(const std::vector<Vector6d>& twists, bool use_occlusion, int iterations, double tolerance,
+                           const Config& config) override {
+    const PyramidLevel& L = (*pyr1_)[level_];
+    if (weights_level_ != level_) {
+      geometricWeights(L, config.min_geometric_weight, problem_.weight_x, problem_.weight_y);
+      weights_level_ = level_;
+    }
+    computeDataCosts(L, (*pyr2_)[level_], twists, use_occlusion ? &occlusion_ : nullptr, config, problem_);
+    const SoftLabels before = u_;
+    const LabelStats ls = optimizer_->optimize(problem_, u_, dual_, iterations, tolerance);
+    LabelStepStats out;
+    out.iterations = ls.iterations;
+    out.energy = ls.energy;
+    double change = 0;
+    for (std::size_t i = 0; i < u_.data.size(); ++i) change += std::fabs(u_.data[i] - before.data[i]);
+    out.mean_change = change / double(u_.planeSize());
+    return out;
+  }
+
+  SoftLabels downloadLabels() override { return u_; }
+
+  // ---- LabelStore: the host store over the current labels
+  int labelCount() const override { return u_.count; }
+  std::vector<double> supports() override { return store().supports(); }
+  void remap(const std::vector<int>& target, int new_count) override {
+    const int old_count = u_.count;
+    store().remap(target, new_count);
+    if (new_count != old_count) dual_ = LabelDual();
+  }
+  std::vector<LabelMoments> ownedMoments() override { return store().ownedMoments(); }
+  CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
+                     const Config& config) override {
+    return store().trialCuts(cuts, twists, use_occlusion, config);
+  }
+  void applyCuts(const std::vector<LabelCut>& cuts) override {
+    if (!cuts.empty()) dual_ = LabelDual();
+    store().applyCuts(cuts);
+  }
+  LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
+    return store().costModel(twists, use_occlusion, config);
+  }
+
+ private:
+  HostLabelStore store() {
+    return HostLabelStore(u_, (*pyr1_)[level_], (*pyr2_)[level_], &occlusion_, accumulator_.get());
+  }
+
+  std::unique_ptr<MotionAccumulator> accumulator_;
+  std::unique_ptr<LabelOptimizer> optimizer_;
+  const Pyramid* pyr1_ = nullptr;
+  const Pyramid* pyr2_ = nullptr;
+  SoftLabels u_, level_labels_;
+  int level_ = 0;
+  ImageU8 occlusion_, level_occlusion_;
+  LabelProblem problem_;
+  LabelDual dual_;
+  int weights_level_ = -1;
+};
+
+}  // namespace
+
+std::unique_ptr<SolveBackend> makeCpuSolveBackend() { return std::make_unique<CpuSolveBackend>(); }
+
+#ifndef MCFLOW_HAVE_CUDA
+std::unique_ptr<SolveBackend> makeCudaSolveBackend() {
+  throw BackendError("CUDA backend requested but this build has no CUDA (built without nvcc or MCFLOW_WITH_CUDA=OFF)");
+}
+#endif
+
+std::unique_ptr<SolveBackend> makeSolveBackend(Backend requested, std::string* note) {
+  std::string why;
+  switch (requested) {
+    case Backend::Cpu:
+      if (note) *note = "cpu (requested)";
+      return makeCpuSolveBackend();
+    case Backend::Cuda:
+      if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);
+      if (note) *note = "cuda (requested)";
+      return makeCudaSolveBackend();
+    case Backend::Auto:
+    default:
+      if (cudaBackendAvailable(&why)) {
+        if (note) *note = "cuda (auto: GPU available)";
+        return makeCudaSolveBackend();
+      }
+      if (note) *note = "cpu (auto: " + why + ")";
+      return makeCpuSolveBackend();
+  }
+}
+
+}  // namespace mc_flow

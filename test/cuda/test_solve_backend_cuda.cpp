@@ -1,0 +1,272 @@
+// The CUDA solve backend (cuda/solve_backend.cu) against the CPU one (src/core/solve_backend.cpp), stage by
+// stage, driven through the same sequence of SolveBackend calls on the same pyramids, at awkward sizes.
+//
+// Tolerances. Discrete results (initial hard labels, which pixels a cut moves, label counts) must agree
+// exactly. Sums over pixels run in another order (supports, moments, normal equations: relative 1e-6 of the
+// largest entry). The label step's data costs use the device's log1pf (a few float ulps from the CPU's
+// log1p), so u after a label step agrees to 1e-3 and the energy to a relative 1e-5.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/kmeans.h"
+#include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/metrics.h"
+#include "mc_flow/core/pyramid.h"
+#include "mc_flow/core/solve_backend.h"
+#include "mc_flow/core/solver.h"
+#include "mc_flow/core/synthetic_scene.h"
+
+namespace mc_flow {
+namespace {
+
+#define SKIP_WITHOUT_GPU()                                                                               \
+  do {                                                                                                   \
+    std::string why_no_gpu;                                                                              \
+    if (!cudaBackendAvailable(&why_no_gpu)) GTEST_SKIP() << "CUDA backend unavailable: " << why_no_gpu; \
+  } while (0)
+
+double maxAbsDifference(const SoftLabels& a, const SoftLabels& b) {
+  EXPECT_EQ(a.width, b.width);
+  EXPECT_EQ(a.height, b.height);
+  EXPECT_EQ(a.count, b.count);
+  if (a.data.size() != b.data.size()) return INFINITY;
+  double d = 0;
+  for (std::size_t i = 0; i < a.data.size(); ++i) d = std::max(d, double(std::fabs(a.data[i] - b.data[i])));
+  return d;
+}
+
+template <typename A, typename B>
+void expectRelativelyClose(const A& a, const B& b, double tolerance, const std::string& what) {
+  ASSERT_EQ(a.size(), b.size()) << what;
+  double scale = 1e-30, diff = 0;
+  for (Eigen::Index i = 0; i < a.size(); ++i) {
+    scale = std::max(scale, std::fabs(a(i)));
+    diff = std::max(diff, std::fabs(a(i) - b(i)));
+  }
+  EXPECT_LE(diff, tolerance * scale) << what << ": largest difference " << diff << ", largest entry " << scale;
+}
+
+struct Scene {
+  SyntheticPair pair;
+  Pyramid p1, p2;
+  std::vector<Eigen::Vector3f> centres;
+};
+
+Scene makeScene(int width, int height, int variant) {
+  SyntheticSceneOptions options;
+  options.width = width;
+  options.height = height;
+  options.variant = variant;
+  Scene s;
+  s.pair = renderSyntheticPair(options);
+  Config config;
+  const int levels = pyramidLevelCount(width, height, config.coarsest_min_width);
+  s.p1 = buildPyramid(s.pair.frame1, s.pair.intrinsics, levels, config);
+  s.p2 = buildPyramid(s.pair.frame2, s.pair.intrinsics, levels, config);
+  s.centres = kmeansPoints(s.p1[std::min(levels - 1, 2)].points, 5, 20, 1e-4, 7).centres;
+  return s;
+}
+
+void expectSameEquations(SolveBackend& cpu, SolveBackend& gpu, int level, MotionLabels which, bool occlusion,
+                         const std::vector<Vector6d>& twists, const Config& config, const std::string& what) {
+  MotionNormalEquations a, b;
+  cpu.motionAccumulator(level, which, occlusion, config).accumulate(twists, a);
+  gpu.motionAccumulator(level, which, occlusion, config).accumulate(twists, b);
+  EXPECT_EQ(a.pixels, b.pixels) << what;
+  expectRelativelyClose(a.H.reshaped(), b.H.reshaped(), 1e-6, what + " H");
+  expectRelativelyClose(a.g, b.g, 1e-6, what + " g");
+  expectRelativelyClose(a.label_cost, b.label_cost, 1e-6, what + " label costs");
+}
+
+// The whole sequence of stage calls a solve makes, on both backends, compared after each.
+void compareStages(int width, int height, int variant) {
+  const Scene s = makeScene(width, height, variant);
+  SCOPED_TRACE(std::to_string(width) + "x" + std::to_string(height) + " variant " + std::to_string(variant));
+  ASSERT_GE(s.centres.size(), 3u);
+  Config config;
+  auto cpu = makeCpuSolveBackend();
+  auto gpu = makeCudaSolveBackend();
+  const int levels = s.p1.size();
+  const int label_level = std::min(levels - 1, 1);
+  for (SolveBackend* b : {cpu.get(), gpu.get()}) {
+    b->loadPyramids(s.p1, s.p2, config);
+    b->initialiseLabels(label_level, s.centres);
+  }
+  ASSERT_EQ(cpu->labelCount(), gpu->labelCount());
+  EXPECT_EQ(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 0.0) << "initial hard labels";
+
+  const int n = cpu->labelCount() - 1;
+  std::vector<Vector6d> twists;
+  for (int i = 0; i < n; ++i) {
+    Vector6d xi;
+    xi << 0.01 * i, -0.004 * i, 0.006, 0.003 * i, -0.002, 0.001 * i;
+    twists.push_back(xi);
+  }
+  // Motion step at the label level, a coarser level (2x2 means) and a finer one (bilinear), and the
+  // dominant-motion labelling.
+  expectSameEquations(*cpu, *gpu, label_level, MotionLabels::Current, false, twists, config, "label level");
+  if (label_level + 1 < levels)
+    expectSameEquations(*cpu, *gpu, label_level + 1, MotionLabels::Current, false, twists, config, "coarser level");
+  expectSameEquations(*cpu, *gpu, 0, MotionLabels::Current, false, twists, config, "finer level");
+  expectSameEquations(*cpu, *gpu, 0, MotionLabels::AllValidAsOne, false, {twists[0]}, config, "one label");
+
+  // Occlusion, then a label step that uses it (data costs, weights, primal-dual).
+  for (SolveBackend* b : {cpu.get(), gpu.get()}) b->updateOcclusion(twists, config);
+  expectSameEquations(*cpu, *gpu, label_level, MotionLabels::Current, true, twists, config, "with occlusion");
+  if (label_level + 1 < levels)
+    expectSameEquations(*cpu, *gpu, label_level + 1, MotionLabels::Current, true, twists, config,
+                        "coarser level with occlusion");
+  const LabelStepStats la = cpu->labelStep(twists, true, 60, 0.0, config);
+  const LabelStepStats lb = gpu->labelStep(twists, true, 60, 0.0, config);
+  EXPECT_EQ(la.iterations, lb.iterations);
+  EXPECT_NEAR(la.energy, lb.energy, 1e-5 * std::fabs(la.energy));
+  EXPECT_NEAR(la.mean_change, lb.mean_change, 1e-4 * std::max(1.0, la.mean_change));
+  EXPECT_LE(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 1e-3) << "after a label step";
+
+  // Label store: supports, moments, cost model.
+  const std::vector<double> sa = cpu->supports(), sb = gpu->supports();
+  expectRelativelyClose(Eigen::Map<const Eigen::VectorXd>(sa.data(), Eigen::Index(sa.size())),
+                        Eigen::Map<const Eigen::VectorXd>(sb.data(), Eigen::Index(sb.size())), 1e-3, "supports");
+  // Moments of owned pixels (u >= 0.5): computed on the same u as the CPU's only up to the label step's
+  // rounding, so count those that agree on the labels first.
+  const std::vector<LabelMoments> ma = cpu->ownedMoments(), mb = gpu->ownedMoments();
+  ASSERT_EQ(ma.size(), mb.size());
+  for (std::size_t i = 0; i < ma.size(); ++i)
+    EXPECT_NEAR(ma[i].count, mb[i].count, std::max(2.0, 1e-3 * ma[i].count)) << "owned pixels of label " << i;
+  const LabelCostModel ca = cpu->costModel(twists, true, config), cb = gpu->costModel(twists, true, config);
+  for (int i = 0; i < n; ++i)
+    expectRelativelyClose(ca.curvature[std::size_t(i)].reshaped(), cb.curvature[std::size_t(i)].reshaped(), 1e-3,
+                          "curvature of label " + std::to_string(i));
+
+  // Remap: labels 0 and 1 merge, label 2 goes to the outlier label, the others shift down.
+  std::vector<int> target(std::size_t(n) + 1);
+  const int new_count = n - 1;  // n - 2 motion labels + outlier
+  target[0] = 0;
+  target[1] = 0;
+  target[2] = new_count - 1;
+  for (int i = 3; i < n; ++i) target[std::size_t(i)] = i - 2;
+  target[std::size_t(n)] = new_count - 1;
+  for (SolveBackend* b : {cpu.get(), gpu.get()}) b->remap(target, new_count);
+  ASSERT_EQ(gpu->labelCount(), new_count);
+  EXPECT_LE(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 1e-3) << "after a remap";
+
+  // Cut label 0 across the x axis through its centroid: the same pixels move, the trial's cost model agrees,
+  // and the labels change only when the cut is applied.
+  const LabelMoments m0 = gpu->ownedMoments()[0];
+  ASSERT_GT(m0.count, 10);
+  const LabelCut cut{0, m0.sum / m0.count, Eigen::Vector3d::UnitX()};
+  std::vector<Vector6d> trial_twists(twists.begin(), twists.begin() + (new_count - 1));
+  trial_twists.push_back(trial_twists[0]);
+  const SoftLabels before_trial = gpu->downloadLabels();
+  const CutTrial ta = cpu->trialCuts({cut}, trial_twists, true, config);
+  const CutTrial tb = gpu->trialCuts({cut}, trial_twists, true, config);
+  EXPECT_NEAR(ta.moved[0], tb.moved[0], 2.0);
+  EXPECT_GT(tb.moved[0], 0);
+  ASSERT_EQ(tb.model.curvature.size(), std::size_t(new_count));
+  for (int i = 0; i < new_count; ++i)
+    expectRelativelyClose(ta.model.curvature[std::size_t(i)].reshaped(), tb.model.curvature[std::size_t(i)].reshaped(),
+                          1e-3, "trial curvature of label " + std::to_string(i));
+  EXPECT_EQ(gpu->labelCount(), new_count);
+  EXPECT_EQ(maxAbsDifference(before_trial, gpu->downloadLabels()), 0.0) << "a trial changed the labels";
+  for (SolveBackend* b : {cpu.get(), gpu.get()}) b->applyCuts({cut});
+  ASSERT_EQ(gpu->labelCount(), new_count + 1);
+  EXPECT_LE(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 1e-3) << "after a cut";
+
+  // The final step: labels carried to level 0 and a label step there from a fresh dual.
+  std::vector<Vector6d> final_twists(twists.begin(), twists.begin() + (new_count - 1));
+  final_twists.push_back(final_twists[0]);
+  for (SolveBackend* b : {cpu.get(), gpu.get()}) {
+    b->moveLabels(0);
+    b->updateOcclusion(final_twists, config);
+  }
+  EXPECT_LE(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 1e-3) << "carried to level 0";
+  const LabelStepStats fa = cpu->labelStep(final_twists, true, 40, 0.0, config);
+  const LabelStepStats fb = gpu->labelStep(final_twists, true, 40, 0.0, config);
+  EXPECT_NEAR(fa.energy, fb.energy, 1e-4 * std::fabs(fa.energy));
+  EXPECT_LE(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 2e-3) << "final label step";
+}
+
+TEST(CudaSolveBackend, StagesMatchCpuAt317x239) {
+  SKIP_WITHOUT_GPU();
+  compareStages(317, 239, 0);
+}
+
+TEST(CudaSolveBackend, StagesMatchCpuAt160x120Variant2) {
+  SKIP_WITHOUT_GPU();
+  compareStages(160, 120, 2);
+}
+
+TEST(CudaSolveBackend, StagesMatchCpuAt64x57) {
+  SKIP_WITHOUT_GPU();
+  compareStages(64, 57, 1);
+}
+
+TEST(CudaSolveBackend, RejectsInconsistentCalls) {
+  SKIP_WITHOUT_GPU();
+  const Scene s = makeScene(64, 48, 0);
+  Config config;
+  auto gpu = makeCudaSolveBackend();
+  gpu->loadPyramids(s.p1, s.p2, config);
+  gpu->initialiseLabels(1, s.centres);
+  const int n = gpu->labelCount() - 1;
+  EXPECT_THROW(gpu->labelStep(std::vector<Vector6d>(std::size_t(n) + 1), false, 5, 0.0, config), InputError);
+  EXPECT_THROW(gpu->remap(std::vector<int>(std::size_t(n) + 1, 0), n + 1), InputError);  // outlier not last
+  EXPECT_THROW(gpu->applyCuts({LabelCut{n, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX()}}), InputError);
+  EXPECT_THROW(gpu->moveLabels(s.p1.size()), InputError);
+}
+
+// The solver's device buffers are reused across pairs of other sizes and label counts: a pair solved after
+// others gives exactly the result of a fresh solver.
+TEST(CudaSolveBackend, WorkspaceReuseGivesTheFreshResult) {
+  SKIP_WITHOUT_GPU();
+  Config config;
+  config.backend = Backend::Cuda;
+  SyntheticSceneOptions a_options, b_options;
+  a_options.width = 160;
+  a_options.height = 120;
+  a_options.variant = 1;
+  b_options.width = 320;
+  b_options.height = 240;
+  b_options.variant = 2;
+  const SyntheticPair a = renderSyntheticPair(a_options), b = renderSyntheticPair(b_options);
+  Solver fresh(config), reused(config);
+  const Result first = fresh.solve(a.frame1, a.frame2, a.intrinsics);
+  reused.solve(b.frame1, b.frame2, b.intrinsics);
+  reused.solve(a.frame1, a.frame2, a.intrinsics);
+  const Result again = reused.solve(a.frame1, a.frame2, a.intrinsics);
+  ASSERT_EQ(first.segments.size(), again.segments.size());
+  EXPECT_EQ(maxAbsDifference(first.soft_labels, again.soft_labels), 0.0);
+  for (std::size_t i = 0; i < first.segments.size(); ++i)
+    EXPECT_EQ((first.segments[i].twist - again.segments[i].twist).norm(), 0.0) << "segment " << i;
+}
+
+// Whole solves on both backends: the same number of segments and EPE within 0.01 px on the synthetic scenes.
+TEST(CudaSolveBackend, SolverMatchesCpuOnSyntheticScenes) {
+  SKIP_WITHOUT_GPU();
+  for (int variant = 0; variant < 3; ++variant) {
+    SyntheticSceneOptions options;
+    options.variant = variant;
+    const SyntheticPair pair = renderSyntheticPair(options);
+    Config cpu_config, gpu_config;
+    cpu_config.backend = Backend::Cpu;
+    gpu_config.backend = Backend::Cuda;
+    Solver cpu_solver(cpu_config), gpu_solver(gpu_config);
+    const Result a = cpu_solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+    const Result b = gpu_solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+    EXPECT_EQ(b.backend_kind, Backend::Cuda);
+    const FlowErrors ea = opticalFlowErrors(a.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion);
+    const FlowErrors eb = opticalFlowErrors(b.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion);
+    std::printf("variant %d: segments cpu %zu gpu %zu, EPE cpu %.4f px gpu %.4f px\n", variant, a.segments.size(),
+                b.segments.size(), ea.epe, eb.epe);
+    EXPECT_EQ(a.segments.size(), b.segments.size()) << "variant " << variant;
+    EXPECT_LT(std::abs(ea.epe - eb.epe), 0.01) << "variant " << variant;
+  }
+}
+
+}  // namespace
+}  // namespace mc_flow
