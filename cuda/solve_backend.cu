@@ -116,9 +116,10 @@ class CudaSolveBackend final : public SolveBackend {
     centres_.reserve(std::max<std::size_t>(std::size_t(centre_count) * 3, 1));
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(centres_.get(), staged, std::size_t(centre_count) * 3 * sizeof(float),
                                       cudaMemcpyHostToDevice, stream_.stream));
+    count_ = 0;  // nothing to keep when the buffers grow
     level_ = level;
+    reserveLabels(plane(), std::max(1, centre_count) + 1);
     count_ = std::max(1, centre_count) + 1;
-    reserveLabels(plane(), count_);
     cuda_detail::launchAssignToCentres(L.points1, centres_.get(), centre_count, labels(), stream_.stream);
     clearOcclusionAndDual();
     // The staging buffer is reused by the next small transfer: wait for this one.
@@ -390,7 +391,7 @@ class CudaSolveBackend final : public SolveBackend {
       // Growing loses the contents: keep them through the other buffer.
       DeviceBuffer<float>& other = label_buffers_[1 - current_];
       other.reserve(values);
-      if (count_ > 0)
+      if (count_ > 0 && label_buffers_[current_].capacity() > 0)
         MCFLOW_CUDA_CHECK(cudaMemcpyAsync(other.get(), labels(), plane() * std::size_t(count_) * sizeof(float),
                                           cudaMemcpyDeviceToDevice, stream_.stream));
       swapLabels();
