@@ -49,7 +49,10 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     test/ros/test_reconfigure.cpp
     test/ros/test_input_watch.cpp)
   target_link_libraries(test_ros_units PRIVATE mc_flow_nodelet GTest::gtest GTest::gtest_main)
-  gtest_discover_tests(test_ros_units DISCOVERY_MODE PRE_TEST TEST_PREFIX "ros.")
+  gtest_discover_tests(test_ros_units DISCOVERY_MODE PRE_TEST TEST_PREFIX "ros." PROPERTIES LABELS test_ros_units)
+  if(MCFLOW_SANITIZE)
+    mcflow_sanitizer_environment(test_ros_units)
+  endif()
   add_dependencies(tests test_ros_units)
 
   # The message validation and the input conversions again, built with ASan+UBSan: a header that slips

@@ -1,4 +1,5 @@
-# Unit and end-to-end tests (gtest via ctest). The ROS tests (rostest) are added in ros_nodelet.cmake.
+# Unit and end-to-end tests (gtest via ctest), labelled with their executable (ctest -L test_io). The ROS
+# tests (rostest) are added in ros_nodelet.cmake.
 find_package(GTest REQUIRED)
 include(GoogleTest)
 
@@ -18,7 +19,10 @@ function(mcflow_add_gtest name)
   target_link_libraries(${name} PRIVATE ${MCFLOW_TEST_LIBS} GTest::gtest GTest::gtest_main)
   target_include_directories(${name} PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/test)
   gtest_discover_tests(${name} DISCOVERY_MODE PRE_TEST
-    PROPERTIES ENVIRONMENT "MCFLOW_SHARED_DATA=${MCFLOW_SHARED_DATA_DEFAULT}")
+    PROPERTIES ENVIRONMENT "MCFLOW_SHARED_DATA=${MCFLOW_SHARED_DATA_DEFAULT}" LABELS ${name})
+  if(MCFLOW_SANITIZE)
+    mcflow_sanitizer_environment(${name} "MCFLOW_SHARED_DATA=${MCFLOW_SHARED_DATA_DEFAULT}")
+  endif()
   add_dependencies(tests ${name})
 endfunction()
 

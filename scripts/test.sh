@@ -1,10 +1,18 @@
 #!/usr/bin/env bash
-# Installs dependencies, builds, and runs every test (gtest + rostest through ctest).
+# Installs dependencies, builds, and runs every test (gtest + rostest through ctest), then the core and I/O
+# tests again under ASan+UBSan (scripts/test_sanitized.sh core-io, in build-sanitize-core-io).
+#   MCFLOW_SANITIZE=1 bash scripts/test.sh   only the sanitized tests: core, I/O and ROS unit tests
+#   MCFLOW_SANITIZE=0 bash scripts/test.sh   no sanitized tests
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 export PATH="/usr/bin:$PATH"
 bash "$ROOT/scripts/install_deps.sh"
-bash "$ROOT/scripts/build.sh"
 export MCFLOW_SHARED_DATA="${MCFLOW_SHARED_DATA:-$(cd "$ROOT/.." && pwd)/shared/data}"
-cd "${MCFLOW_BUILD_DIR:-$ROOT/build}"
-OMP_WAIT_POLICY=passive ctest --output-on-failure -j"$(nproc)"
+if [ "${MCFLOW_SANITIZE:-}" = 1 ]; then
+  exec bash "$ROOT/scripts/test_sanitized.sh"
+fi
+bash "$ROOT/scripts/build.sh"
+(cd "${MCFLOW_BUILD_DIR:-$ROOT/build}" && OMP_WAIT_POLICY=passive ctest --output-on-failure -j"$(nproc)")
+if [ "${MCFLOW_SANITIZE:-}" != 0 ]; then
+  bash "$ROOT/scripts/test_sanitized.sh" core-io
+fi
