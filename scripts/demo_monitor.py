@@ -1,13 +1,14 @@
 #!/usr/bin/python3
 """Ends the demo: waits until the bag player has finished and the nodelet's last pair has come out,
-then reports and exits (demo.launch marks this node required, so roslaunch then stops everything).
+then reports, and ends the roslaunch that started it the way Ctrl-C does (see end_launch).
 
 Parameters (private): segments_topic, input_topic (a topic the player publishes), player (its node name),
-bag (its path, for messages), save_dir, status_file (gets "0" or "1 <reason>": roslaunch exits 0 when a
-required node ends, so scripts read this), settle (s to wait for results after the player is gone),
+bag (its path, for messages), save_dir, status_file (gets "0" or "1 <reason>": roslaunch exits 0 either
+way, so scripts read this), settle (s to wait for results after the player is gone),
 first_result_timeout (s), timeout (s, whole demo).
 """
 import os
+import signal
 import sys
 import time
 
@@ -108,6 +109,24 @@ class Monitor:
         return 0
 
 
+def end_launch():
+    """Sends SIGINT, as Ctrl-C does, to the roslaunch that started this node: its normal shutdown. A node
+    marked required would end the launch too, but roslaunch reports the end of a required node, a
+    successful one included, as a red 'REQUIRED process [...] has died!'. Started otherwise (rosrun), the
+    parent is left alone."""
+    parent = os.getppid()
+    try:
+        with open("/proc/%d/cmdline" % parent, "rb") as f:
+            command = f.read().split(b"\0")
+    except OSError:
+        return
+    if any(os.path.basename(part) == b"roslaunch" for part in command[:2]):
+        os.kill(parent, signal.SIGINT)
+
+
 if __name__ == "__main__":
     rospy.init_node("demo_monitor")
-    sys.exit(Monitor().run())
+    code = Monitor().run()
+    if not rospy.is_shutdown():
+        end_launch()
+    sys.exit(code)

@@ -28,7 +28,7 @@ rm -f "$out"/pictures/*.png 2>/dev/null || true
 bag="$out/mc_flow_synthetic.bag"
 "$build/devel/lib/mc_flow/make_synthetic_bag" "$bag" --frames "$frames" --rate 10
 echo "playing $bag at rate $rate into the nodelet (pictures: $out/pictures)"
-# roslaunch exits 0 when the required demo_monitor ends, even on failure: the monitor's status file says.
+# demo_monitor ends roslaunch, which then exits 0 even on failure: the monitor's status file says.
 status="$out/demo_status"
 rm -f "$status"
 roslaunch -p "$port" mc_flow demo.launch bag:="$bag" rate:="$rate" save_dir:="$out/pictures" \

@@ -3,7 +3,7 @@
 #  1. --ros-args: every argument documented, none but bag Required (mc_flow.launch: none);
 #  2. a bag with only the three camera topics (no TF; depth 16UC1 in its own frame), given by a path
 #     relative to the folder roslaunch starts in: it plays, and every output's frame_id is the rviz
-#     config's default Fixed Frame, so rviz needs no transform;
+#     config's default Fixed Frame, so rviz needs no transform; the launch ends without a process dying;
 #  3. a relative path to no file: refused before anything starts, naming the resolved path;
 #  4. a file the player cannot read: the demo ends with the reason and status 1, not a timeout.
 # Usage: check_bag_launch.sh SOURCE_DIR DEVEL_DIR
@@ -52,7 +52,9 @@ while read -r _ name ids; do
   [ "$ids" = "$fixed" ] || fail "$name carries frame_id '$ids', not the rviz Fixed Frame '$fixed'"
 done < <(grep "^FRAME " "$work/frames")
 [ "$(cut -d' ' -f1 "$work/status" 2>/dev/null)" = 0 ] || { tail -20 "$work/launch.log"; fail "demo status: $(cat "$work/status" 2>/dev/null)"; }
-echo "ok   bag:=three.bag relative to the launch folder; every output in '$fixed'"
+# A demo that went well ends without roslaunch's red "REQUIRED process [...] has died!".
+! grep -q "has died" "$work/launch.log" || { grep -B2 -A3 "has died" "$work/launch.log"; fail "a process died at the end of the demo"; }
+echo "ok   bag:=three.bag relative to the launch folder; every output in '$fixed'; clean end"
 
 # 3. a relative path to nothing
 out=$(cd "$work" && timeout 60 roslaunch -p "$port" mc_flow demo.launch bag:=missing.bag rviz:=false 2>&1)
