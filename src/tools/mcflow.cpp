@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -28,6 +29,7 @@
 #include "mc_flow/io/flow_io.h"
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
+#include "mc_flow/io/resources.h"
 #include "mc_flow/io/result_io.h"
 
 namespace {
@@ -280,9 +282,18 @@ Result solveAndWrite(const io::PairPaths& paths, const Arguments& args, const Co
   io::createOutputDirectory(out);  // fail on an unwritable directory before the solve
   Solver solver(config);           // fails fast on an unusable backend
 
+  // Read before loading: the estimate includes the loaded images. MCFLOW_MEMINFO (a file in /proc/meminfo's
+  // format) stands in for /proc/meminfo in the tests.
+  const char* meminfo = std::getenv("MCFLOW_MEMINFO");
+  const std::uint64_t available =
+      meminfo ? io::parseMemAvailable(io::readTextFile(meminfo)) : io::availableMemoryBytes();
   progress("loading " + paths.rgb1 + ", " + paths.depth1 + ", " + paths.rgb2 + ", " + paths.depth2 + "...");
   const auto load_start = std::chrono::steady_clock::now();
   io::LoadedPair pair = io::loadPair(paths);
+  const io::SizeCheck size = io::checkRunSize(pair.frame1.width(), pair.frame1.height(), config,
+                                              solver.backendName() == "cpu", available);
+  if (!size.error.empty()) throw InputError(size.error);
+  if (!size.warning.empty()) std::cerr << "mcflow: warning: " << size.warning << std::endl;
   const Intrinsics K = inputIntrinsics(args, pair.frame1.width(), pair.frame1.height());
   io::RunInfo info{paths.rgb1, paths.depth1, paths.rgb2, paths.depth2, paths.depth_scale, elapsedMs(load_start), 0};
 

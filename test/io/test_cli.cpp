@@ -399,3 +399,17 @@ TEST(CliErrors, CudaBackendWithoutGpu) {
   EXPECT_EQ(run.code, 2);
   EXPECT_NE(lower(run.err).find("cuda"), std::string::npos) << run.err;
 }
+
+// A pair that would not fit in memory is refused after loading, before the solve, naming the estimate and
+// what is available. MCFLOW_MEMINFO stands in for /proc/meminfo, so no large image is needed.
+TEST(CliErrors, PairLargerThanAvailableMemoryIsRefusedNamingTheEstimate) {
+  const fs::path meminfo = workDir() / "meminfo";
+  io::writeTextFile(meminfo.string(), "MemTotal:        2048 kB\nMemAvailable:    1024 kB\n");
+  ::setenv("MCFLOW_MEMINFO", meminfo.c_str(), 1);
+  const CliRun run = runCli("run " + inputArgs() + " --intrinsics " + intrinsicsText() + outArg("e_memory"));
+  ::unsetenv("MCFLOW_MEMINFO");
+  EXPECT_EQ(run.code, 1) << run.err;
+  EXPECT_NE(run.err.find("a 160x120 pair at processing level 0 (160x120) needs about"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("only 1 MB is available (MemAvailable in /proc/meminfo)"), std::string::npos) << run.err;
+  EXPECT_FALSE(fs::exists(workDir() / "e_memory" / "optical_flow.flo"));
+}
