@@ -230,6 +230,17 @@ void MotionNormalEquations::add(const MotionNormalEquations& other) {
   pixels += other.pixels;
 }
 
+std::string toString(MotionStop stop) {
+  switch (stop) {
+    case MotionStop::NoLabels: return "no_labels";
+    case MotionStop::IterationLimit: return "iteration_limit";
+    case MotionStop::SmallUpdate: return "small_update";
+    case MotionStop::TooFewPixels: return "too_few_pixels";
+    case MotionStop::SolveFailed: return "solve_failed";
+  }
+  return "unknown(" + std::to_string(int(stop)) + ")";
+}
+
 double motionOutOfViewCost(const Config& config) {
   return (1.0 + config.alpha) * std::log1p(kOutOfViewResidualScales * kOutOfViewResidualScales);
 }
@@ -253,7 +264,7 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
                                         const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator) {
   const int motion_labels = labels.count - 1;
-  if (motion_labels <= 0 || int(twists.size()) != motion_labels) return MotionLevelStats{};
+  if (motion_labels <= 0 || int(twists.size()) != motion_labels) return MotionLevelStats{};  // stop = NoLabels
   std::unique_ptr<MotionAccumulator> own;
   if (!accumulator) {
     own = makeCpuMotionAccumulator();
@@ -277,13 +288,17 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
   std::vector<double> accepted_cost(static_cast<std::size_t>(motion_labels), std::numeric_limits<double>::infinity());
   std::vector<Vector6d> accepted_twist = twists;
 
+  stats.stop = MotionStop::IterationLimit;
   for (int iteration = 0; iteration < config.motion_iterations_per_level; ++iteration) {
     accumulator->accumulate(twists, total);
     if (iteration == 0) stats.cost_before = total.cost;
     stats.cost_after = total.cost;
     stats.pixels_used = total.pixels;
     stats.iterations = iteration + 1;
-    if (total.pixels < 6) break;
+    if (total.pixels < 6) {
+      stats.stop = MotionStop::TooFewPixels;
+      break;
+    }
 
     // Accept or reject each label's last step; rejected and unsupported labels get a zero update now.
     std::vector<bool> frozen(static_cast<std::size_t>(motion_labels), false);
@@ -318,7 +333,10 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
         total.H(d, d) += damping[std::size_t(i)] * total.H(d, d) + 1e-9 * std::max(block_max, 1e-12);
     }
     const Eigen::VectorXd delta = total.H.ldlt().solve(-total.g);
-    if (!delta.allFinite()) break;
+    if (!delta.allFinite()) {
+      stats.stop = MotionStop::SolveFailed;
+      break;
+    }
     double largest = 0;
     for (int i = 0; i < motion_labels; ++i) {
       Vector6d d = delta.segment<6>(6 * i);
@@ -328,7 +346,10 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
       twists[std::size_t(i)] += d;
       largest = std::max(largest, d.cwiseAbs().maxCoeff());
     }
-    if (largest < config.motion_min_update) break;
+    if (largest < config.motion_min_update) {
+      stats.stop = MotionStop::SmallUpdate;
+      break;
+    }
   }
   // A backtracked step that was not evaluated any more is dropped: return the last accepted twists.
   twists = accepted_twist;

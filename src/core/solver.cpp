@@ -163,9 +163,11 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
     Config motion_config = config;
     if (k > 0) motion_config.motion_iterations_per_level = config.motion_iterations_refine;
     for (int level = coarsest; level >= finest; --level) {
-      const MotionLevelStats ms = estimateMotionsWith(
+      MotionLevelStats ms = estimateMotionsWith(
           backend.motionAccumulator(level, MotionLabels::Current, occlusions, config), twists, motion_config);
+      ms.level = level;
       stats.motion_iterations += ms.iterations;
+      stats.motion_levels.push_back(ms);
     }
     result.timings.motion += elapsedMs(t);
 

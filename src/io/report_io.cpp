@@ -75,7 +75,15 @@ std::string reportJson(const Result& result, const Config& config, const RunInfo
   Json config_fields = Json::object();
   for (const auto& [name, value] : config.fields()) config_fields[name] = configValue(value);
   Json iterations = Json::array();
-  for (const OuterIterationStats& it : result.iterations)
+  for (const OuterIterationStats& it : result.iterations) {
+    Json motion_levels = Json::array();
+    for (const MotionLevelStats& m : it.motion_levels)
+      motion_levels.push_back({{"level", m.level},
+                               {"iterations", m.iterations},
+                               {"stop", toString(m.stop)},
+                               {"pixels", m.pixels_used},
+                               {"cost_before", number(m.cost_before)},
+                               {"cost_after", number(m.cost_after)}});
     iterations.push_back({{"iteration", it.iteration},
                           {"labels_before", it.labels_before},
                           {"labels_after", it.labels_after},
@@ -83,9 +91,11 @@ std::string reportJson(const Result& result, const Config& config, const RunInfo
                           {"removed", it.removed},
                           {"split", it.split},
                           {"motion_iterations", it.motion_iterations},
+                          {"motion_levels", motion_levels},
                           {"label_iterations", it.label_iterations},
                           {"label_change", number(it.label_change)},
                           {"energy", number(it.energy)}});
+  }
   Json report;
   report["inputs"] = {{"rgb1", info.rgb1},
                       {"depth1", info.depth1},

@@ -129,6 +129,22 @@ TEST(Solver, OutputsAreConsistent) {
   EXPECT_GT(r.timings.total, 0.0);
   EXPECT_FALSE(r.iterations.empty());
   EXPECT_EQ(r.backend, "cpu");
+  EXPECT_EQ(r.backend_kind, Backend::Cpu);
+  // The motion step's statistics per level reach the result: coarse to fine, ending at the processing level,
+  // iterations adding up to the iteration's total, each with the reason its loop stopped.
+  for (const OuterIterationStats& it : r.iterations) {
+    ASSERT_FALSE(it.motion_levels.empty());
+    EXPECT_EQ(it.motion_levels.back().level, config.processing_level);
+    int sum = 0;
+    for (std::size_t k = 0; k < it.motion_levels.size(); ++k) {
+      const MotionLevelStats& m = it.motion_levels[k];
+      if (k > 0) EXPECT_EQ(m.level, it.motion_levels[k - 1].level - 1);
+      EXPECT_NE(m.stop, MotionStop::NoLabels);
+      EXPECT_GT(m.iterations, 0);
+      sum += m.iterations;
+    }
+    EXPECT_EQ(sum, it.motion_iterations);
+  }
 }
 
 TEST(Solver, StaticSceneGivesZeroMotion) {

@@ -18,12 +18,23 @@
 
 namespace mc_flow {
 
+/// @brief Why the IRLS loop of one level stopped (as dvo_slam reports per level).
+enum class MotionStop {
+  NoLabels,        ///< nothing to estimate (no motion label, or twists not matching the labels)
+  IterationLimit,  ///< motion_iterations_per_level (or _refine) reached
+  SmallUpdate,     ///< the largest twist update fell below motion_min_update
+  TooFewPixels,    ///< fewer than 6 pixels carried residuals
+  SolveFailed,     ///< the damped normal equations gave a non-finite step
+};
+std::string toString(MotionStop stop);
+
 struct MotionLevelStats {
-  int level = 0;
+  int level = 0;           ///< pyramid level (set by the caller; 0 = input resolution)
   int iterations = 0;
   int pixels_used = 0;
   double cost_before = 0;  ///< robust cost (normalised Cauchy) at the first iteration
   double cost_after = 0;   ///< at the last iteration
+  MotionStop stop = MotionStop::NoLabels;
 };
 
 /// @brief The normal equations of one IRLS linearisation over all motion labels (6 unknowns per label).

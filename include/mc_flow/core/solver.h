@@ -11,6 +11,7 @@
 
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/image.h"
+#include "mc_flow/core/motion_estimation.h"
 #include "mc_flow/core/se3.h"
 #include "mc_flow/core/soft_labels.h"
 
@@ -39,6 +40,7 @@ struct OuterIterationStats {
   int merged = 0, removed = 0, split = 0;
   double smallest_refused_merge = 0;  ///< predicted data-cost increase of the cheapest merge not taken
   int motion_iterations = 0;  ///< IRLS iterations summed over levels
+  std::vector<MotionLevelStats> motion_levels;  ///< the motion step per level, coarse to fine
   int label_iterations = 0;   ///< primal-dual iterations
   double label_change = 0;    ///< mean |u_k+1 - u_k| at the label level
   double energy = 0;          ///< E(u) of eq. 4 after the label step
