@@ -22,5 +22,6 @@ mkdir -p "$corpus" "$artifacts"
 export OPENCV_LOG_LEVEL=ERROR
 export ASAN_OPTIONS="${ASAN_OPTIONS:-abort_on_error=1:detect_leaks=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
-exec "$build/fuzz_$target" -artifact_prefix="$artifacts/${target}-" -print_final_stats=1 "$@" \
+# Not exec: the EXIT trap must still remove the work folder.
+"$build/fuzz_$target" -artifact_prefix="$artifacts/${target}-" -print_final_stats=1 "$@" \
   "$corpus" "$work/seeds0/$target" "$work/seeds1/$target"
