@@ -61,6 +61,34 @@ class DeviceBuffer {
 namespace mc_flow {
 namespace cuda_detail {
 
+/// Page-locked host memory of T that only grows: the staging of the small per-call uploads and downloads.
+template <typename T>
+class PinnedBuffer {
+ public:
+  PinnedBuffer() = default;
+  PinnedBuffer(const PinnedBuffer&) = delete;
+  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
+  ~PinnedBuffer() {
+    if (data_) cudaFreeHost(data_);
+  }
+  /// @brief Makes room for at least `count` elements (at least one); old contents are lost when it grows.
+  T* reserve(std::size_t count) {
+    count = count > 0 ? count : 1;
+    if (count <= capacity_) return data_;
+    if (data_) MCFLOW_CUDA_CHECK(cudaFreeHost(data_));
+    data_ = nullptr;
+    capacity_ = 0;
+    MCFLOW_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&data_), count * sizeof(T)));
+    capacity_ = count;
+    return data_;
+  }
+  T* get() { return data_; }
+
+ private:
+  T* data_ = nullptr;
+  std::size_t capacity_ = 0;
+};
+
 /// Owns one non-blocking CUDA stream; destroyed without throwing.
 struct StreamHolder {
   cudaStream_t stream = nullptr;

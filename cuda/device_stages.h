@@ -75,6 +75,17 @@ struct DeviceTransform {
 };
 DeviceTransform deviceTransform(const Vector6d& twist);
 
+/// @brief P2 = R P + t for a row-major 3x4 float transform, rounded as the CPU's Eigen product of the
+/// points: a0 x + (a1 y + a2 z), then + t (explicitly rounded operations, no FMA).
+__device__ __forceinline__ void transformPointDevice(const float T[12], const float P[3], float P2[3]) {
+#pragma unroll
+  for (int r = 0; r < 3; ++r) {
+    const float* row = T + 4 * r;
+    P2[r] = __fadd_rn(__fadd_rn(__fmul_rn(row[0], P[0]), __fadd_rn(__fmul_rn(row[1], P[1]), __fmul_rn(row[2], P[2]))),
+                      row[3]);
+  }
+}
+
 // ---------------------------------------------------------------- motion step (motion_estimation.cu)
 /// @brief The motion step's accumulator on device-resident data (no uploads but the twists).
 class DeviceMotionAccumulator : public MotionAccumulator {

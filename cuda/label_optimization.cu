@@ -200,18 +200,6 @@ struct PinnedScalars {
   double energy = 0.0;
 };
 
-struct PinnedHolder {
-  PinnedScalars* scalars = nullptr;
-  PinnedHolder() {
-    MCFLOW_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&scalars), sizeof(PinnedScalars)));
-  }
-  ~PinnedHolder() {
-    if (scalars) cudaFreeHost(scalars);
-  }
-  PinnedHolder(const PinnedHolder&) = delete;
-  PinnedHolder& operator=(const PinnedHolder&) = delete;
-};
-
 // The iterations between two convergence checks run as one CUDA graph: at the coarse pyramid levels the
 // solver works at (e.g. 160x120), a kernel takes a few microseconds and launch gaps would dominate.
 struct GraphHolder {
@@ -227,7 +215,7 @@ struct GraphHolder {
 // engine under CudaLabelOptimizer (the host-memory interface).
 class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
  public:
-  explicit PrimalDualEngine(cudaStream_t stream) : stream_(stream) {}
+  explicit PrimalDualEngine(cudaStream_t stream) : stream_(stream), scalars_(pinned_.reserve(1)) {}
 
   LabelStats run(const cuda_detail::DeviceLabelProblem& problem, float* u, float* p, int iterations,
                  double tolerance) override {
@@ -265,10 +253,10 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
       stats.iterations = done;
       std::size_t bytes = temp_bytes_;
       MCFLOW_CUDA_CHECK(cub::DeviceReduce::Max(temp_.get(), bytes, change_.get(), max_change_.get(), int(plane), s));
-      MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&pinned_.scalars->max_change, max_change_.get(), sizeof(float),
+      MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->max_change, max_change_.get(), sizeof(float),
                                         cudaMemcpyDeviceToHost, s));
       MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
-      stats.last_change = pinned_.scalars->max_change;
+      stats.last_change = scalars_->max_change;
       if (stats.last_change < tolerance) break;
     }
 
@@ -277,9 +265,9 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     MCFLOW_CUDA_CHECK_LAUNCH("pixelEnergy");
     std::size_t bytes = temp_bytes_;
     MCFLOW_CUDA_CHECK(cub::DeviceReduce::Sum(temp_.get(), bytes, pixel_energy_.get(), energy_.get(), int(plane), s));
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&pinned_.scalars->energy, energy_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->energy, energy_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
-    stats.energy = pinned_.scalars->energy;
+    stats.energy = scalars_->energy;
     return stats;
   }
 
@@ -410,7 +398,8 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
 
   static constexpr int kPrimalBlockY = 4;
   cudaStream_t stream_;
-  PinnedHolder pinned_;
+  cuda_detail::PinnedBuffer<PinnedScalars> pinned_;
+  PinnedScalars* scalars_;  // the two scalars read back
   DeviceBuffer<float> u_bar_, sigma_rx_, sigma_ry_, shrink_x_, shrink_y_, tau_;
   DeviceBuffer<float> change_, max_change_;
   DeviceBuffer<std::uint8_t> temp_;
@@ -527,11 +516,8 @@ __global__ void dataCostsKernel(const DataCostParams q, float* __restrict__ data
   data_cost[std::size_t(q.motion_labels) * plane + idx] = q.outlier_cost;
   const float I1 = q.level.intensity1.at(x, y, 0);
   for (int i = 0; i < q.motion_labels; ++i) {
-    const float* T = q.transforms[i].m;
     float P2[3];
-#pragma unroll
-    for (int r = 0; r < 3; ++r)
-      P2[r] = add(add(mul(T[4 * r], P[0]), add(mul(T[4 * r + 1], P[1]), mul(T[4 * r + 2], P[2]))), T[4 * r + 3]);
+    cuda_detail::transformPointDevice(q.transforms[i].m, P, P2);
     float cost = q.out_of_view;
     if (P2[2] > 1e-3f) {
       float u = add(__fdiv_rn(mul(q.fx, P2[0]), P2[2]), q.cx), v = add(__fdiv_rn(mul(q.fy, P2[1]), P2[2]), q.cy);

@@ -45,6 +45,7 @@ namespace {
 using cuda_detail::addRn;
 using cuda_detail::DeviceBuffer;
 using cuda_detail::DeviceImage;
+using cuda_detail::PinnedBuffer;
 using cuda_detail::divRn;
 using cuda_detail::mulRn;
 using cuda_detail::subRn;
@@ -239,13 +240,8 @@ __global__ void __launch_bounds__(kThreads) accumulateNormalEquations(const Kern
         transform = p.motions[first].transform;
         left_jacobian = p.motions[first].left_jacobian;
       }
-      // P2 = R P + t with Eigen's order for a 3x3 * 3 product: a0 x + (a1 y + a2 z).
       float P2[3];
-#pragma unroll
-      for (int r = 0; r < 3; ++r) {
-        const float* row = transform + 4 * r;
-        P2[r] = addRn(addRn(mulRn(row[0], P[0]), addRn(mulRn(row[1], P[1]), mulRn(row[2], P[2]))), row[3]);
-      }
+      cuda_detail::transformPointDevice(transform, P, P2);
       const float inv_z = divRn(1.f, fmaxf(P2[2], 1e-3f));
       float u = addRn(mulRn(mulRn(p.fx, P2[0]), inv_z), p.cx);
       float v = addRn(mulRn(mulRn(p.fy, P2[1]), inv_z), p.cy);
@@ -427,31 +423,6 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
 
 // ----------------------------------------------------------------- host side
 
-/// Page-locked host memory that only grows (the per-call upload of the motions and download of the sums).
-template <typename T>
-class PinnedBuffer {
- public:
-  PinnedBuffer() = default;
-  PinnedBuffer(const PinnedBuffer&) = delete;
-  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
-  ~PinnedBuffer() {
-    if (data_) cudaFreeHost(data_);
-  }
-  void reserve(std::size_t count) {
-    if (count <= capacity_) return;
-    if (data_) MCFLOW_CUDA_CHECK(cudaFreeHost(data_));
-    data_ = nullptr;
-    capacity_ = 0;
-    MCFLOW_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&data_), count * sizeof(T)));
-    capacity_ = count;
-  }
-  T* get() { return data_; }
-
- private:
-  T* data_ = nullptr;
-  std::size_t capacity_ = 0;
-};
-
 std::string sizeText(int w, int h, int c) {
   return std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(c);
 }
@@ -540,11 +511,8 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     level_ = level;
     bound_labels_ = labels;
     bound_occluded_ = occluded;
-    width_ = level.width;
-    height_ = level.height;
     motion_labels_ = count - 1;
     config_ = config;
-    intrinsics_ = level.intrinsics;
     blended_.reserve(plane);
     blended_hessian_.reserve(plane * kUpper);
     active_mass_.reserve(plane);
@@ -552,7 +520,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   }
 
   void accumulate(const std::vector<Vector6d>& twists, MotionNormalEquations& out) override {
-    if (width_ <= 0) throw InputError("CUDA motion step: accumulate() called before setLevel()");
+    if (level_.width <= 0) throw InputError("CUDA motion step: accumulate() called before setLevel() or bind()");
     const int n = motion_labels_;
     if (int(twists.size()) != n)
       throw InputError("CUDA motion step: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
@@ -566,7 +534,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     // Layout of the sums: per-label values, cost, pixels (block_values, as in the per-block partials), pairs.
     const std::size_t block_values = label_values + 2;
     const std::size_t sum_values = block_values + pair_values;
-    const std::size_t plane = std::size_t(width_) * height_;
+    const std::size_t plane = std::size_t(level_.width) * level_.height;
     const unsigned blocks = unsigned((plane + kThreads - 1) / kThreads);
     motions_.reserve(std::size_t(n));
     host_motions_.reserve(std::size_t(n));
@@ -578,10 +546,9 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     LabelMotion* motions = host_motions_.get();
     for (int i = 0; i < n; ++i) {
       const Vector6d& xi = twists[std::size_t(i)];
-      const Eigen::Matrix<float, 3, 4> T = se3Exp(xi).topRows<3>().cast<float>();
+      const cuda_detail::DeviceTransform T = cuda_detail::deviceTransform(xi);
       const Eigen::Matrix<float, 6, 6> J = se3LeftJacobian(xi).cast<float>();
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 4; ++c) motions[i].transform[r * 4 + c] = T(r, c);
+      for (int k = 0; k < 12; ++k) motions[i].transform[k] = T.m[k];
       for (int r = 0; r < 6; ++r)
         for (int c = 0; c < 6; ++c) motions[i].left_jacobian[r * 6 + c] = J(r, c);
       for (int k = 0; k < 6; ++k) motions[i].twist[k] = xi(k);
@@ -598,13 +565,13 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     p.labels = bound_labels_;
     p.occluded = bound_occluded_;
     p.motions = motions_.get();
-    p.width = width_;
-    p.height = height_;
+    p.width = level_.width;
+    p.height = level_.height;
     p.motion_labels = n;
-    p.fx = float(intrinsics_.fx);
-    p.fy = float(intrinsics_.fy);
-    p.cx = float(intrinsics_.cx);
-    p.cy = float(intrinsics_.cy);
+    p.fx = float(level_.intrinsics.fx);
+    p.fy = float(level_.intrinsics.fy);
+    p.cx = float(level_.intrinsics.cx);
+    p.cy = float(level_.intrinsics.cy);
     p.c_intensity = float(config_.cauchy_c_intensity);
     p.c_depth = float(config_.cauchy_c_depth);
     p.alpha = float(config_.alpha);
@@ -672,9 +639,8 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   cuda_detail::DeviceLevel level_;
   const float* bound_labels_ = nullptr;
   const std::uint8_t* bound_occluded_ = nullptr;
-  int width_ = 0, height_ = 0, motion_labels_ = 0;
+  int motion_labels_ = 0;
   Config config_;
-  Intrinsics intrinsics_;
   DeviceBuffer<float> points1_, intensity1_, intensity2_, depth2_, intensity_grad2_, depth_grad2_, labels_;
   DeviceBuffer<float> blended_hessian_, active_mass_, mass_;  // blended pixels, for the pair kernel
   DeviceBuffer<std::uint8_t> occluded_, blended_;
@@ -686,7 +652,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
 
 }  // namespace
 
-/// @brief The CUDA motion accumulator (selected by makeMotionAccumulator(Backend::Cuda)); throws BackendError
+/// @brief The CUDA motion accumulator on host-memory levels (setLevel uploads); throws BackendError
 /// when no usable CUDA device is present.
 std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator() {
   std::string why;

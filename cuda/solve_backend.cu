@@ -31,33 +31,7 @@ namespace {
 
 using cuda_detail::DeviceBuffer;
 using cuda_detail::DeviceLevel;
-
-/// Page-locked host memory that only grows: the small uploads and downloads of the decisions.
-class PinnedBytes {
- public:
-  PinnedBytes() = default;
-  PinnedBytes(const PinnedBytes&) = delete;
-  PinnedBytes& operator=(const PinnedBytes&) = delete;
-  ~PinnedBytes() {
-    if (data_) cudaFreeHost(data_);
-  }
-  template <typename T>
-  T* as(std::size_t count) {
-    const std::size_t bytes = count * sizeof(T);
-    if (bytes > capacity_) {
-      if (data_) MCFLOW_CUDA_CHECK(cudaFreeHost(data_));
-      data_ = nullptr;
-      capacity_ = 0;
-      MCFLOW_CUDA_CHECK(cudaMallocHost(&data_, bytes));
-      capacity_ = bytes;
-    }
-    return static_cast<T*>(data_);
-  }
-
- private:
-  void* data_ = nullptr;
-  std::size_t capacity_ = 0;
-};
+using cuda_detail::PinnedBuffer;
 
 struct LevelBuffers {
   DeviceBuffer<float> points1, intensity1, intensity2, depth2, intensity_grad2, depth_grad2;
@@ -110,7 +84,7 @@ class CudaSolveBackend final : public SolveBackend {
   void initialiseLabels(int level, const std::vector<Eigen::Vector3f>& centres) override {
     const DeviceLevel& L = levelAt(level);
     const int centre_count = int(centres.size());
-    float* staged = pinned_.as<float>(std::max<std::size_t>(std::size_t(centre_count) * 3, 1));
+    float* staged = staged_floats_.reserve(std::size_t(centre_count) * 3);
     for (int c = 0; c < centre_count; ++c)
       for (int k = 0; k < 3; ++k) staged[3 * c + k] = centres[std::size_t(c)](k);
     centres_.reserve(std::max<std::size_t>(std::size_t(centre_count) * 3, 1));
@@ -209,7 +183,7 @@ class CudaSolveBackend final : public SolveBackend {
     requireTwists("updateOcclusion", twists);
     const DeviceLevel& L = levels_[std::size_t(level_)];
     const std::size_t n = twists.size();
-    double* staged = pinned_.as<double>(std::max<std::size_t>(n * 18, 1));
+    double* staged = staged_doubles_.reserve(n * 18);
     for (std::size_t i = 0; i < n; ++i) {
       const Eigen::Matrix4d T = se3Exp(twists[i]);
       for (int k = 0; k < 6; ++k) staged[18 * i + std::size_t(k)] = twists[i](k);
@@ -241,7 +215,7 @@ class CudaSolveBackend final : public SolveBackend {
       weights_level_ = level_;
     }
     const std::size_t n = twists.size();
-    auto* staged = pinned_.as<cuda_detail::DeviceTransform>(std::max<std::size_t>(n, 1));
+    auto* staged = staged_transforms_.reserve(n);
     for (std::size_t i = 0; i < n; ++i) staged[i] = cuda_detail::deviceTransform(twists[i]);
     transforms_.reserve(std::max<std::size_t>(n, 1));
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(transforms_.get(), staged, n * sizeof(cuda_detail::DeviceTransform),
@@ -268,7 +242,7 @@ class CudaSolveBackend final : public SolveBackend {
 
     scalar_.reserve(1);
     cuda_detail::launchAbsoluteChange(labels(), before_.get(), values, scalar_.get(), s);
-    double* change = pinned_.as<double>(1);
+    double* change = staged_doubles_.reserve(1);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(change, scalar_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
     LabelStepStats out;
@@ -296,7 +270,7 @@ class CudaSolveBackend final : public SolveBackend {
     if (n <= 0) return out;
     scalar_.reserve(std::size_t(n));
     cuda_detail::launchLabelSupports(labels(), plane(), n, scalar_.get(), stream_.stream);
-    download(out.data(), scalar_.get(), std::size_t(n));
+    download(out.data(), scalar_.get(), std::size_t(n), staged_doubles_);
     return out;
   }
 
@@ -317,7 +291,7 @@ class CudaSolveBackend final : public SolveBackend {
     std::vector<double> values(std::size_t(n) * 10);
     scalar_.reserve(values.size());
     cuda_detail::launchOwnedMoments(labels(), levels_[std::size_t(level_)].points1, n, scalar_.get(), stream_.stream);
-    download(values.data(), scalar_.get(), values.size());
+    download(values.data(), scalar_.get(), values.size(), staged_doubles_);
     for (int i = 0; i < n; ++i) {
       const double* v = values.data() + 10 * i;
       LabelMoments& m = out[std::size_t(i)];
@@ -344,7 +318,7 @@ class CudaSolveBackend final : public SolveBackend {
     accumulator_->accumulate(twists, equations);
     trial.model = costModelFromEquations(equations, count_ - 1 + m);
     std::vector<unsigned long long> counts(static_cast<std::size_t>(m));
-    if (m > 0) download(counts.data(), moved_.get(), counts.size());
+    if (m > 0) download(counts.data(), moved_.get(), counts.size(), staged_counts_);
     for (int c = 0; c < m; ++c) trial.moved[std::size_t(c)] = double(counts[std::size_t(c)]);
     return trial;
   }
@@ -388,16 +362,14 @@ class CudaSolveBackend final : public SolveBackend {
   void reserveLabels(std::size_t p, int count) {
     const std::size_t values = p * std::size_t(count);
     if (values > label_buffers_[current_].capacity()) {
-      // Growing loses the contents: keep them through the other buffer.
-      DeviceBuffer<float>& other = label_buffers_[1 - current_];
-      other.reserve(values);
-      if (count_ > 0 && label_buffers_[current_].capacity() > 0)
-        MCFLOW_CUDA_CHECK(cudaMemcpyAsync(other.get(), labels(), plane() * std::size_t(count_) * sizeof(float),
+      // Growing loses the contents: grow the other buffer, keep the labels there, and make it the current one.
+      label_buffers_[1 - current_].reserve(values);
+      if (count_ > 0)
+        MCFLOW_CUDA_CHECK(cudaMemcpyAsync(scratch(), labels(), plane() * std::size_t(count_) * sizeof(float),
                                           cudaMemcpyDeviceToDevice, stream_.stream));
       swapLabels();
-      label_buffers_[1 - current_].reserve(values);
     }
-    label_buffers_[1 - current_].reserve(values);
+    label_buffers_[1 - current_].reserve(values);  // the scratch buffer
   }
   // Writes the labels with `cuts` applied into the scratch buffer and counts the moved pixels into moved_.
   void cutInto(const std::vector<LabelCut>& cuts) {
@@ -407,7 +379,7 @@ class CudaSolveBackend final : public SolveBackend {
       if (c.parent < 0 || c.parent >= count_ - 1)
         throw InputError("label cut: parent " + std::to_string(c.parent) + " is not a motion label (count " +
                          std::to_string(count_) + ")");
-    double* staged = pinned_.as<double>(std::size_t(m) * 7);
+    double* staged = staged_doubles_.reserve(std::size_t(m) * 7);
     for (int c = 0; c < m; ++c) {
       const LabelCut& cut = cuts[std::size_t(c)];
       double* v = staged + 7 * c;
@@ -448,15 +420,19 @@ class CudaSolveBackend final : public SolveBackend {
                                       stream_.stream));
   }
   template <typename T>
-  void download(T* host, const T* device, std::size_t count) {
-    T* staged = pinned_.as<T>(count);
+  void download(T* host, const T* device, std::size_t count, PinnedBuffer<T>& staging) {
+    T* staged = staging.reserve(count);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(staged, device, count * sizeof(T), cudaMemcpyDeviceToHost, stream_.stream));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
     std::copy_n(staged, count, host);
   }
 
   cuda_detail::StreamHolder stream_;
-  PinnedBytes pinned_;
+  // Page-locked staging of the small transfers (each is synchronised before its buffer is used again).
+  PinnedBuffer<float> staged_floats_;
+  PinnedBuffer<double> staged_doubles_;
+  PinnedBuffer<cuda_detail::DeviceTransform> staged_transforms_;
+  PinnedBuffer<unsigned long long> staged_counts_;
   std::vector<std::unique_ptr<LevelBuffers>> buffers_;
   std::vector<DeviceLevel> levels_;
   DeviceBuffer<float> label_buffers_[2], level_labels_[2], before_, data_cost_, weight_x_, weight_y_, centres_,

@@ -310,25 +310,29 @@ std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer() {
 }
 #endif
 
-std::unique_ptr<LabelOptimizer> makeLabelOptimizer(Backend backend, std::string* note) {
+Backend resolveBackend(Backend requested, std::string* note) {
   std::string why;
-  switch (backend) {
+  switch (requested) {
     case Backend::Cpu:
       if (note) *note = "cpu (requested)";
-      return makeCpuLabelOptimizer();
+      return Backend::Cpu;
     case Backend::Cuda:
       if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);
       if (note) *note = "cuda (requested)";
-      return makeCudaLabelOptimizer();
+      return Backend::Cuda;
     case Backend::Auto:
     default:
       if (cudaBackendAvailable(&why)) {
         if (note) *note = "cuda (auto: GPU available)";
-        return makeCudaLabelOptimizer();
+        return Backend::Cuda;
       }
       if (note) *note = "cpu (auto: " + why + ")";
-      return makeCpuLabelOptimizer();
+      return Backend::Cpu;
   }
+}
+
+std::unique_ptr<LabelOptimizer> makeLabelOptimizer(Backend backend, std::string* note) {
+  return resolveBackend(backend, note) == Backend::Cuda ? makeCudaLabelOptimizer() : makeCpuLabelOptimizer();
 }
 
 }  // namespace mc_flow

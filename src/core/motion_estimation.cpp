@@ -247,19 +247,6 @@ double motionOutOfViewCost(const Config& config) {
 
 std::unique_ptr<MotionAccumulator> makeCpuMotionAccumulator() { return std::make_unique<CpuMotionAccumulator>(); }
 
-#ifdef MCFLOW_HAVE_CUDA_MOTION
-std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator();  // cuda/motion_estimation.cu
-#endif
-
-std::unique_ptr<MotionAccumulator> makeMotionAccumulator(Backend resolved_backend) {
-#ifdef MCFLOW_HAVE_CUDA_MOTION
-  if (resolved_backend == Backend::Cuda) return makeCudaMotionAccumulator();
-#else
-  (void)resolved_backend;
-#endif
-  return makeCpuMotionAccumulator();
-}
-
 MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
                                         const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator) {

@@ -174,24 +174,7 @@ std::unique_ptr<SolveBackend> makeCudaSolveBackend() {
 #endif
 
 std::unique_ptr<SolveBackend> makeSolveBackend(Backend requested, std::string* note) {
-  std::string why;
-  switch (requested) {
-    case Backend::Cpu:
-      if (note) *note = "cpu (requested)";
-      return makeCpuSolveBackend();
-    case Backend::Cuda:
-      if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);
-      if (note) *note = "cuda (requested)";
-      return makeCudaSolveBackend();
-    case Backend::Auto:
-    default:
-      if (cudaBackendAvailable(&why)) {
-        if (note) *note = "cuda (auto: GPU available)";
-        return makeCudaSolveBackend();
-      }
-      if (note) *note = "cpu (auto: " + why + ")";
-      return makeCpuSolveBackend();
-  }
+  return resolveBackend(requested, note) == Backend::Cuda ? makeCudaSolveBackend() : makeCpuSolveBackend();
 }
 
 }  // namespace mc_flow

@@ -65,17 +65,25 @@ TEST(MotionEstimation, ZeroMotionStaysZero) {
   EXPECT_LT(est[0].norm(), 1e-4) << est[0].transpose();
 }
 
-TEST(MotionEstimation, RobustCostDecreasesAtALevel) {
+// One pyramid level of the two-plane scene moved by `truth`, every pixel on motion label 0.
+struct OneLevelScene {
   Vector6d truth;
-  truth << 0.01, 0.0, 0.005, 0.0, 0.01, 0.0;
-  const test::TwoPlaneScene s = test::renderTwoPlaneScene(160, 120, se3Exp(truth));
+  Pyramid p1, p2;
+  SoftLabels u{160, 120, 2, 0.f};
+  OneLevelScene() {
+    truth << 0.01, 0.0, 0.005, 0.0, 0.01, 0.0;
+    const test::TwoPlaneScene s = test::renderTwoPlaneScene(160, 120, se3Exp(truth));
+    p1 = buildPyramid(s.frame1, s.K, 1, Config());
+    p2 = buildPyramid(s.frame2, s.K, 1, Config());
+    std::fill(u.plane(0), u.plane(0) + u.planeSize(), 1.f);
+  }
+};
+
+TEST(MotionEstimation, RobustCostDecreasesAtALevel) {
+  const OneLevelScene s;
   Config config;
-  const Pyramid p1 = buildPyramid(s.frame1, s.K, 1, config);
-  const Pyramid p2 = buildPyramid(s.frame2, s.K, 1, config);
-  SoftLabels u(160, 120, 2, 0.f);
-  std::fill(u.plane(0), u.plane(0) + u.planeSize(), 1.f);
   std::vector<Vector6d> twists(1, Vector6d::Zero());
-  const MotionLevelStats st = estimateMotionsAtLevel(p1[0], p2[0], u, nullptr, twists, config);
+  const MotionLevelStats st = estimateMotionsAtLevel(s.p1[0], s.p2[0], s.u, nullptr, twists, config);
   EXPECT_GT(st.iterations, 1);
   EXPECT_LT(st.cost_after, 0.5 * st.cost_before);
   EXPECT_TRUE(st.stop == MotionStop::SmallUpdate || st.stop == MotionStop::IterationLimit) << toString(st.stop);
@@ -83,34 +91,27 @@ TEST(MotionEstimation, RobustCostDecreasesAtALevel) {
 
 // Each way the IRLS loop can stop is reported, as dvo_slam does per level.
 TEST(MotionEstimation, ReportsWhyTheLevelStopped) {
-  Vector6d truth;
-  truth << 0.01, 0.0, 0.005, 0.0, 0.01, 0.0;
-  const test::TwoPlaneScene s = test::renderTwoPlaneScene(160, 120, se3Exp(truth));
+  const OneLevelScene s;
   Config config;
-  const Pyramid p1 = buildPyramid(s.frame1, s.K, 1, config);
-  const Pyramid p2 = buildPyramid(s.frame2, s.K, 1, config);
-  SoftLabels u(160, 120, 2, 0.f);
-  std::fill(u.plane(0), u.plane(0) + u.planeSize(), 1.f);
-
   std::vector<Vector6d> twists(1, Vector6d::Zero());
   config.motion_iterations_per_level = 2;
   config.motion_min_update = 0;
-  MotionLevelStats st = estimateMotionsAtLevel(p1[0], p2[0], u, nullptr, twists, config);
+  MotionLevelStats st = estimateMotionsAtLevel(s.p1[0], s.p2[0], s.u, nullptr, twists, config);
   EXPECT_EQ(st.stop, MotionStop::IterationLimit);
   EXPECT_EQ(st.iterations, 2);
 
-  twists.assign(1, truth);
+  twists.assign(1, s.truth);
   config.motion_iterations_per_level = 50;
   config.motion_min_update = 1e-3;  // already at the truth: the first step is tiny
-  st = estimateMotionsAtLevel(p1[0], p2[0], u, nullptr, twists, config);
+  st = estimateMotionsAtLevel(s.p1[0], s.p2[0], s.u, nullptr, twists, config);
   EXPECT_EQ(st.stop, MotionStop::SmallUpdate);
   EXPECT_LT(st.iterations, 50);
 
   SoftLabels outliers(160, 120, 2, 0.f);  // every pixel on the outlier label: nothing carries residuals
   std::fill(outliers.plane(1), outliers.plane(1) + outliers.planeSize(), 1.f);
-  st = estimateMotionsAtLevel(p1[0], p2[0], outliers, nullptr, twists, config);
+  st = estimateMotionsAtLevel(s.p1[0], s.p2[0], outliers, nullptr, twists, config);
   EXPECT_EQ(st.stop, MotionStop::TooFewPixels);
 
   std::vector<Vector6d> wrong(2, Vector6d::Zero());
-  EXPECT_EQ(estimateMotionsAtLevel(p1[0], p2[0], u, nullptr, wrong, config).stop, MotionStop::NoLabels);
+  EXPECT_EQ(estimateMotionsAtLevel(s.p1[0], s.p2[0], s.u, nullptr, wrong, config).stop, MotionStop::NoLabels);
 }

@@ -31,7 +31,6 @@ namespace {
 
 constexpr double kRelativeTolerance = 1e-6;
 constexpr double kTwistTolerance = 1e-5;  // end to end, after all IRLS iterations of all levels
-constexpr double kSolverEpeTolerance = 0.01;  // [px]
 
 #define SKIP_WITHOUT_GPU()                                                                  \
   do {                                                                                      \
@@ -352,7 +351,7 @@ TEST(CudaMotionAccumulator, CoarseToFineTwistsMatchCpu) {
   const SoftLabels full = makeLabels(s.pair, motion_labels, LabelKind::Blended, 2u);
   std::vector<Vector6d> twists_cpu(std::size_t(motion_labels), Vector6d::Zero()), twists_gpu = twists_cpu;
   auto cpu = makeCpuMotionAccumulator();
-  auto gpu = makeMotionAccumulator(Backend::Cuda);
+  auto gpu = makeCudaMotionAccumulator();
   ASSERT_EQ(gpu->name(), "cuda");
   double largest_difference = 0, largest_motion = 0;
   for (int level = levels - 1; level >= 0; --level) {
@@ -373,27 +372,7 @@ TEST(CudaMotionAccumulator, CoarseToFineTwistsMatchCpu) {
   EXPECT_LE(largest_difference, kTwistTolerance);
 }
 
-TEST(CudaMotionAccumulator, SolverOnGpuMatchesCpuBackend) {
-  SKIP_WITHOUT_GPU();
-  for (int variant = 0; variant < 2; ++variant) {
-    SyntheticSceneOptions options;
-    options.variant = variant;
-    const SyntheticPair pair = renderSyntheticPair(options);
-    Config cpu_config, gpu_config;
-    cpu_config.backend = Backend::Cpu;
-    gpu_config.backend = Backend::Auto;
-    Solver cpu_solver(cpu_config), gpu_solver(gpu_config);
-    const Result a = cpu_solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
-    const Result b = gpu_solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
-    const FlowErrors ea = opticalFlowErrors(a.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion);
-    const FlowErrors eb = opticalFlowErrors(b.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion);
-    std::printf("variant %d: EPE cpu %.4f px, gpu %.4f px\n", variant, ea.epe, eb.epe);
-    RecordProperty("epe_cpu_" + std::to_string(variant), std::to_string(ea.epe));
-    RecordProperty("epe_gpu_" + std::to_string(variant), std::to_string(eb.epe));
-    EXPECT_LT(std::abs(ea.epe - eb.epe), kSolverEpeTolerance) << "variant " << variant;
-    EXPECT_LT(eb.epe, 0.4) << "variant " << variant;
-  }
-}
+// The whole solver on both backends: test_solve_backend_cuda.cpp, SolverMatchesCpuOnSyntheticScenes.
 
 }  // namespace
 }  // namespace mc_flow

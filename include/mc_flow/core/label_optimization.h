@@ -74,7 +74,10 @@ std::unique_ptr<LabelOptimizer> makeCpuLabelOptimizer();
 bool cudaBackendAvailable(std::string* why);
 /// @brief The CUDA implementation; throws BackendError when unavailable.
 std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer();
-/// @brief Resolves Config::backend: Auto = CUDA when available else CPU; Cuda throws BackendError if unavailable.
+/// @brief Resolves Config::backend to Cpu or Cuda: Auto = CUDA when available else CPU; Cuda throws BackendError
+/// if unavailable. `note` says what was chosen and why.
+Backend resolveBackend(Backend requested, std::string* note = nullptr);
+/// @brief The label optimizer of resolveBackend(backend, note).
 std::unique_ptr<LabelOptimizer> makeLabelOptimizer(Backend backend, std::string* note = nullptr);
 
 }  // namespace mc_flow

@@ -66,9 +66,6 @@ class MotionAccumulator {
 
 /// @brief The CPU implementation (OpenMP, static schedule: deterministic for a given thread count).
 std::unique_ptr<MotionAccumulator> makeCpuMotionAccumulator();
-/// @brief The accumulator that goes with a label-step backend: CUDA when the label step runs on CUDA and
-/// this build has the CUDA motion kernels, otherwise the CPU one.
-std::unique_ptr<MotionAccumulator> makeMotionAccumulator(Backend resolved_backend);
 /// @brief Cost charged to a pixel whose warp leaves the view (as if both residuals were 10 Cauchy scales).
 double motionOutOfViewCost(const Config& config);
 
