@@ -117,6 +117,13 @@ const FieldEntry kFields[] = {
     MCFLOW_FIELD(detect_occlusions),
     MCFLOW_FIELD(occlusion_kz),
     MCFLOW_FIELD(occlusion_ko),
+    MCFLOW_FIELD(warm_start),
+    MCFLOW_FIELD(warm_outer_iterations),
+    MCFLOW_FIELD(warm_motion_coarse_levels),
+    MCFLOW_FIELD(warm_depth_tolerance),
+    MCFLOW_FIELD(warm_min_coverage),
+    MCFLOW_FIELD(warm_max_energy_ratio),
+    MCFLOW_FIELD(id_min_overlap),
     MCFLOW_FIELD(backend),
     MCFLOW_FIELD(threads),
     MCFLOW_FIELD(verbose),
@@ -241,6 +248,14 @@ void Config::validate() const {
 
   requireNonNegative("occlusion_kz", occlusion_kz);
   requireNonNegative("occlusion_ko", occlusion_ko);
+
+  requireIntAtLeast("warm_outer_iterations", warm_outer_iterations, 1);
+  requireIntIn("warm_motion_coarse_levels", warm_motion_coarse_levels, 0, 10);
+  requirePositive("warm_depth_tolerance", warm_depth_tolerance);
+  requireFraction("warm_min_coverage", warm_min_coverage);
+  if (!(warm_max_energy_ratio >= 1) || !std::isfinite(warm_max_energy_ratio))
+    rangeError("warm_max_energy_ratio", doubleText(warm_max_energy_ratio), "must be finite and >= 1");
+  requireFraction("id_min_overlap", id_min_overlap);
 
   if (backend != Backend::Auto && backend != Backend::Cpu && backend != Backend::Cuda)
     rangeError("backend", std::to_string(int(backend)), "unknown enum value");

@@ -88,6 +88,19 @@ struct Config {
   double occlusion_kz = 20.0;   ///< [1/m] K_z: weight of the depth test against the warp count
   double occlusion_ko = 2.5;    ///< K_o: threshold on C(W(x)) + K_z * O_Z(x)
 
+  // ---- stream: warm start from the previous pair (Solver::solve with a previous result) ----
+  bool warm_start = true;              ///< a previous pair's result seeds the labels and motions (false: every pair
+                                       ///< starts from K-means; the previous result then only keeps the segment ids)
+  int warm_outer_iterations = 2;       ///< outer iterations of a warm-started solve
+  int warm_motion_coarse_levels = 2;   ///< the first motion step of a warm solve starts this many levels above the finest
+  double warm_depth_tolerance = 0.05;  ///< [m] a carried label is kept where the depth it predicts is this close to the
+                                       ///< observed depth; elsewhere the pixel is uncovered
+  double warm_min_coverage = 0.5;      ///< [fraction of valid frame-1 pixels] fewer covered by carried labels: cold start
+  double warm_max_energy_ratio = 1.5;  ///< a warm result whose energy per valid pixel exceeds this times the previous
+                                       ///< pair's is solved again from K-means, and the lower energy is kept
+  double id_min_overlap = 0.3;         ///< [fraction] a cold-started segment keeps a previous id when it shares at least
+                                       ///< this fraction of the smaller region with that id's carried pixels
+
   // ---- execution ----
   Backend backend = Backend::Auto;  ///< label step on the GPU when available (Auto) or forced
   int threads = 0;                  ///< OpenMP threads (0 = OpenMP default)
