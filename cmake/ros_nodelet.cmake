@@ -22,7 +22,7 @@ set_target_properties(mc_flow_nodelet PROPERTIES
 
 # Writes the demo bag: a synthetic RGB-D sequence with moving parts (no camera needed).
 add_executable(make_synthetic_bag src/ros/make_synthetic_bag.cpp)
-target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet)
+target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet mcflow_testing)
 set_target_properties(make_synthetic_bag PROPERTIES
   RUNTIME_OUTPUT_DIRECTORY ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_BIN_DESTINATION})
 
@@ -83,7 +83,7 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
   foreach(name ${MCFLOW_ROSTEST_NODES})
     add_rostest_gtest(rostest_${name} test/ros/${name}.test test/ros/rostest_${name}.cpp test/ros/rostest_common.cpp)
     target_include_directories(rostest_${name} PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/test/ros)
-    target_link_libraries(rostest_${name} mc_flow_nodelet ${GTEST_LIBRARIES})
+    target_link_libraries(rostest_${name} mc_flow_nodelet mcflow_testing ${GTEST_LIBRARIES})
     add_dependencies(rostest_${name} mc_flow_nodelet)
     add_dependencies(tests rostest_${name})
   endforeach()

@@ -30,7 +30,7 @@ if(NOT TARGET tests)
   add_custom_target(tests)
 endif()
 
-set(MCFLOW_TEST_LIBS mcflow_core)
+set(MCFLOW_TEST_LIBS mcflow_core mcflow_testing)
 mcflow_add_gtest(test_core ${CMAKE_CURRENT_SOURCE_DIR}/test/core/*.cpp)
 # GPU tests skip (visibly, GTEST_SKIP with the reason) where no CUDA GPU is usable.
 mcflow_add_gtest(test_cuda ${CMAKE_CURRENT_SOURCE_DIR}/test/cuda/*.cpp)

@@ -22,7 +22,7 @@
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/core/synthetic_scene.h"
+#include "mc_flow/testing/synthetic_scene.h"
 #include "mc_flow/io/benchmark.h"
 #include "mc_flow/io/camera_info.h"
 #include "mc_flow/io/config_file.h"

@@ -3,7 +3,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_adaptation.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/core/synthetic_scene.h"
+#include "mc_flow/testing/synthetic_scene.h"
 #include <map>
 
 #include <cmath>

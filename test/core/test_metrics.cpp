@@ -3,7 +3,7 @@
 #include <cmath>
 #include <limits>
 
-#include "mc_flow/core/metrics.h"
+#include "mc_flow/testing/metrics.h"
 
 namespace mc_flow {
 namespace {

@@ -7,9 +7,9 @@
 #include <map>
 
 #include "mc_flow/core/error.h"
-#include "mc_flow/core/metrics.h"
+#include "mc_flow/testing/metrics.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/core/synthetic_scene.h"
+#include "mc_flow/testing/synthetic_scene.h"
 #include "test_helpers.h"
 
 using namespace mc_flow;

@@ -17,11 +17,11 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
-#include "mc_flow/core/metrics.h"
+#include "mc_flow/testing/metrics.h"
 #include "mc_flow/core/motion_estimation.h"
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/core/synthetic_scene.h"
+#include "mc_flow/testing/synthetic_scene.h"
 
 namespace mc_flow {
 

@@ -1,4 +1,4 @@
-#include "mc_flow/core/metrics.h"
+#include "mc_flow/testing/metrics.h"
 
 #include <algorithm>
 #include <cmath>
