@@ -126,9 +126,9 @@ void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms
                      std::uint8_t* outlier_only, cudaStream_t stream);
 
 // ---------------------------------------------------------------- soft labels (soft_labels.cu)
-/// @brief Hard labels from the nearest of `centre_count` centres (xyz floats); invalid points -> outlier.
-void launchAssignToCentres(const DeviceImage& points, const float* centres, int centre_count, float* u,
-                           cudaStream_t stream);
+/// @brief `count` planes of one-hot labels from hard labels (-1 = outlier, the last plane); pixels without a
+/// valid point go to the outlier plane.
+void launchOneHotLabels(const DeviceImage& points, const int* hard, int count, float* u, cudaStream_t stream);
 /// @brief Two planes: 1 on plane 0 where the point is valid, else on plane 1.
 void launchAllValidAsOne(const DeviceImage& points, float* u, cudaStream_t stream);
 /// @brief downsampleLabels: 2x2 means (clamped) of `count` planes.

@@ -1,4 +1,4 @@
-// Soft-label operations of the device-resident solve (src/core/soft_labels.cpp, kmeans.cpp's assignment and
+// Soft-label operations of the device-resident solve (src/core/soft_labels.cpp, solve_backend.cpp's initialisation and
 // the HostLabelStore of label_adaptation.cpp are the references): initial hard labels, resampling between
 // pyramid levels, remapping planes (merges, removals), per-label supports and owned-pixel moments, cuts.
 // Sums run in a fixed order (one block per label, a fixed tree), so repeated solves are bit-identical.
@@ -26,10 +26,6 @@ dim3 gridFor(int width, int height) {
   return dim3(unsigned((width + kBlockX - 1) / kBlockX), unsigned((height + kBlockY - 1) / kBlockY));
 }
 
-__device__ __forceinline__ bool validPoint(const DeviceImage& points, int x, int y) {
-  return isfinite(points.at(x, y, 0)) && isfinite(points.at(x, y, 1)) && isfinite(points.at(x, y, 2));
-}
-
 // Sums `values` doubles per thread over the block into the first thread's slots, in a fixed order.
 __device__ void blockSum(double* shared, int values) {
   for (int stride = blockDim.x / 2; stride > 0; stride >>= 1) {
@@ -40,26 +36,13 @@ __device__ void blockSum(double* shared, int values) {
   __syncthreads();
 }
 
-__global__ void assignKernel(const DeviceImage points, const float* __restrict__ centres, int centre_count, int count,
+__global__ void oneHotKernel(const DeviceImage points, const int* __restrict__ hard, int count,
                              float* __restrict__ u) {
   const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
   if (x >= points.width || y >= points.height) return;
   const std::size_t plane = std::size_t(points.width) * points.height, idx = std::size_t(y) * points.width + x;
-  int label = count - 1;
-  if (centre_count > 0 && validPoint(points, x, y)) {
-    const float p[3] = {points.at(x, y, 0), points.at(x, y, 1), points.at(x, y, 2)};
-    float best = INFINITY;
-    label = 0;
-    for (int c = 0; c < centre_count; ++c) {
-      const float dx = __fsub_rn(p[0], centres[3 * c]), dy = __fsub_rn(p[1], centres[3 * c + 1]),
-                  dz = __fsub_rn(p[2], centres[3 * c + 2]);
-      const float d = __fadd_rn(__fadd_rn(__fmul_rn(dx, dx), __fmul_rn(dy, dy)), __fmul_rn(dz, dz));
-      if (d < best) {
-        best = d;
-        label = c;
-      }
-    }
-  }
+  const int h = hard[idx];
+  const int label = (h >= 0 && isfinite(points.at(x, y, 2))) ? h : count - 1;
   for (int i = 0; i < count; ++i) u[i * plane + idx] = i == label ? 1.f : 0.f;
 }
 
@@ -224,12 +207,9 @@ double levelScale(int from, int to) { return std::exp2(std::round(std::log2(doub
 
 }  // namespace
 
-void launchAssignToCentres(const DeviceImage& points, const float* centres, int centre_count, float* u,
-                           cudaStream_t stream) {
-  const int count = (centre_count > 0 ? centre_count : 1) + 1;
-  assignKernel<<<gridFor(points.width, points.height), dim3(kBlockX, kBlockY), 0, stream>>>(points, centres,
-                                                                                             centre_count, count, u);
-  MCFLOW_CUDA_CHECK_LAUNCH("assignKernel");
+void launchOneHotLabels(const DeviceImage& points, const int* hard, int count, float* u, cudaStream_t stream) {
+  oneHotKernel<<<gridFor(points.width, points.height), dim3(kBlockX, kBlockY), 0, stream>>>(points, hard, count, u);
+  MCFLOW_CUDA_CHECK_LAUNCH("oneHotKernel");
 }
 
 void launchAllValidAsOne(const DeviceImage& points, float* u, cudaStream_t stream) {

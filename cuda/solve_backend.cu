@@ -81,20 +81,20 @@ class CudaSolveBackend final : public SolveBackend {
     weights_level_ = -1;
   }
 
-  void initialiseLabels(int level, const std::vector<Eigen::Vector3f>& centres) override {
+  void initialiseLabels(int level, const ImageI32& hard, int motion_labels) override {
     const DeviceLevel& L = levelAt(level);
-    const int centre_count = int(centres.size());
-    float* staged = staged_floats_.reserve(std::size_t(centre_count) * 3);
-    for (int c = 0; c < centre_count; ++c)
-      for (int k = 0; k < 3; ++k) staged[3 * c + k] = centres[std::size_t(c)](k);
-    centres_.reserve(std::max<std::size_t>(std::size_t(centre_count) * 3, 1));
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(centres_.get(), staged, std::size_t(centre_count) * 3 * sizeof(float),
-                                      cudaMemcpyHostToDevice, stream_.stream));
+    validateHardLabels(hard, motion_labels, L.width, L.height);
+    const std::size_t p = std::size_t(L.width) * L.height;
+    int* staged = staged_ints_.reserve(p);
+    std::copy_n(hard.data.data(), p, staged);
+    hard_labels_.reserve(p);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(hard_labels_.get(), staged, p * sizeof(int), cudaMemcpyHostToDevice,
+                                      stream_.stream));
     count_ = 0;  // nothing to keep when the buffers grow
     level_ = level;
-    reserveLabels(plane(), std::max(1, centre_count) + 1);
-    count_ = std::max(1, centre_count) + 1;
-    cuda_detail::launchAssignToCentres(L.points1, centres_.get(), centre_count, labels(), stream_.stream);
+    reserveLabels(plane(), motion_labels + 1);
+    count_ = motion_labels + 1;
+    cuda_detail::launchOneHotLabels(L.points1, hard_labels_.get(), count_, labels(), stream_.stream);
     clearOcclusionAndDual();
     // The staging buffer is reused by the next small transfer: wait for this one.
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
@@ -430,18 +430,18 @@ class CudaSolveBackend final : public SolveBackend {
   cuda_detail::StreamHolder stream_;
   // Page-locked staging of the small transfers (each is synchronised before its buffer is used again).
   PinnedBuffer<float> staged_floats_;
+  PinnedBuffer<int> staged_ints_;
   PinnedBuffer<double> staged_doubles_;
   PinnedBuffer<cuda_detail::DeviceTransform> staged_transforms_;
   PinnedBuffer<unsigned long long> staged_counts_;
   std::vector<std::unique_ptr<LevelBuffers>> buffers_;
   std::vector<DeviceLevel> levels_;
-  DeviceBuffer<float> label_buffers_[2], level_labels_[2], before_, data_cost_, weight_x_, weight_y_, centres_,
-      warped_z_;
+  DeviceBuffer<float> label_buffers_[2], level_labels_[2], before_, data_cost_, weight_x_, weight_y_, warped_z_;
   DeviceBuffer<std::uint8_t> occlusion_, level_occlusion_, outlier_only_;
   DeviceBuffer<float> dual_;
   DeviceBuffer<double> scalar_, motions_, cuts_;
   DeviceBuffer<cuda_detail::DeviceTransform> transforms_;
-  DeviceBuffer<int> counts_;
+  DeviceBuffer<int> counts_, hard_labels_;
   DeviceBuffer<long long> targets_;
   DeviceBuffer<unsigned long long> moved_;
   int current_ = 0, count_ = 0, level_ = 0, weights_level_ = -1;

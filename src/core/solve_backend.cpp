@@ -13,6 +13,19 @@
 
 namespace mc_flow {
 
+void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int height) {
+  if (motion_labels < 1)
+    throw InputError("initial labels: " + std::to_string(motion_labels) + " motion labels, need at least 1");
+  if (hard.width != width || hard.height != height || hard.channels != 1)
+    throw InputError("initial labels: a " + std::to_string(hard.width) + "x" + std::to_string(hard.height) + "x" +
+                     std::to_string(hard.channels) + " image for a " + std::to_string(width) + "x" +
+                     std::to_string(height) + " level");
+  for (std::size_t k = 0; k < hard.data.size(); ++k)
+    if (hard.data[k] < -1 || hard.data[k] >= motion_labels)
+      throw InputError("initial labels: pixel " + std::to_string(k) + " has label " + std::to_string(hard.data[k]) +
+                       ", outside [-1, " + std::to_string(motion_labels) + ")");
+}
+
 namespace {
 
 // Nearest-pixel resampling of a mask to another pyramid level (pixel-centre aligned). Levels differ by a
@@ -61,13 +74,12 @@ class CpuSolveBackend final : public SolveBackend {
     weights_level_ = -1;
   }
 
-  void initialiseLabels(int level, const std::vector<Eigen::Vector3f>& centres) override {
+  void initialiseLabels(int level, const ImageI32& hard, int motion_labels) override {
     const PyramidLevel& L = (*pyr1_)[level];
-    const ImageI32 assignment = assignToNearestCentre(L.points, centres);
-    const int motion_labels = std::max<int>(1, int(centres.size()));
+    validateHardLabels(hard, motion_labels, L.points.width, L.points.height);
     u_ = SoftLabels(L.points.width, L.points.height, motion_labels + 1, 0.f);
-    for (std::size_t k = 0; k < assignment.data.size(); ++k) {
-      const int a = assignment.data[k];
+    for (std::size_t k = 0; k < hard.data.size(); ++k) {
+      const int a = std::isfinite(L.points.data[k * 3 + 2]) ? hard.data[k] : -1;
       u_.plane(a >= 0 ? a : u_.outlier())[k] = 1.f;
     }
     level_ = level;

@@ -1,6 +1,6 @@
-// Algorithm 1 of the paper: K-means initialisation, then alternating motion step (coarse to fine),
-// occlusion mask, label step and label-count update; a final label step at the processing level; outputs
-// at the input resolution.
+// Algorithm 1 of the paper: K-means initialisation (or, in a stream, the previous pair's segments carried
+// forward), then alternating motion step (coarse to fine), occlusion mask, label step and label-count update;
+// a final label step at the processing level; outputs at the input resolution.
 #include "mc_flow/core/solver.h"
 
 #include <algorithm>
@@ -17,6 +17,7 @@
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/scene_flow.h"
 #include "mc_flow/core/solve_backend.h"
+#include "mc_flow/core/warm_start.h"
 
 #ifdef _OPENMP
 #include <omp.h>
@@ -56,6 +57,38 @@ class ThreadCountScope {
 
 }  // namespace
 
+namespace {
+
+// The pyramids and the levels a solve works at.
+struct Prepared {
+  Pyramid pyr1, pyr2;
+  int width = 0, height = 0;  // input
+  int levels = 0, finest = 0, label_level = 0, kmeans_level = 0, valid_label_level = 0;
+};
+
+// What Algorithm 1 starts from: hard labels at the label level, one twist and one id per motion label.
+struct Start {
+  ImageI32 hard;
+  int motion_labels = 0;
+  std::vector<Vector6d> twists;
+  std::vector<int> ids;
+  int next_id = 1;
+  int outer_iterations = 1;
+  int first_motion_coarsest = 0;  // the first motion step's coarsest level
+  bool first_motion_refines = false;  // the first motion step uses motion_iterations_refine
+};
+
+}  // namespace
+
+std::string toString(StartKind start) {
+  switch (start) {
+    case StartKind::Cold: return "cold";
+    case StartKind::Warm: return "warm";
+    case StartKind::ColdFallback: return "cold_fallback";
+  }
+  return "unknown";
+}
+
 struct Solver::Impl {
   Config config;
   std::unique_ptr<SolveBackend> backend;
@@ -68,6 +101,16 @@ struct Solver::Impl {
     std::fprintf(stderr, format, args...);
     std::fprintf(stderr, "\n");
   }
+
+  Result run(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous);
+  Prepared prepare(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K) const;
+  // A result with the sizes, levels and backend of a solve filled in.
+  Result emptyResult(const Prepared& p, const Intrinsics& K) const;
+  Start coldStart(const Prepared& p, Result& result);
+  Start warmStart(const Prepared& p, CarriedLabels carried, const Result& previous, Result& result);
+  // Algorithm 1 from `start`, the final label step and the outputs. Segment ids follow the labels through
+  // merges and splits; `previous` (may be null) names the ids that existed before this pair.
+  void iterate(const Prepared& p, Start start, const Result* previous, Result& result);
 };
 
 Solver::Solver(const Config& config) : impl_(std::make_unique<Impl>()) {
@@ -83,9 +126,14 @@ std::string Solver::backendName() const { return toString(impl_->backend->kind()
 Backend Solver::backendKind() const { return impl_->backend->kind(); }
 
 Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K) {
-  const Config& config = impl_->config;
-  const auto start = Clock::now();
-  const ThreadCountScope thread_scope(config.threads);
+  return impl_->run(frame1, frame2, K, nullptr);
+}
+
+Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result& previous) {
+  return impl_->run(frame1, frame2, K, &previous);
+}
+
+Prepared Solver::Impl::prepare(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K) const {
   K.validate();
   frame1.validate("frame1");
   frame2.validate("frame2");
@@ -93,78 +141,244 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
     throw InputError("frame sizes differ: frame1 is " + std::to_string(frame1.width()) + "x" +
                      std::to_string(frame1.height()) + ", frame2 is " + std::to_string(frame2.width()) + "x" +
                      std::to_string(frame2.height()));
-
-  Result result;
-  result.width = frame1.width();
-  result.height = frame1.height();
-  result.intrinsics = K;
-  result.backend_kind = impl_->backend->kind();
-  result.backend = toString(result.backend_kind);
-  result.backend_note = impl_->backend_note;
-
-  // ---- preprocessing: pyramids
-  auto t = Clock::now();
-  const int levels = pyramidLevelCount(result.width, result.height, config.coarsest_min_width);
-  if (config.processing_level >= levels)
+  Prepared p;
+  p.width = frame1.width();
+  p.height = frame1.height();
+  p.levels = pyramidLevelCount(p.width, p.height, config.coarsest_min_width);
+  if (config.processing_level >= p.levels)
     throw ConfigError("processing_level = " + std::to_string(config.processing_level) + " but a " +
-                      std::to_string(result.width) + "x" + std::to_string(result.height) + " input has only " +
-                      std::to_string(levels) + " pyramid levels");
-  const Pyramid pyr1 = buildPyramid(frame1, K, levels, config);
-  const Pyramid pyr2 = buildPyramid(frame2, K, levels, config);
-  const int finest = config.processing_level;
-  const int label_level = std::min(levels - 1, finest + config.label_level_offset);
-  const int kmeans_level = std::min(levels - 1, label_level + config.kmeans_level_offset);
-  result.pyramid_levels = levels;
-  result.processing_width = pyr1[finest].points.width;
-  result.processing_height = pyr1[finest].points.height;
-  const int valid_label_level = pyr1[label_level].validCount();
-  if (pyr1[finest].validCount() == 0 || valid_label_level == 0)
+                      std::to_string(p.width) + "x" + std::to_string(p.height) + " input has only " +
+                      std::to_string(p.levels) + " pyramid levels");
+  p.pyr1 = buildPyramid(frame1, K, p.levels, config);
+  p.pyr2 = buildPyramid(frame2, K, p.levels, config);
+  p.finest = config.processing_level;
+  p.label_level = std::min(p.levels - 1, p.finest + config.label_level_offset);
+  p.kmeans_level = std::min(p.levels - 1, p.label_level + config.kmeans_level_offset);
+  p.valid_label_level = p.pyr1[p.label_level].validCount();
+  if (p.pyr1[p.finest].validCount() == 0 || p.valid_label_level == 0)
     throw InputError("frame1: no depth within [min_depth, max_depth] = [" + std::to_string(config.min_depth) + ", " +
                      std::to_string(config.max_depth) + "] m");
+  return p;
+}
+
+Result Solver::Impl::emptyResult(const Prepared& p, const Intrinsics& K) const {
+  Result result;
+  result.width = p.width;
+  result.height = p.height;
+  result.intrinsics = K;
+  result.backend_kind = backend->kind();
+  result.backend = toString(result.backend_kind);
+  result.backend_note = backend_note;
+  result.pyramid_levels = p.levels;
+  result.processing_width = p.pyr1[p.finest].points.width;
+  result.processing_height = p.pyr1[p.finest].points.height;
+  result.valid_pixels = p.pyr1[p.finest].validCount();
+  return result;
+}
+
+Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous) {
+  const auto start_time = Clock::now();
+  const ThreadCountScope thread_scope(config.threads);
+  auto t = Clock::now();
+  const Prepared p = prepare(frame1, frame2, K);
+  Result result = emptyResult(p, K);
+  backend->loadPyramids(p.pyr1, p.pyr2, config);
   result.timings.preprocessing = elapsedMs(t);
 
-  // ---- initialisation: K-means on 3D points (a coarse level: a few hundred points, on the host), hard
-  // labels at the label level
-  t = Clock::now();
-  SolveBackend& backend = *impl_->backend;
-  backend.loadPyramids(pyr1, pyr2, config);
-  KMeansResult kmeans = kmeansPoints(pyr1[kmeans_level].points, config.initial_labels, config.kmeans_max_iterations,
+  // Stream mode: the previous pair's segments on this frame 1 (for the warm start, or only for the ids).
+  ImageI32 carried_ids;
+  if (previous) {
+    t = Clock::now();
+    carried_ids = carrySegmentIds(*previous, p.pyr1[0].points, config.warm_depth_tolerance);
+    result.timings.initialisation += elapsedMs(t);
+  }
+
+  auto solveCold = [&](Result& r) {
+    iterate(p, coldStart(p, r), previous, r);
+    if (previous) {
+      // Persistent ids by overlap with the carried segments.
+      ImageI32 index_labels(r.width, r.height, 1, 0);
+      for (std::size_t k = 0; k < index_labels.data.size(); ++k) {
+        const int id = r.labels.data[k];
+        for (std::size_t s = 0; s < r.segments.size(); ++s)
+          if (id > 0 && r.segments[s].id == id) index_labels.data[k] = int(s) + 1;
+      }
+      int next_id = std::max(previous->next_id, 1);
+      const std::vector<int> ids =
+          matchSegmentIds(index_labels, int(r.segments.size()), carried_ids, config.id_min_overlap, next_id);
+      for (std::size_t k = 0; k < r.labels.data.size(); ++k)
+        if (index_labels.data[k] > 0) r.labels.data[k] = ids[std::size_t(index_labels.data[k] - 1)];
+      for (std::size_t s = 0; s < r.segments.size(); ++s) r.segments[s].id = ids[s];
+      r.next_id = next_id;
+      r.merged_ids.clear();
+    }
+  };
+
+  if (previous && config.warm_start) {
+    t = Clock::now();
+    CarriedLabels carried = carriedLabelsAtLevel(carried_ids, p.pyr1[p.label_level].points, 1 << p.label_level);
+    result.timings.initialisation += elapsedMs(t);
+    if (carried.coverage() < config.warm_min_coverage) {
+      result.start = StartKind::ColdFallback;
+      result.start_note = "the previous segments cover " + std::to_string(carried.coverage()) +
+                          " of the valid pixels, below warm_min_coverage = " + std::to_string(config.warm_min_coverage);
+      solveCold(result);
+    } else {
+      iterate(p, warmStart(p, std::move(carried), *previous, result), previous, result);
+      result.start = StartKind::Warm;
+      const double warm_per_pixel = result.energy / std::max(1, result.valid_pixels);
+      const double previous_per_pixel = previous->energy / std::max(1, previous->valid_pixels);
+      if (previous->valid_pixels > 0 && warm_per_pixel > config.warm_max_energy_ratio * previous_per_pixel) {
+        // The carried solution explains this pair much worse than the previous one was explained: a jump,
+        // a reset or a new scene. A cold solve decides.
+        Result cold = emptyResult(p, K);
+        cold.timings = result.timings;
+        solveCold(cold);
+        const std::string why = "warm energy per pixel " + std::to_string(warm_per_pixel) + " > warm_max_energy_ratio x " +
+                                std::to_string(previous_per_pixel);
+        if (cold.energy < result.energy) {
+          cold.start = StartKind::ColdFallback;
+          cold.start_note = why + "; the cold solve's energy is lower";
+          result = std::move(cold);
+        } else {
+          result.start_note = why + "; a cold solve did not do better, the warm result is kept";
+          result.timings = cold.timings;
+        }
+      }
+    }
+  } else {
+    solveCold(result);
+  }
+
+  if (previous) {
+    // The previous pair's segments that neither continue nor merged have ended.
+    for (const Segment& s : previous->segments) {
+      bool alive = false;
+      for (const Segment& n : result.segments) alive = alive || n.id == s.id;
+      for (const auto& m : result.merged_ids) alive = alive || m.first == s.id;
+      if (!alive) result.ended_ids.push_back(s.id);
+    }
+  }
+  result.timings.total = elapsedMs(start_time);
+  return result;
+}
+
+Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
+  // K-means on 3D points at a coarse level (a few hundred points, on the host), assigned at the label level.
+  const auto t = Clock::now();
+  KMeansResult kmeans = kmeansPoints(p.pyr1[p.kmeans_level].points, config.initial_labels, config.kmeans_max_iterations,
                                      config.kmeans_tolerance, config.seed);
-  if (kmeans.centres.empty()) kmeans = kmeansPoints(pyr1[label_level].points, config.initial_labels,
-                                                    config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
-  backend.initialiseLabels(label_level, kmeans.centres);
-  const int initial_motion_labels = backend.labelCount() - 1;
+  if (kmeans.centres.empty())
+    kmeans = kmeansPoints(p.pyr1[p.label_level].points, config.initial_labels, config.kmeans_max_iterations,
+                          config.kmeans_tolerance, config.seed);
+  Start start;
+  start.motion_labels = std::max(1, int(kmeans.centres.size()));
+  start.hard = assignToNearestCentre(p.pyr1[p.label_level].points, kmeans.centres);
+  backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
   // Every label starts from the dominant motion (one label over all valid pixels, coarse to fine down to the
   // label level): with a moving camera all labels then start near the truth, and a small segment that is
   // frozen at the coarse levels (too few pixels there) does not have to find a large motion from zero.
   Vector6d dominant = Vector6d::Zero();
   if (config.dominant_motion_init) {
-    for (int level = levels - 1; level >= label_level; --level) {
+    for (int level = p.levels - 1; level >= p.label_level; --level) {
       std::vector<Vector6d> single{dominant};
-      estimateMotionsWith(backend.motionAccumulator(level, MotionLabels::AllValidAsOne, false, config), single, config);
+      estimateMotionsWith(backend->motionAccumulator(level, MotionLabels::AllValidAsOne, false, config), single, config);
       dominant = single[0];
     }
   }
-  std::vector<Vector6d> twists(std::size_t(initial_motion_labels), dominant);
-  result.timings.initialisation = elapsedMs(t);
-  impl_->progress("pyramid %d levels, labels at level %d, %d initial labels", levels, label_level, initial_motion_labels);
+  start.twists.assign(std::size_t(start.motion_labels), dominant);
+  for (int i = 0; i < start.motion_labels; ++i) start.ids.push_back(i + 1);
+  start.next_id = start.motion_labels + 1;
+  start.outer_iterations = config.outer_iterations;
+  start.first_motion_coarsest = p.levels - 1;
+  result.timings.initialisation += elapsedMs(t);
+  progress("pyramid %d levels, labels at level %d, %d initial labels (K-means)", p.levels, p.label_level,
+           start.motion_labels);
+  return start;
+}
 
+Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Result& previous, Result& result) {
+  const auto t = Clock::now();
+  Start start;
+  start.hard = std::move(carried.hard);
+  start.ids = carried.ids;
+  start.next_id = std::max(previous.next_id, 1);
+  // Constant velocity: each carried segment starts from its previous motion.
+  std::vector<double> covered(carried.ids.size(), 0.0);
+  for (const int h : start.hard.data)
+    if (h >= 0) covered[std::size_t(h)] += 1;
+  for (const int id : carried.ids) {
+    Vector6d twist = Vector6d::Zero();
+    for (const Segment& s : previous.segments)
+      if (s.id == id) twist = s.twist;
+    start.twists.push_back(twist);
+  }
+  const Vector6d widest = start.twists[std::size_t(std::max_element(covered.begin(), covered.end()) - covered.begin())];
+  // Pixels no carried segment covers (new surfaces, parts entering the view): K-means among them alone, as
+  // many clusters as their share of the initial labels; too few of them stay with the outlier label, which
+  // the label step hands to their neighbours.
+  const ImageF& points = p.pyr1[p.label_level].points;
+  const int uncovered = carried.valid - carried.covered;
+  const double min_new = std::max(32.0, config.min_support_fraction * double(carried.valid));
+  if (uncovered >= min_new) {
+    ImageF open_points(points.width, points.height, 3, std::numeric_limits<float>::quiet_NaN());
+    for (std::size_t k = 0; k < start.hard.data.size(); ++k)
+      if (start.hard.data[k] < 0)
+        for (int c = 0; c < 3; ++c) open_points.data[k * 3 + std::size_t(c)] = points.data[k * 3 + std::size_t(c)];
+    const int clusters = std::clamp(int(std::lround(config.initial_labels * double(uncovered) / carried.valid)), 1,
+                                    config.initial_labels);
+    const KMeansResult kmeans =
+        kmeansPoints(open_points, clusters, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
+    const int base = int(start.ids.size());
+    for (std::size_t k = 0; k < start.hard.data.size(); ++k)
+      if (start.hard.data[k] < 0 && kmeans.assignment.data[k] >= 0) start.hard.data[k] = base + kmeans.assignment.data[k];
+    for (std::size_t c = 0; c < kmeans.centres.size(); ++c) {
+      start.twists.push_back(widest);
+      start.ids.push_back(start.next_id++);
+    }
+  }
+  start.motion_labels = int(start.ids.size());
+  backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
+  start.outer_iterations = config.warm_outer_iterations;
+  start.first_motion_coarsest = std::min(p.levels - 1, p.finest + config.warm_motion_coarse_levels);
+  start.first_motion_refines = true;
+  result.timings.initialisation += elapsedMs(t);
+  progress("warm start: %d carried segments cover %.3f of the valid pixels, %d new labels", int(carried.ids.size()),
+           carried.coverage(), start.motion_labels - int(carried.ids.size()));
+  return start;
+}
+
+void Solver::Impl::iterate(const Prepared& p, Start start, const Result* previous, Result& result) {
+  SolveBackend& labels = *backend;
   const bool occlusions = config.detect_occlusions;
+  const int finest = p.finest;
+  std::vector<Vector6d>& twists = start.twists;
+  std::vector<int>& ids = start.ids;
+  std::vector<std::pair<int, int>> merges;  // (id, into id) as they happen
+  // Segment ids follow the labels: a merge keeps the larger label's id, a split gives the new half a new id.
+  auto followIdentity = [&](const AdaptationStats& as) {
+    for (const auto& [from, into] : as.merged_into) merges.emplace_back(ids[std::size_t(from)], ids[std::size_t(into)]);
+    std::vector<int> next;
+    for (const int from : as.identity_from) next.push_back(from >= 0 ? ids[std::size_t(from)] : start.next_id++);
+    ids = std::move(next);
+  };
+  auto t = Clock::now();
 
   // ---- Algorithm 1
-  for (int k = 0; k < config.outer_iterations; ++k) {
+  for (int k = 0; k < start.outer_iterations; ++k) {
     OuterIterationStats stats;
     stats.iteration = k;
-    stats.labels_before = backend.labelCount() - 1;
+    stats.labels_before = labels.labelCount() - 1;
 
     // 1. motion step, coarse to fine
     t = Clock::now();
-    const int coarsest = k == 0 ? levels - 1 : std::min(levels - 1, finest + config.motion_coarse_levels_after_first);
+    const int coarsest =
+        k == 0 ? start.first_motion_coarsest : std::min(p.levels - 1, finest + config.motion_coarse_levels_after_first);
     Config motion_config = config;
-    if (k > 0) motion_config.motion_iterations_per_level = config.motion_iterations_refine;
+    if (k > 0 || start.first_motion_refines) motion_config.motion_iterations_per_level = config.motion_iterations_refine;
     for (int level = coarsest; level >= finest; --level) {
       MotionLevelStats ms = estimateMotionsWith(
-          backend.motionAccumulator(level, MotionLabels::Current, occlusions, config), twists, motion_config);
+          labels.motionAccumulator(level, MotionLabels::Current, occlusions, config), twists, motion_config);
       ms.level = level;
       stats.motion_iterations += ms.iterations;
       stats.motion_levels.push_back(ms);
@@ -174,19 +388,20 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
     // Labels whose motions came out alike are merged before the label step as well as after it: the
     // result is the same as merging one step later, but the label step then runs on a few labels, not 20.
     t = Clock::now();
-    LabelCostModel early_model = backend.costModel(twists, occlusions, config);
-    const AdaptationStats early = adaptLabelCount(backend, twists, early_model, valid_label_level, config, false);
+    LabelCostModel early_model = labels.costModel(twists, occlusions, config);
+    const AdaptationStats early = adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false);
+    followIdentity(early);
     stats.merged += early.merged;
     result.timings.adaptation += elapsedMs(t);
 
     // occlusion mask of the current motions (section 6)
     t = Clock::now();
-    if (occlusions) backend.updateOcclusion(twists, config);
+    if (occlusions) labels.updateOcclusion(twists, config);
     result.timings.occlusion += elapsedMs(t);
 
     // 2. label step
     t = Clock::now();
-    const LabelStepStats ls = backend.labelStep(twists, occlusions, config.label_iterations, config.label_tolerance, config);
+    const LabelStepStats ls = labels.labelStep(twists, occlusions, config.label_iterations, config.label_tolerance, config);
     stats.label_iterations = ls.iterations;
     stats.energy = ls.energy;
     stats.label_change = ls.mean_change;
@@ -194,20 +409,24 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
 
     // 3. update n: merges and removals on the energy, then (while a motion step follows) splits
     t = Clock::now();
-    LabelCostModel model = backend.costModel(twists, occlusions, config);
-    const AdaptationStats as = adaptLabelCount(backend, twists, model, valid_label_level, config, true);
+    LabelCostModel model = labels.costModel(twists, occlusions, config);
+    const AdaptationStats as = adaptLabelCount(labels, twists, model, p.valid_label_level, config, true);
+    followIdentity(as);
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.smallest_refused_merge = as.smallest_refused_merge;
-    if (k + 1 < config.outer_iterations)
-      stats.split = proposeSplits(backend, twists, occlusions, valid_label_level, config).split;
-    stats.labels_after = backend.labelCount() - 1;
+    if (k + 1 < start.outer_iterations) {
+      const AdaptationStats splits = proposeSplits(labels, twists, occlusions, p.valid_label_level, config);
+      followIdentity(splits);
+      stats.split = splits.split;
+    }
+    stats.labels_after = labels.labelCount() - 1;
     result.timings.adaptation += elapsedMs(t);
     result.energy = ls.energy;
     result.iterations.push_back(stats);
-    impl_->progress("outer iteration %d: %d motion labels (merged %d, removed %d, split %d; cheapest refused merge %.1f, label cost %.1f), label change %.5f",
-                    k, stats.labels_after, stats.merged, stats.removed, stats.split, stats.smallest_refused_merge,
-                    labelCost(config, valid_label_level), stats.label_change);
+    progress("outer iteration %d: %d motion labels (merged %d, removed %d, split %d; cheapest refused merge %.1f, label cost %.1f), label change %.5f",
+             k, stats.labels_after, stats.merged, stats.removed, stats.split, stats.smallest_refused_merge,
+             labelCost(config, p.valid_label_level), stats.label_change);
     if (k > 0 && as.merged + as.removed + stats.split == 0 && stats.label_change < config.outer_convergence) break;
   }
 
@@ -216,20 +435,45 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
   SoftLabels u_final;
   {
     t = Clock::now();
-    backend.moveLabels(finest);
-    if (occlusions) backend.updateOcclusion(twists, config);
+    labels.moveLabels(finest);
+    if (occlusions) labels.updateOcclusion(twists, config);
     result.timings.occlusion += elapsedMs(t);
     t = Clock::now();
     const LabelStepStats ls =
-        backend.labelStep(twists, occlusions, config.label_iterations_final, config.label_tolerance, config);
+        labels.labelStep(twists, occlusions, config.label_iterations_final, config.label_tolerance, config);
     result.energy = ls.energy;
-    u_final = backend.downloadLabels();
+    u_final = labels.downloadLabels();
     result.timings.labels += elapsedMs(t);
+  }
+
+  // ---- segment ids: 1..m for a pair solved alone; in a stream, the ids that followed the labels
+  if (!previous) {
+    for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = int(i) + 1;
+    start.next_id = int(ids.size()) + 1;
+    merges.clear();
+  }
+  result.next_id = start.next_id;
+  result.merged_ids.clear();
+  for (const auto& [from, into] : merges) {
+    bool existed = false;
+    for (const Segment& s : previous->segments) existed = existed || s.id == from;
+    if (!existed) continue;
+    // Follow the chain to the id that is still there (a later merge may have absorbed the first target).
+    int final_into = into;
+    for (bool moved = true; moved;) {
+      moved = false;
+      for (const auto& [f, i] : merges)
+        if (f == final_into) {
+          final_into = i;
+          moved = true;
+        }
+    }
+    result.merged_ids.emplace_back(from, final_into);
   }
 
   // ---- outputs at the input resolution
   t = Clock::now();
-  const PyramidLevel& F0 = pyr1[0];
+  const PyramidLevel& F0 = p.pyr1[0];
   result.soft_labels = finest == 0 ? u_final : upsampleLabels(u_final, result.width, result.height);
   // Pixels without depth belong to the outlier label whatever the upsampling blended in.
   for (int y = 0; y < result.height; ++y)
@@ -238,28 +482,30 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
         for (int i = 0; i < result.soft_labels.count; ++i)
           result.soft_labels.at(i, x, y) = i == result.soft_labels.outlier() ? 1.f : 0.f;
   const ImageF warped = warpPoints(F0.points, result.soft_labels, twists);
-  sceneAndOpticalFlow(F0.points, warped, K, result.scene_flow, result.optical_flow);
-  result.occlusion = config.detect_occlusions ? detectOcclusions(warped, pyr2[0].depth, K, config)
+  sceneAndOpticalFlow(F0.points, warped, result.intrinsics, result.scene_flow, result.optical_flow);
+  result.moved_depth = ImageF(result.width, result.height, 1, std::numeric_limits<float>::quiet_NaN());
+  for (std::size_t k = 0; k < result.moved_depth.data.size(); ++k) result.moved_depth.data[k] = warped.data[k * 3 + 2];
+  result.occlusion = config.detect_occlusions ? detectOcclusions(warped, p.pyr2[0].depth, result.intrinsics, config)
                                               : ImageU8(result.width, result.height, 1, 0);
   const ImageI32 argmax = result.soft_labels.argmax();
   result.labels = ImageI32(result.width, result.height, 1, 0);
   for (std::size_t i = 0; i < argmax.data.size(); ++i) {
     const int a = argmax.data[i];
-    result.labels.data[i] = (a == result.soft_labels.outlier() || !std::isfinite(F0.points.data[i * 3 + 2])) ? 0 : a + 1;
+    result.labels.data[i] =
+        (a == result.soft_labels.outlier() || !std::isfinite(F0.points.data[i * 3 + 2])) ? 0 : ids[std::size_t(a)];
   }
   const std::vector<Eigen::Vector3d> centroids = labelCentroids(result.soft_labels, F0.points);
+  result.segments.clear();
   for (int i = 0; i < result.soft_labels.count - 1; ++i) {
     Segment s;
-    s.id = i + 1;
+    s.id = ids[std::size_t(i)];
     s.twist = twists[std::size_t(i)];
     s.transform = se3Exp(s.twist);
     s.support = result.soft_labels.support(i);
     s.centroid = centroids[std::size_t(i)];
     result.segments.push_back(s);
   }
-  result.timings.outputs = elapsedMs(t);
-  result.timings.total = elapsedMs(start);
-  return result;
+  result.timings.outputs += elapsedMs(t);
 }
 
 }  // namespace mc_flow

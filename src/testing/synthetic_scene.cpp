@@ -137,7 +137,8 @@ struct BoxSpec {
   Vector3d rotation_deg;          ///< rotations about x, y, z [deg], applied x first
   Vector3d velocity_m;            ///< translation of the centre per pair [m]
   Vector3d rotation_rate_deg;     ///< rotation about the centre per pair [deg]
-  double period = 40.0;           ///< oscillation period of the sequence [frames]
+  double period = 40.0;           ///< oscillation period of the sequence [frames]; 0 = straight on (f(t) = t)
+  int start_frame = 0;            ///< the box rests until this frame
 };
 
 struct ArmSpec {
@@ -200,7 +201,7 @@ RoomSpec standardRoom() {
   return room;
 }
 
-VariantSpec variantSpec(int variant) {
+VariantSpec variantSpec(int variant, bool stream_events = false) {
   VariantSpec spec;
   spec.room = standardRoom();
   spec.texture_seed = 7919u * static_cast<std::uint32_t>(variant + 1);
@@ -258,15 +259,27 @@ VariantSpec variantSpec(int variant) {
       spec.room.period = 32;
     }
   }
+  if (stream_events) {
+    // A box that rests until frame 10 and then moves, and a box that moves straight on out of the view.
+    BoxSpec late = box("late_box", 10, {-0.25, 0.5, 2.7}, {0.15, 0.12, 0.1}, {10, 20, 0}, {0.02, -0.015, -0.02},
+                       {2.0, -2.5, 1.5}, 30);
+    late.start_frame = 10;
+    spec.boxes.push_back(late);
+    spec.boxes.push_back(
+        box("leaver", 11, {0.35, -0.08, 2.2}, {0.1, 0.08, 0.08}, {0, 25, 10}, {0.055, 0.0, 0.0}, {0, 0, 0}, 0));
+  }
   return spec;
 }
 
 // ------------------------------------------------------------------------------------------- motions
 
-/// f(t) = sin(w t) / sin(w): f(0) = 0, f(1) = 1, bounded, so parts stay in view over long sequences.
-double trajectoryFactor(double period, int t) {
+/// f(t) = sin(w t) / sin(w): f(0) = 0, f(1) = 1, bounded, so parts stay in view over long sequences; a
+/// period of 0 moves straight on (f(t) = t). A part that starts at frame t0 rests before and runs f(t - t0).
+double trajectoryFactor(double period, int t, int start_frame = 0) {
+  const double s = std::max(0, t - start_frame);
+  if (period <= 0) return s;
   const double w = 2.0 * kPi / period;
-  return std::sin(w * t) / std::sin(w);
+  return std::sin(w * s) / std::sin(w);
 }
 
 /// Camera-frame twists of every part over the pair interval (motion_scale applied).
@@ -356,7 +369,7 @@ class PosedScene {
     room_ = LocalRayFrame::fromPose(se3Exp(trajectoryFactor(spec.room.period, t) * motion.background));
     for (std::size_t k = 0; k < spec.boxes.size(); ++k) {
       const BoxSpec& b = spec.boxes[k];
-      boxes_.push_back(LocalRayFrame::fromPose(se3Exp(trajectoryFactor(b.period, t) * motion.boxes[k]) *
+      boxes_.push_back(LocalRayFrame::fromPose(se3Exp(trajectoryFactor(b.period, t, b.start_frame) * motion.boxes[k]) *
                                                poseFrom(b.centre, b.rotation_deg)));
     }
     arm_factor_ = trajectoryFactor(spec.arm.period, t);
@@ -496,6 +509,9 @@ void validateOptions(const SyntheticSceneOptions& o) {
   if (!std::isfinite(o.intensity_noise) || o.intensity_noise < 0.0) {
     throw InputError("synthetic scene: intensity_noise " + std::to_string(o.intensity_noise) + " must be >= 0");
   }
+  if (o.first_frame < 0 || o.first_frame > 100000) {
+    throw InputError("synthetic scene: first_frame " + std::to_string(o.first_frame) + " outside [0, 100000]");
+  }
   if (!std::isfinite(o.depth_noise) || o.depth_noise < 0.0) {
     throw InputError("synthetic scene: depth_noise " + std::to_string(o.depth_noise) + " must be >= 0");
   }
@@ -555,19 +571,19 @@ void renderFrame(const SyntheticSceneOptions& options, const VariantSpec& spec, 
 
 std::vector<SyntheticPart> partsAt(const VariantSpec& spec, const SceneMotion& motion, int t) {
   std::vector<SyntheticPart> parts;
-  auto add = [&parts](int id, const std::string& name, const Vector6d& xi, double period, int tt) {
+  auto add = [&parts](int id, const std::string& name, const Vector6d& xi, double period, int tt, int start) {
     SyntheticPart p;
     p.id = id;
     p.name = name;
-    p.twist = (trajectoryFactor(period, tt + 1) - trajectoryFactor(period, tt)) * xi;
+    p.twist = (trajectoryFactor(period, tt + 1, start) - trajectoryFactor(period, tt, start)) * xi;
     parts.push_back(p);
   };
-  add(0, "background", motion.background, spec.room.period, t);
+  add(0, "background", motion.background, spec.room.period, t, 0);
   for (std::size_t k = 0; k < spec.boxes.size(); ++k) {
-    add(spec.boxes[k].part_id, spec.boxes[k].name, motion.boxes[k], spec.boxes[k].period, t);
+    add(spec.boxes[k].part_id, spec.boxes[k].name, motion.boxes[k], spec.boxes[k].period, t, spec.boxes[k].start_frame);
   }
-  add(spec.arm.upper_id, "upper_arm", motion.upper_arm, spec.arm.period, t);
-  add(spec.arm.fore_id, "forearm", motion.forearm, spec.arm.period, t);
+  add(spec.arm.upper_id, "upper_arm", motion.upper_arm, spec.arm.period, t, 0);
+  add(spec.arm.fore_id, "forearm", motion.forearm, spec.arm.period, t, 0);
   return parts;
 }
 
@@ -579,7 +595,7 @@ void renderSyntheticFrame(const SyntheticSceneOptions& options, int t, RgbdFrame
                           Intrinsics& K) {
   validateOptions(options);
   if (t < 0) throw InputError("synthetic scene: frame index " + std::to_string(t) + " must be >= 0");
-  const VariantSpec spec = variantSpec(options.variant);
+  const VariantSpec spec = variantSpec(options.variant, options.stream_events);
   const SceneMotion motion = sceneMotion(spec, options.motion_scale);
   K = sceneIntrinsics(options.width, options.height);
   renderFrame(options, spec, motion, t, frame, color, nullptr);
@@ -588,31 +604,38 @@ void renderSyntheticFrame(const SyntheticSceneOptions& options, int t, RgbdFrame
 std::vector<SyntheticPart> syntheticSequenceMotions(const SyntheticSceneOptions& options, int t) {
   validateOptions(options);
   if (t < 0) throw InputError("synthetic scene: frame index " + std::to_string(t) + " must be >= 0");
-  const VariantSpec spec = variantSpec(options.variant);
+  const VariantSpec spec = variantSpec(options.variant, options.stream_events);
   return partsAt(spec, sceneMotion(spec, options.motion_scale), t);
 }
 
 SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options) {
   validateOptions(options);
-  const VariantSpec spec = variantSpec(options.variant);
+  const VariantSpec spec = variantSpec(options.variant, options.stream_events);
   const SceneMotion motion = sceneMotion(spec, options.motion_scale);
   const int W = options.width, H = options.height;
+  const int t0 = options.first_frame;
 
   SyntheticPair pair;
   pair.intrinsics = sceneIntrinsics(W, H);
   const Intrinsics& K = pair.intrinsics;
   std::vector<Hit> hits;
-  renderFrame(options, spec, motion, 0, pair.frame1, pair.color1, &hits);
-  renderFrame(options, spec, motion, 1, pair.frame2, pair.color2, nullptr);
-  pair.parts = partsAt(spec, motion, 0);
+  renderFrame(options, spec, motion, t0, pair.frame1, pair.color1, &hits);
+  renderFrame(options, spec, motion, t0 + 1, pair.frame2, pair.color2, nullptr);
+  pair.parts = partsAt(spec, motion, t0);
 
-  // Frame-1 -> frame-2 transforms. f(1) - f(0) == 1 exactly, so these are the matrices frame 2 was rendered with.
-  const Matrix4d background_motion = se3Exp(motion.background);
+  // Frame-1 -> frame-2 transforms: exp((f(t0 + 1) - f(t0)) xi) per part (exponentials of one twist commute);
+  // for the first pair f(1) - f(0) == 1 exactly.
+  auto step = [t0](double period, int start) {
+    return trajectoryFactor(period, t0 + 1, start) - trajectoryFactor(period, t0, start);
+  };
+  const Matrix4d background_motion = se3Exp(step(spec.room.period, 0) * motion.background);
   std::vector<Matrix4d> box_motion;
-  for (const Vector6d& xi : motion.boxes) box_motion.push_back(se3Exp(xi));
-  const Matrix4d upper_motion = se3Exp(motion.upper_arm), fore_motion = se3Exp(motion.forearm);
+  for (std::size_t k = 0; k < motion.boxes.size(); ++k)
+    box_motion.push_back(se3Exp(step(spec.boxes[k].period, spec.boxes[k].start_frame) * motion.boxes[k]));
+  const double arm_step = step(spec.arm.period, 0);
+  const Matrix4d upper_motion = se3Exp(arm_step * motion.upper_arm), fore_motion = se3Exp(arm_step * motion.forearm);
 
-  const PosedScene scene2(spec, motion, 1);
+  const PosedScene scene2(spec, motion, t0 + 1);
   const float nan = std::numeric_limits<float>::quiet_NaN();
   pair.gt_scene_flow = ImageF(W, H, 3, nan);
   pair.gt_optical_flow = ImageF(W, H, 2, nan);
@@ -637,7 +660,7 @@ SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options) {
         default:
           M = hit.blend == 0.0   ? upper_motion
               : hit.blend == 1.0 ? fore_motion
-                                 : se3Exp((1.0 - hit.blend) * motion.upper_arm + hit.blend * motion.forearm);
+                                 : se3Exp(arm_step * ((1.0 - hit.blend) * motion.upper_arm + hit.blend * motion.forearm));
       }
       const Vector3d P2 = M.topLeftCorner<3, 3>() * P + M.topRightCorner<3, 1>();
       for (int c = 0; c < 3; ++c) pair.gt_scene_flow(x, y, c) = static_cast<float>(P2[c] - P[c]);

@@ -95,7 +95,7 @@ void compareStages(int width, int height, int variant) {
   const int label_level = std::min(levels - 1, 1);
   for (SolveBackend* b : {cpu.get(), gpu.get()}) {
     b->loadPyramids(s.p1, s.p2, config);
-    b->initialiseLabels(label_level, s.centres);
+    b->initialiseLabels(label_level, assignToNearestCentre(s.p1[label_level].points, s.centres), int(s.centres.size()));
   }
   ASSERT_EQ(cpu->labelCount(), gpu->labelCount());
   EXPECT_EQ(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 0.0) << "initial hard labels";
@@ -212,8 +212,12 @@ TEST(CudaSolveBackend, RejectsInconsistentCalls) {
   Config config;
   auto gpu = makeCudaSolveBackend();
   gpu->loadPyramids(s.p1, s.p2, config);
-  gpu->initialiseLabels(1, s.centres);
+  gpu->initialiseLabels(1, assignToNearestCentre(s.p1[1].points, s.centres), int(s.centres.size()));
   const int n = gpu->labelCount() - 1;
+  EXPECT_THROW(gpu->initialiseLabels(1, ImageI32(3, 3, 1, 0), 2), InputError);  // wrong size
+  ImageI32 beyond(s.p1[1].points.width, s.p1[1].points.height, 1, 0);
+  beyond.data[5] = n;
+  EXPECT_THROW(gpu->initialiseLabels(1, beyond, n), InputError);  // a label >= motion_labels
   EXPECT_THROW(gpu->labelStep(std::vector<Vector6d>(std::size_t(n) + 1), false, 5, 0.0, config), InputError);
   EXPECT_THROW(gpu->remap(std::vector<int>(std::size_t(n) + 1, 0), n + 1), InputError);  // outlier not last
   EXPECT_THROW(gpu->applyCuts({LabelCut{n, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX()}}), InputError);

@@ -49,9 +49,10 @@ class SolveBackend : public LabelStore {
   /// They must outlive the solve. Resets the labels, the occlusion mask and the dual variables.
   virtual void loadPyramids(const Pyramid& frame1, const Pyramid& frame2, const Config& config) = 0;
 
-  /// @brief Hard initial labels at `level`: each valid pixel goes to its nearest centre, invalid ones to
-  /// the outlier label. Label count = centres + 1.
-  virtual void initialiseLabels(int level, const std::vector<Eigen::Vector3f>& centres) = 0;
+  /// @brief Hard initial labels at `level` (K-means' assignment or labels carried from the previous pair):
+  /// `hard` holds a motion label in [0, motion_labels) per pixel, or -1 for the outlier label; pixels
+  /// without depth go to the outlier label whatever `hard` says. Label count = motion_labels + 1.
+  virtual void initialiseLabels(int level, const ImageI32& hard, int motion_labels) = 0;
   /// @brief Pyramid level the labels live at.
   virtual int labelLevel() const = 0;
   /// @brief Carries the labels to `level` (up: bilinear and renormalised; down: 2x2 means; the same level:
@@ -75,6 +76,10 @@ class SolveBackend : public LabelStore {
   /// @brief The current labels (at the label level) in host memory.
   virtual SoftLabels downloadLabels() = 0;
 };
+
+/// @brief Checks initial hard labels (size, values in [-1, motion_labels), motion_labels >= 1); throws
+/// InputError naming the value.
+void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int height);
 
 /// @brief The CPU backend (OpenMP): the stage functions of src/core on host images.
 std::unique_ptr<SolveBackend> makeCpuSolveBackend();

@@ -7,6 +7,7 @@
 
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "mc_flow/core/config.h"
@@ -20,7 +21,8 @@ namespace mc_flow {
 /// @brief One rigid part. The twist and transform map frame-1 points to where they are in frame 2
 /// (camera optical frame of frame 1), over the frame interval (not per second).
 struct Segment {
-  int id = 0;                   ///< 1..m (0 is reserved for the outlier label in label images)
+  int id = 0;                   ///< >= 1, the value of its pixels in Result::labels (0: outlier or no depth); 1..m for
+                                ///< a pair solved alone, kept through a stream when the previous result is passed on
   Vector6d twist = Vector6d::Zero();  ///< (v [m], w [rad]) over the interval
   Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();  ///< exp(twist)
   double support = 0;           ///< sum of u over the pixels (input resolution)
@@ -46,6 +48,14 @@ struct OuterIterationStats {
   double energy = 0;          ///< E(u) of eq. 4 after the label step
 };
 
+/// @brief How a solve started.
+enum class StartKind {
+  Cold,         ///< K-means on 3D points (no previous result, or Config::warm_start off)
+  Warm,         ///< from the previous pair's labels and motions
+  ColdFallback  ///< a previous result was given but not used: Result::start_note says why
+};
+std::string toString(StartKind start);
+
 /// @brief Everything the solver produces. Images are at the input resolution.
 struct Result {
   int width = 0, height = 0;
@@ -56,9 +66,17 @@ struct Result {
   ImageU8 occlusion;       ///< 255 = occluded
   ImageF scene_flow;       ///< 3 channels [m], frame-1 camera frame; NaN where depth is invalid
   ImageF optical_flow;     ///< 2 channels [px]; NaN where depth is invalid
+  ImageF moved_depth;      ///< [m] depth of each frame-1 point after its motion (seen from frame 2); NaN where invalid
   StageTimings timings;
   std::vector<OuterIterationStats> iterations;
   double energy = 0;             ///< final E(u) (processing level)
+  int valid_pixels = 0;          ///< frame-1 pixels with valid depth at the processing level
+  // ---- stream mode (Solver::solve with the previous pair's result) ----
+  StartKind start = StartKind::Cold;
+  std::string start_note;        ///< why a given previous result was not used (empty otherwise)
+  int next_id = 1;               ///< the id the next new segment gets (ids are never reused within a stream)
+  std::vector<std::pair<int, int>> merged_ids;  ///< (id, id it merged into) for the previous pair's segments
+  std::vector<int> ended_ids;    ///< ids of the previous pair's segments that neither continue nor merged
   int processing_width = 0, processing_height = 0;
   int pyramid_levels = 0;
   Backend backend_kind = Backend::Cpu;  ///< the backend that ran (Cpu or Cuda, never Auto)
@@ -79,6 +97,15 @@ class Solver {
   /// @brief Solves one pair. Throws InputError for bad input (sizes, non-finite values, no valid depth,
   /// bad intrinsics).
   Result solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K);
+
+  /// @brief Solves the next pair of a stream: `previous` is the result of the pair whose frame 2 is this
+  /// `frame1` (same size). With Config::warm_start its segments are carried into frame 1 and start the solve
+  /// with their motions (constant velocity); pixels they do not cover go through K-means. The carried
+  /// solution is refused, and the pair solved cold, when the carried labels cover less than
+  /// warm_min_coverage of the valid pixels, or when the warm result's energy per pixel exceeds
+  /// warm_max_energy_ratio times the previous pair's and a cold solve does better. Segment ids persist
+  /// either way (a cold solve matches them by overlap with the carried segments).
+  Result solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result& previous);
 
   const Config& config() const;
   std::string backendName() const;

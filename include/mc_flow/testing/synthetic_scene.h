@@ -24,6 +24,9 @@ struct SyntheticSceneOptions {
   double intensity_noise = 0.0; ///< std dev added to intensity (0..1 units)
   double depth_noise = 0.0;     ///< [m] std dev at 1 m, growing with depth^2 (Kinect-like)
   unsigned seed = 1;            ///< noise seed
+  int first_frame = 0;          ///< renderSyntheticPair renders frames (first_frame, first_frame + 1) of the sequence
+  bool stream_events = false;   ///< adds a box that starts moving at frame 10 (part 10) and one that moves straight
+                                ///< out of the view (part 11), for sequences
 };
 
 struct SyntheticPart {
@@ -46,7 +49,7 @@ struct SyntheticPair {
 
 int syntheticVariantCount();
 
-/// @brief Renders the pair (t = 0, t = 1) of a variant.
+/// @brief Renders the pair (first_frame, first_frame + 1) of a variant, with its ground truth.
 SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options);
 
 /// @brief Renders frame `t` of a smoothly moving sequence (t = 0, 1, 2, ...): the colour, the frame and,

@@ -1,0 +1,46 @@
+/**
+ * @file warm_start.h
+ * @brief Stream mode: the previous pair's segments carried into the next pair's frame 1, for a warm start
+ * (initial labels and motions) and for persistent segment ids.
+ *
+ * Pair k solves frames (k-1, k) and labels frame k-1's pixels; pair k+1 labels frame k's. The previous
+ * pair's scene flow moves each labelled point of frame k-1 to where it is in frame k, which says which
+ * segment each pixel of frame k continues. Design: docs/ALGORITHM.md, "Stream mode".
+ */
+#pragma once
+
+#include <vector>
+
+#include "mc_flow/core/image.h"
+
+namespace mc_flow {
+
+struct Result;
+
+/// @brief The previous pair's segment ids on the next pair's frame-1 pixels (input resolution), 0 where
+/// no segment arrives. Each labelled point of the previous frame 1 is moved by its scene flow and
+/// projected (the nearest point wins a pixel); a pixel keeps the id only where the moved point's depth is
+/// within `depth_tolerance` [m] of the depth observed there (`points`: the next frame 1's 3D points, NaN
+/// where invalid). One-pixel gaps between splatted points are closed from neighbours at a similar depth.
+ImageI32 carrySegmentIds(const Result& previous, const ImageF& points, double depth_tolerance);
+
+/// @brief Carried ids as hard initial labels of a pyramid level.
+struct CarriedLabels {
+  ImageI32 hard;             ///< motion label index per level pixel, -1 = uncovered or no depth
+  std::vector<int> ids;      ///< segment id of motion label i
+  int covered = 0;           ///< level pixels with valid depth and a carried label
+  int valid = 0;             ///< level pixels with valid depth
+  double coverage() const { return valid > 0 ? double(covered) / valid : 0.0; }
+};
+
+/// @brief Each pixel of the level (3D points `level_points`, `scale` input pixels per level pixel, a power
+/// of two) takes the id most of its input pixels carry, when they are at least half of them.
+CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& level_points, int scale);
+
+/// @brief Persistent ids for a cold-started pair: segment i (labels 1..m in `labels`, 0 = none) takes the
+/// carried id it overlaps most when the overlap is at least `min_overlap` of the smaller of the two regions
+/// (largest overlaps matched first, each id once); the others get next_id, next_id + 1, ... (advanced).
+std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, const ImageI32& carried_ids,
+                                 double min_overlap, int& next_id);
+
+}  // namespace mc_flow

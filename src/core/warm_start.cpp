@@ -1,0 +1,156 @@
+// Stream mode: the previous pair's segments moved into the next frame 1 (forward splatting of the labelled
+// points by their scene flow, with a depth test), resampled to a pyramid level, or matched to a cold
+// solve's segments by overlap.
+#include "mc_flow/core/warm_start.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <tuple>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/solver.h"
+
+namespace mc_flow {
+
+ImageI32 carrySegmentIds(const Result& previous, const ImageF& points, double depth_tolerance) {
+  const int W = points.width, H = points.height;
+  if (previous.width != W || previous.height != H)
+    throw InputError("warm start: the previous result is " + std::to_string(previous.width) + "x" +
+                     std::to_string(previous.height) + " but the frame is " + std::to_string(W) + "x" +
+                     std::to_string(H));
+  if (previous.labels.data.size() != std::size_t(W) * H || previous.scene_flow.data.size() != std::size_t(W) * H * 3 ||
+      previous.optical_flow.data.size() != std::size_t(W) * H * 2 ||
+      previous.moved_depth.data.size() != std::size_t(W) * H)
+    throw InputError("warm start: the previous result has no labels or flow at its " + std::to_string(W) + "x" +
+                     std::to_string(H) + " resolution");
+  // Forward splat with a depth buffer: the nearest moved point wins a pixel.
+  ImageF nearest(W, H, 1, std::numeric_limits<float>::infinity());
+  ImageI32 splat(W, H, 1, 0);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const int id = previous.labels(x, y);
+      if (id <= 0) continue;
+      const float u = float(x) + previous.optical_flow(x, y, 0), v = float(y) + previous.optical_flow(x, y, 1);
+      if (!std::isfinite(u) || !std::isfinite(v)) continue;
+      const int tx = int(std::lround(u)), ty = int(std::lround(v));
+      if (tx < 0 || ty < 0 || tx >= W || ty >= H) continue;
+      const float z_moved = previous.moved_depth(x, y);  // where the point is in frame 2, seen from frame 2's camera
+      if (!(z_moved > 0) || z_moved >= nearest(tx, ty)) continue;
+      nearest(tx, ty) = z_moved;
+      splat(tx, ty) = id;
+    }
+  ImageI32 carried(W, H, 1, 0);
+  auto observed = [&](int x, int y) { return points(x, y, 2); };
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      if (splat(x, y) > 0 && std::isfinite(observed(x, y)) && std::abs(nearest(x, y) - observed(x, y)) <= depth_tolerance)
+        carried(x, y) = splat(x, y);
+  // Close the one-pixel gaps that rounding leaves where a surface comes closer (it covers more pixels):
+  // a pixel without an id takes the most common id of its 8 neighbours whose observed depth is close.
+  ImageI32 closed = carried;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (carried(x, y) > 0 || !std::isfinite(observed(x, y))) continue;
+      int best_id = 0, best_count = 0;
+      int ids[8], counts[8], n = 0;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int nx = x + dx, ny = y + dy;
+          if ((dx == 0 && dy == 0) || nx < 0 || ny < 0 || nx >= W || ny >= H) continue;
+          const int id = carried(nx, ny);
+          if (id <= 0 || !(std::abs(observed(nx, ny) - observed(x, y)) <= depth_tolerance)) continue;
+          int k = 0;
+          while (k < n && ids[k] != id) ++k;
+          if (k == n) {
+            ids[n] = id;
+            counts[n++] = 0;
+          }
+          if (++counts[k] > best_count) {
+            best_count = counts[k];
+            best_id = id;
+          }
+        }
+      if (best_count >= 2) closed(x, y) = best_id;
+    }
+  return closed;
+}
+
+CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& level_points, int scale) {
+  if (scale < 1 || (scale & (scale - 1)) != 0)
+    throw InputError("carried labels: scale " + std::to_string(scale) + " is not a power of two");
+  const int w = level_points.width, h = level_points.height;
+  if (carried_ids.width < w * scale || carried_ids.height < h * scale)
+    throw InputError("carried labels: a " + std::to_string(carried_ids.width) + "x" + std::to_string(carried_ids.height) +
+                     " id image cannot cover a " + std::to_string(w) + "x" + std::to_string(h) + " level at scale " +
+                     std::to_string(scale));
+  CarriedLabels out;
+  out.hard = ImageI32(w, h, 1, -1);
+  std::map<int, int> index_of_id;
+  std::vector<std::pair<int, int>> counts;  // (id, count) within a block
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (!std::isfinite(level_points(x, y, 2))) continue;
+      ++out.valid;
+      counts.clear();
+      for (int by = 0; by < scale; ++by)
+        for (int bx = 0; bx < scale; ++bx) {
+          const int id = carried_ids(x * scale + bx, y * scale + by);
+          if (id <= 0) continue;
+          auto it = std::find_if(counts.begin(), counts.end(), [id](const auto& c) { return c.first == id; });
+          if (it == counts.end())
+            counts.emplace_back(id, 1);
+          else
+            ++it->second;
+        }
+      if (counts.empty()) continue;
+      // The most common id; ties go to the smaller id, so the result does not depend on the visiting order.
+      const auto best = std::max_element(counts.begin(), counts.end(), [](const auto& a, const auto& b) {
+        return a.second < b.second || (a.second == b.second && a.first > b.first);
+      });
+      if (2 * best->second < scale * scale) continue;
+      auto [it, inserted] = index_of_id.emplace(best->first, int(index_of_id.size()));
+      if (inserted) out.ids.push_back(best->first);
+      out.hard(x, y) = it->second;
+      ++out.covered;
+    }
+  return out;
+}
+
+std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, const ImageI32& carried_ids,
+                                 double min_overlap, int& next_id) {
+  if (labels.width != carried_ids.width || labels.height != carried_ids.height)
+    throw InputError("segment ids: labels are " + std::to_string(labels.width) + "x" + std::to_string(labels.height) +
+                     ", carried ids " + std::to_string(carried_ids.width) + "x" + std::to_string(carried_ids.height));
+  std::vector<double> size(std::size_t(segment_count) + 1, 0.0);
+  std::map<int, double> carried_size;
+  std::map<std::pair<int, int>, double> overlap;  // (segment, id) -> pixels
+  for (std::size_t k = 0; k < labels.data.size(); ++k) {
+    const int s = labels.data[k], id = carried_ids.data[k];
+    if (s > 0 && s <= segment_count) size[std::size_t(s)] += 1;
+    if (id > 0) carried_size[id] += 1;
+    if (s > 0 && s <= segment_count && id > 0) overlap[{s, id}] += 1;
+  }
+  std::vector<std::tuple<double, int, int>> candidates;  // (overlap, segment, id)
+  for (const auto& [key, pixels] : overlap) {
+    const double smaller = std::min(size[std::size_t(key.first)], carried_size[key.second]);
+    if (smaller > 0 && pixels >= min_overlap * smaller) candidates.emplace_back(pixels, key.first, key.second);
+  }
+  std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
+    return std::get<0>(a) > std::get<0>(b) ||
+           (std::get<0>(a) == std::get<0>(b) && std::tie(std::get<1>(a), std::get<2>(a)) < std::tie(std::get<1>(b), std::get<2>(b)));
+  });
+  std::vector<int> ids(std::size_t(segment_count), 0);
+  std::map<int, bool> taken;
+  for (const auto& [pixels, segment, id] : candidates) {
+    if (ids[std::size_t(segment - 1)] != 0 || taken[id]) continue;
+    ids[std::size_t(segment - 1)] = id;
+    taken[id] = true;
+  }
+  for (int& id : ids)
+    if (id == 0) id = next_id++;
+  return ids;
+}
+
+}  // namespace mc_flow

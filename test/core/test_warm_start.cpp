@@ -1,0 +1,140 @@
+// Stream mode: carrying the previous pair's segments into the next frame 1, resampling them to a level,
+// matching ids by overlap, and the solver's warm start and its fallbacks.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <set>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/solver.h"
+#include "mc_flow/core/warm_start.h"
+#include "mc_flow/testing/metrics.h"
+#include "mc_flow/testing/synthetic_scene.h"
+
+namespace mc_flow {
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// A previous result on a W x H grid: two segments (ids 7 left half, 9 right half) at depth 2 m, every point
+// moving by `shift` pixels along x (and keeping its depth).
+Result shiftedPrevious(int W, int H, int shift) {
+  Result r;
+  r.width = W;
+  r.height = H;
+  r.intrinsics = {100, 100, W / 2.0, H / 2.0};
+  r.labels = ImageI32(W, H, 1, 0);
+  r.optical_flow = ImageF(W, H, 2, 0.f);
+  r.scene_flow = ImageF(W, H, 3, 0.f);
+  r.moved_depth = ImageF(W, H, 1, 2.f);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      r.labels(x, y) = x < W / 2 ? 7 : 9;
+      r.optical_flow(x, y, 0) = float(shift);
+    }
+  Segment a, b;
+  a.id = 7;
+  b.id = 9;
+  r.segments = {a, b};
+  r.next_id = 10;
+  return r;
+}
+
+ImageF planePoints(int W, int H, float depth) {
+  ImageF points(W, H, 3, 0.f);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      points(x, y, 0) = (x - W / 2.f) / 100.f * depth;
+      points(x, y, 1) = (y - H / 2.f) / 100.f * depth;
+      points(x, y, 2) = depth;
+    }
+  return points;
+}
+
+TEST(WarmStart, CarriesIdsAlongTheFlowWhereTheDepthAgrees) {
+  const int W = 40, H = 20;
+  const Result previous = shiftedPrevious(W, H, 3);
+  ImageF points = planePoints(W, H, 2.f);
+  for (int x = 0; x < W; ++x) points(x, 5, 2) = 2.5f;  // row 5: another surface than the one that arrives
+  points(30, 10, 2) = kNaN;                              // no depth
+  const ImageI32 carried = carrySegmentIds(previous, points, 0.05);
+  // Columns 0..2 receive nothing (everything moved right); the boundary moves from 20 to 23.
+  EXPECT_EQ(carried(1, 10), 0);
+  EXPECT_EQ(carried(3, 10), 7);
+  EXPECT_EQ(carried(22, 10), 7);
+  EXPECT_EQ(carried(23, 10), 9);
+  EXPECT_EQ(carried(39, 10), 9);
+  EXPECT_EQ(carried(10, 5), 0) << "the observed depth is 0.5 m away from the carried point's";
+  EXPECT_EQ(carried(30, 10), 0) << "no depth, no id";
+  // With a looser tolerance the row is carried too.
+  EXPECT_EQ(carrySegmentIds(previous, points, 0.6)(10, 5), 7);
+}
+
+TEST(WarmStart, ClosesOnePixelGapsOfASurfaceThatComesCloser) {
+  const int W = 40, H = 20;
+  Result previous = shiftedPrevious(W, H, 0);
+  // Every second column of the previous frame is unlabelled: its points land nowhere.
+  for (int y = 0; y < H; ++y)
+    for (int x = 1; x < W; x += 2) previous.labels(x, y) = 0;
+  const ImageI32 carried = carrySegmentIds(previous, planePoints(W, H, 2.f), 0.05);
+  EXPECT_EQ(carried(11, 10), 7);
+  EXPECT_EQ(carried(25, 10), 9);
+}
+
+TEST(WarmStart, RejectsAPreviousResultOfAnotherSize) {
+  const Result previous = shiftedPrevious(40, 20, 0);
+  EXPECT_THROW(carrySegmentIds(previous, planePoints(20, 10, 2.f), 0.05), InputError);
+  Result empty;
+  empty.width = 40;
+  empty.height = 20;
+  EXPECT_THROW(carrySegmentIds(empty, planePoints(40, 20, 2.f), 0.05), InputError);
+}
+
+TEST(WarmStart, LevelLabelsTakeTheMajorityOfTheirBlock) {
+  ImageI32 ids(8, 4, 1, 0);
+  // Block (0,0): three 5s and one 6 -> 5. Block (1,0): two 6s, two uncovered -> 6 (half). Block (2,0): one 6
+  // -> uncovered. Block (3,0) has no depth at the level.
+  ids(0, 0) = 5, ids(1, 0) = 5, ids(0, 1) = 5, ids(1, 1) = 6;
+  ids(2, 0) = 6, ids(3, 1) = 6;
+  ids(4, 0) = 6;
+  ids(6, 0) = 5, ids(7, 0) = 5, ids(6, 1) = 5, ids(7, 1) = 5;
+  ImageF level = planePoints(4, 2, 1.f);
+  level(3, 0, 2) = kNaN;
+  const CarriedLabels c = carriedLabelsAtLevel(ids, level, 2);
+  ASSERT_EQ(c.ids.size(), 2u);
+  EXPECT_EQ(c.ids[std::size_t(c.hard(0, 0))], 5);
+  EXPECT_EQ(c.ids[std::size_t(c.hard(1, 0))], 6);
+  EXPECT_EQ(c.hard(2, 0), -1);
+  EXPECT_EQ(c.hard(3, 0), -1);
+  EXPECT_EQ(c.valid, 7);
+  EXPECT_EQ(c.covered, 2);
+  EXPECT_THROW(carriedLabelsAtLevel(ids, level, 3), InputError);
+  EXPECT_THROW(carriedLabelsAtLevel(ids, planePoints(8, 4, 1.f), 2), InputError);
+}
+
+TEST(WarmStart, MatchesIdsByOverlapEachIdOnce) {
+  ImageI32 labels(10, 1, 1, 0), carried(10, 1, 1, 0);
+  // Segment 1 covers 0..4, segment 2 covers 5..9, segment 3 is one pixel inside id 4's region.
+  for (int x = 0; x < 10; ++x) labels(x, 0) = x < 5 ? 1 : 2;
+  labels(9, 0) = 3;
+  for (int x = 0; x < 10; ++x) carried(x, 0) = x < 6 ? 4 : 8;
+  int next_id = 20;
+  const std::vector<int> ids = matchSegmentIds(labels, 3, carried, 0.3, next_id);
+  ASSERT_EQ(ids.size(), 3u);
+  EXPECT_EQ(ids[0], 4);
+  EXPECT_EQ(ids[1], 8);
+  EXPECT_EQ(ids[2], 20) << "id 8 is taken by the larger overlap";
+  EXPECT_EQ(next_id, 21);
+  // Requiring the whole smaller region: segment 2 shares 3 of its 4 pixels with id 8 and gets a new id,
+  // while segment 3 (one pixel, inside id 8's region) now takes id 8.
+  next_id = 30;
+  const std::vector<int> strict = matchSegmentIds(labels, 3, carried, 1.0, next_id);
+  EXPECT_EQ(strict[0], 4);
+  EXPECT_EQ(strict[1], 30);
+  EXPECT_EQ(strict[2], 8);
+  EXPECT_EQ(next_id, 31);
+}
+
+}  // namespace
+}  // namespace mc_flow
