@@ -1,0 +1,120 @@
+/**
+ * @file sequence.h
+ * @brief One RGB-D stream, frame by frame: preprocessing to the processing resolution, pairing and the
+ * reset policy, the warm start, persistent segment ids and each segment's accumulated pose. The nodelet and
+ * `mcflow run-seq` both drive this class; it knows nothing of ROS or files. Design: docs/STREAMS.md.
+ */
+#pragma once
+
+#include <any>
+#include <map>
+#include <memory>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "mc_flow/core/config.h"
+#include "mc_flow/core/image.h"
+#include "mc_flow/core/solver.h"
+
+namespace mc_flow {
+
+/// @brief The downsampling factor for an input `width`: `requested` > 0 is used as is (a power of two,
+/// else ConfigError); 0 picks the power of two that brings the width closest to 320 px (the paper's
+/// resolution: 640 -> 2, 320 -> 1, 1280 -> 4).
+int chooseDownsample(int requested, int width);
+
+/// @brief A frame at `factor` times fewer pixels per axis by the pyramid's rules (depth: neighbours within
+/// `depth_range` [m] of the block's median; intensity: [1 3 3 1] smoothing), halving log2(factor) times;
+/// odd last columns/rows are dropped, so the principal point needs no shift (Intrinsics::scaled).
+RgbdFrame downsampleFrame(const RgbdFrame& frame, int factor, double depth_range);
+
+/// @brief One frame of a stream at the input resolution.
+struct StreamFrame {
+  RgbdFrame frame;      ///< intensity [0, 1], depth [m] (0 or NaN = invalid)
+  Intrinsics K;         ///< of `frame`
+  double stamp = 0;     ///< [s]
+  std::string source;   ///< camera / frame id: a change starts a new sequence
+  std::any extra;       ///< the caller's data carried with the frame (e.g. a display image)
+};
+
+/// @brief A frame as the solver sees it: at the processing resolution.
+struct PreparedFrame {
+  RgbdFrame frame;
+  Intrinsics K;
+  double stamp = 0;
+  std::string source;
+  int downsample = 1;                  ///< input pixels per processing pixel (per axis)
+  int input_width = 0, input_height = 0;
+  std::any extra;
+};
+
+/// @brief A segment's motion accumulated since it appeared (camera frame of its first pair's frame 1).
+struct SegmentTrack {
+  Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();  ///< product of its transforms, latest first
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();     ///< [m] its centroid moved to the latest frame
+  long first_pair = 0, last_pair = 0;
+};
+
+/// @brief What one frame did.
+struct SequenceStep {
+  enum class Outcome {
+    Solved,          ///< a pair (first, second) was solved: `result`
+    Started,         ///< the frame starts a sequence (the first, or after a reset): nothing to solve yet
+    RepeatedStamp,   ///< the stamp repeats the previous frame's: the frame is dropped
+    PairFailed,      ///< the solver refused the pair (`problem`); the frame is kept as the next pair's first
+  };
+  Outcome outcome = Outcome::Started;
+  std::string reset_key;     ///< "back", "gap" or "input" when the frame started a new sequence after one
+  std::string reset_reason;  ///< why, in words
+  std::string problem;       ///< PairFailed: the solver's message
+  std::string backend_fallback;  ///< the GPU failed: the solver continues on the CPU (the pair is failed)
+  const PreparedFrame* first = nullptr;   ///< Solved: the pair's frames (valid until the next push)
+  const PreparedFrame* second = nullptr;
+  const Result* result = nullptr;         ///< Solved (valid until the next push)
+  long pair_index = -1;                   ///< Solved: 0, 1, ... over the pipeline's life
+};
+
+/// @brief Pairs consecutive frames of one stream and solves them (see the file comment). Not thread-safe.
+class SequencePipeline {
+ public:
+  /// `downsample`: see chooseDownsample (0 = automatic). `max_pair_interval` [s]: a longer gap starts a new
+  /// sequence. Throws ConfigError for a bad config, a negative interval or a downsample that is not 0 or a
+  /// power of two; BackendError when CUDA is forced but unusable.
+  SequencePipeline(const Config& config, int downsample, double max_pair_interval);
+
+  /// @brief Prepares the frame and, when it continues the sequence, solves the pair (previous, frame) (warm
+  /// started from the previous pair's result when Config::warm_start). Frames whose stamps go back, follow a gap
+  /// longer than max_pair_interval, or come from another source or size start a new sequence. Throws
+  /// InputError when the frame itself is unusable (it is then not kept).
+  SequenceStep push(StreamFrame frame);
+
+  /// @brief Forgets the previous frame, result and tracks (ids keep increasing).
+  void reset();
+  /// @brief A new solver for the following pairs (parameters changed); the sequence continues.
+  void setConfig(const Config& config);
+
+  const Solver& solver() const { return *solver_; }
+  /// @brief Tracks of the segments alive after the last solved pair, by id.
+  const std::map<int, SegmentTrack>& tracks() const { return tracks_; }
+  long pairsSolved() const { return pairs_solved_; }
+  long resets() const { return resets_; }
+
+ private:
+  PreparedFrame prepare(StreamFrame frame) const;
+  void updateTracks(const Result& result);
+
+  Config config_;
+  int downsample_request_ = 0;
+  double max_pair_interval_ = 1.0;
+  std::unique_ptr<Solver> solver_;
+  std::unique_ptr<PreparedFrame> pair_first_;      // the last solved pair's first frame
+  std::unique_ptr<PreparedFrame> previous_frame_;  // the next pair's first frame
+  std::unique_ptr<Result> last_result_;            // the prior of the next pair (only while it ends at previous_frame_)
+  std::map<int, SegmentTrack> tracks_;
+  long pairs_solved_ = 0, resets_ = 0;
+};
+
+std::string toString(SequenceStep::Outcome outcome);
+
+}  // namespace mc_flow

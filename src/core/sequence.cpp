@@ -1,0 +1,183 @@
+// One RGB-D stream: preprocessing, pairing and resets, the warm start and the segment tracks.
+#include "mc_flow/core/sequence.h"
+
+#include <cmath>
+#include <cstdlib>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/pyramid.h"
+
+namespace mc_flow {
+
+namespace {
+
+bool isPowerOfTwo(int v) { return v > 0 && (v & (v - 1)) == 0; }
+
+std::string sizeText(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+
+}  // namespace
+
+int chooseDownsample(int requested, int width) {
+  if (requested < 0 || (requested > 0 && !isPowerOfTwo(requested)))
+    throw ConfigError("downsample = " + std::to_string(requested) + " is invalid: must be 0 (automatic) or a power of two");
+  if (requested > 0) return requested;
+  int best = 1;
+  for (int factor = 2; factor <= 16; factor *= 2)
+    if (std::abs(width / factor - 320) < std::abs(width / best - 320)) best = factor;
+  return best;
+}
+
+RgbdFrame downsampleFrame(const RgbdFrame& frame, int factor, double depth_range) {
+  if (!isPowerOfTwo(factor)) throw ConfigError("downsample factor " + std::to_string(factor) + " is not a power of two");
+  RgbdFrame out = frame;
+  // The pyramid's halving expects 0 for invalid depth (NaN never enters it).
+  for (float& z : out.depth.data)
+    if (!std::isfinite(z) || z < 0) z = 0.f;
+  for (int f = factor; f > 1; f /= 2) {
+    out.intensity = downsampleIntensity(out.intensity);
+    out.depth = downsampleDepth(out.depth, depth_range);
+  }
+  return out;
+}
+
+std::string toString(SequenceStep::Outcome outcome) {
+  switch (outcome) {
+    case SequenceStep::Outcome::Solved: return "solved";
+    case SequenceStep::Outcome::Started: return "started";
+    case SequenceStep::Outcome::RepeatedStamp: return "repeated_stamp";
+    case SequenceStep::Outcome::PairFailed: return "pair_failed";
+  }
+  return "unknown";
+}
+
+SequencePipeline::SequencePipeline(const Config& config, int downsample, double max_pair_interval)
+    : config_(config), downsample_request_(downsample), max_pair_interval_(max_pair_interval) {
+  chooseDownsample(downsample, 320);  // validates the request
+  if (!(max_pair_interval > 0) || !std::isfinite(max_pair_interval))
+    throw ConfigError("max_pair_interval = " + std::to_string(max_pair_interval) + " s is invalid: must be finite and > 0");
+  solver_ = std::make_unique<Solver>(config_);
+}
+
+void SequencePipeline::setConfig(const Config& config) {
+  solver_ = std::make_unique<Solver>(config);
+  config_ = config;
+}
+
+void SequencePipeline::reset() {
+  pair_first_.reset();
+  previous_frame_.reset();
+  last_result_.reset();
+  tracks_.clear();
+}
+
+PreparedFrame SequencePipeline::prepare(StreamFrame frame) const {
+  frame.K.validate();
+  frame.frame.validate("frame");
+  PreparedFrame out;
+  out.input_width = frame.frame.width();
+  out.input_height = frame.frame.height();
+  out.downsample = chooseDownsample(downsample_request_, out.input_width);
+  const int w = out.input_width / out.downsample, h = out.input_height / out.downsample;
+  if (w < 16 || h < 16)
+    throw InputError("processing size " + sizeText(w, h) + " (input " + sizeText(out.input_width, out.input_height) +
+                     " / downsample " + std::to_string(out.downsample) + ") is too small: at least 16x16");
+  out.frame = out.downsample == 1 ? std::move(frame.frame)
+                                  : downsampleFrame(frame.frame, out.downsample, config_.depth_downsample_range);
+  out.K = frame.K.scaled(1.0 / out.downsample);
+  out.stamp = frame.stamp;
+  out.source = std::move(frame.source);
+  out.extra = std::move(frame.extra);
+  return out;
+}
+
+SequenceStep SequencePipeline::push(StreamFrame input) {
+  PreparedFrame frame = prepare(std::move(input));
+  SequenceStep step;
+  if (previous_frame_) {
+    const PreparedFrame& previous = *previous_frame_;
+    const double dt = frame.stamp - previous.stamp;
+    if (dt == 0.0) {
+      step.outcome = SequenceStep::Outcome::RepeatedStamp;
+      return step;
+    }
+    if (dt < 0.0) {
+      step.reset_key = "back";
+      step.reset_reason = "the stamp went back by " + std::to_string(-dt) + " s (stream reset or bag loop)";
+    } else if (dt > max_pair_interval_) {
+      step.reset_key = "gap";
+      step.reset_reason = "a gap of " + std::to_string(dt) + " s exceeds max_pair_interval " +
+                          std::to_string(max_pair_interval_) + " s";
+    } else if (frame.source != previous.source || !frame.frame.intensity.sameSize(previous.frame.intensity)) {
+      step.reset_key = "input";
+      step.reset_reason = "the input changed from '" + previous.source + "' " +
+                          sizeText(previous.input_width, previous.input_height) + " to '" + frame.source + "' " +
+                          sizeText(frame.input_width, frame.input_height);
+    }
+    if (!step.reset_key.empty()) {
+      reset();
+      ++resets_;
+    }
+  }
+  if (!previous_frame_) {
+    previous_frame_ = std::make_unique<PreparedFrame>(std::move(frame));
+    step.outcome = SequenceStep::Outcome::Started;
+    return step;
+  }
+
+  const PreparedFrame& first = *previous_frame_;
+  Result result;
+  try {
+    result = last_result_ ? solver_->solve(first.frame, frame.frame, first.K, *last_result_)
+                          : solver_->solve(first.frame, frame.frame, first.K);
+  } catch (const BackendError& e) {
+    // The GPU failed at run time: the following pairs run on the CPU.
+    step.backend_fallback = std::string(e.what());
+    step.problem = "the " + solver_->backendName() + " backend failed: " + e.what();
+    Config cpu = config_;
+    cpu.backend = Backend::Cpu;
+    setConfig(cpu);
+  } catch (const InputError& e) {
+    step.problem = e.what();
+  } catch (const ConfigError& e) {
+    // Parameters that do not fit this input (e.g. processing_level deeper than its pyramid).
+    step.problem = e.what();
+  }
+  if (!step.problem.empty()) {
+    // The sequence goes on from this frame, without a prior (the last result does not end at it).
+    step.outcome = SequenceStep::Outcome::PairFailed;
+    previous_frame_ = std::make_unique<PreparedFrame>(std::move(frame));
+    last_result_.reset();
+    return step;
+  }
+  pair_first_ = std::move(previous_frame_);
+  previous_frame_ = std::make_unique<PreparedFrame>(std::move(frame));
+  last_result_ = std::make_unique<Result>(std::move(result));
+  updateTracks(*last_result_);
+  step.outcome = SequenceStep::Outcome::Solved;
+  step.first = pair_first_.get();
+  step.second = previous_frame_.get();
+  step.result = last_result_.get();
+  step.pair_index = pairs_solved_++;
+  return step;
+}
+
+void SequencePipeline::updateTracks(const Result& result) {
+  std::map<int, SegmentTrack> next;
+  for (const Segment& s : result.segments) {
+    SegmentTrack track;
+    const auto known = tracks_.find(s.id);
+    if (known != tracks_.end()) {
+      track = known->second;
+    } else {
+      track.first_pair = pairs_solved_;
+    }
+    track.pose = s.transform * track.pose;
+    track.origin = s.transform.topLeftCorner<3, 3>() * s.centroid + s.transform.topRightCorner<3, 1>();
+    track.last_pair = pairs_solved_;
+    next[s.id] = track;
+  }
+  tracks_ = std::move(next);
+}
+
+}  // namespace mc_flow
