@@ -8,11 +8,12 @@ find_package(catkin REQUIRED COMPONENTS ${MCFLOW_CATKIN_COMPONENTS})
 add_message_files(DIRECTORY msg FILES MotionSegment.msg SegmentArray.msg)
 generate_messages(DEPENDENCIES std_msgs geometry_msgs)
 
-# The .cfg reads names, types, defaults and descriptions from the core's config.h (one source of truth).
+# The .cfg reads names, types, defaults, ranges, units and descriptions from the core's parameter table
+# (include/mc_flow/core/config_fields.def, which also generates mc_flow::Config).
 generate_dynamic_reconfigure_options(cfg/McFlow.cfg)
 # Regenerate the parameters whenever the core Config changes.
 add_custom_command(OUTPUT ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_INCLUDE_DESTINATION}/McFlowConfig.h APPEND
-  DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/include/mc_flow/core/config.h)
+  DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/include/mc_flow/core/config_fields.def)
 
 catkin_package(
   INCLUDE_DIRS include

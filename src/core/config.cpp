@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <type_traits>
 #include <variant>
 
 #include "mc_flow/core/error.h"
@@ -67,7 +68,7 @@ bool parseBool(const std::string& name, const std::string& text) {
   throw ConfigError("Config." + name + ": '" + text + "' is not a boolean (true/false/1/0)");
 }
 
-// One table drives set() and fields(), so a field's name and type are written down once.
+// set() and fields() walk this list of member pointers, generated from config_fields.def.
 using FieldPointer = std::variant<double Config::*, int Config::*, unsigned Config::*, bool Config::*,
                                   Regularizer Config::*, Backend Config::*>;
 struct FieldEntry {
@@ -75,60 +76,13 @@ struct FieldEntry {
   FieldPointer pointer;
 };
 
-#define MCFLOW_FIELD(member) FieldEntry{#member, &Config::member}
 const FieldEntry kFields[] = {
-    MCFLOW_FIELD(max_depth),
-    MCFLOW_FIELD(min_depth),
-    MCFLOW_FIELD(coarsest_min_width),
-    MCFLOW_FIELD(processing_level),
-    MCFLOW_FIELD(depth_downsample_range),
-    MCFLOW_FIELD(initial_labels),
-    MCFLOW_FIELD(kmeans_max_iterations),
-    MCFLOW_FIELD(kmeans_tolerance),
-    MCFLOW_FIELD(kmeans_level_offset),
-    MCFLOW_FIELD(seed),
-    MCFLOW_FIELD(dominant_motion_init),
-    MCFLOW_FIELD(outer_iterations),
-    MCFLOW_FIELD(outer_convergence),
-    MCFLOW_FIELD(label_level_offset),
-    MCFLOW_FIELD(motion_iterations_per_level),
-    MCFLOW_FIELD(motion_iterations_refine),
-    MCFLOW_FIELD(motion_coarse_levels_after_first),
-    MCFLOW_FIELD(alpha),
-    MCFLOW_FIELD(cauchy_c_intensity),
-    MCFLOW_FIELD(cauchy_c_depth),
-    MCFLOW_FIELD(motion_damping),
-    MCFLOW_FIELD(motion_min_update),
-    MCFLOW_FIELD(min_label_weight),
-    MCFLOW_FIELD(motion_min_label_pixels),
-    MCFLOW_FIELD(regularizer),
-    MCFLOW_FIELD(lambda_quadratic),
-    MCFLOW_FIELD(lambda_tv),
-    MCFLOW_FIELD(label_iterations),
-    MCFLOW_FIELD(label_iterations_final),
-    MCFLOW_FIELD(label_tolerance),
-    MCFLOW_FIELD(outlier_cost),
-    MCFLOW_FIELD(out_of_view_cost),
-    MCFLOW_FIELD(min_geometric_weight),
-    MCFLOW_FIELD(label_cost),
-    MCFLOW_FIELD(max_splits_per_iteration),
-    MCFLOW_FIELD(max_labels),
-    MCFLOW_FIELD(min_support_fraction),
-    MCFLOW_FIELD(detect_occlusions),
-    MCFLOW_FIELD(occlusion_kz),
-    MCFLOW_FIELD(occlusion_ko),
-    MCFLOW_FIELD(warm_start),
-    MCFLOW_FIELD(warm_outer_iterations),
-    MCFLOW_FIELD(warm_motion_coarse_levels),
-    MCFLOW_FIELD(warm_depth_tolerance),
-    MCFLOW_FIELD(warm_min_coverage),
-    MCFLOW_FIELD(warm_max_energy_ratio),
-    MCFLOW_FIELD(id_min_overlap),
-    MCFLOW_FIELD(backend),
-    MCFLOW_FIELD(threads),
-    MCFLOW_FIELD(verbose),
+#define MCFLOW_SECTION(title)
+#define MCFLOW_PARAM(type, name, default_value, min, max, unit, description) FieldEntry{#name, &Config::name},
+#include "mc_flow/core/config_fields.def"
+#undef MCFLOW_PARAM
+#undef MCFLOW_SECTION
 };
-#undef MCFLOW_FIELD
 
 template <class... Ts>
 struct Overloaded : Ts... {
@@ -137,31 +91,37 @@ struct Overloaded : Ts... {
 template <class... Ts>
 Overloaded(Ts...) -> Overloaded<Ts...>;
 
-// ---- range checks used by validate() ----
+// ---- the text of a value, as set() parses it and fields() writes it ----
+std::string valueText(double v) { return doubleText(v); }
+std::string valueText(int v) { return std::to_string(v); }
+std::string valueText(unsigned v) { return std::to_string(v); }
+std::string valueText(bool v) { return v ? "true" : "false"; }
+std::string valueText(Regularizer v) { return toString(v); }
+std::string valueText(Backend v) { return toString(v); }
+
+// ---- validate(): the table's inclusive [min, max] ----
 [[noreturn]] void rangeError(const char* name, const std::string& value, const std::string& rule) {
   throw ConfigError(std::string("Config.") + name + " = " + value + " is invalid: " + rule);
 }
-void requireFinite(const char* name, double v) {
-  if (!std::isfinite(v)) rangeError(name, doubleText(v), "must be finite");
-}
-void requirePositive(const char* name, double v) {
-  requireFinite(name, v);
-  if (!(v > 0)) rangeError(name, doubleText(v), "must be > 0");
-}
-void requireNonNegative(const char* name, double v) {
-  requireFinite(name, v);
-  if (!(v >= 0)) rangeError(name, doubleText(v), "must be >= 0");
-}
-void requireFraction(const char* name, double v) {
-  requireFinite(name, v);
-  if (!(v >= 0 && v < 1)) rangeError(name, doubleText(v), "must be in [0, 1)");
-}
-void requireIntAtLeast(const char* name, int v, int lo) {
-  if (v < lo) rangeError(name, std::to_string(v), "must be >= " + std::to_string(lo));
-}
-void requireIntIn(const char* name, int v, int lo, int hi) {
-  if (v < lo || v > hi)
-    rangeError(name, std::to_string(v), "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+
+template <class T>
+void requireInRange(const char* name, T value, T lo, T hi, const char* unit) {
+  if constexpr (std::is_same_v<T, bool>) {
+    return;
+  } else {
+    bool inside;
+    if constexpr (std::is_enum_v<T>) {
+      using U = std::underlying_type_t<T>;
+      inside = U(value) >= U(lo) && U(value) <= U(hi);
+    } else {
+      inside = value >= lo && value <= hi;  // false for NaN
+    }
+    if (!inside) {
+      rangeError(name, valueText(value),
+                 "must be in [" + valueText(lo) + ", " + valueText(hi) + "]" +
+                     (std::string(unit) == "1" || std::string(unit) == "-" ? "" : std::string(" ") + unit));
+    }
+  }
 }
 
 }  // namespace
@@ -199,67 +159,28 @@ Backend parseBackend(const std::string& s) {
 }
 
 void Config::validate() const {
-  requirePositive("min_depth", min_depth);
-  requirePositive("max_depth", max_depth);
+#define MCFLOW_SECTION(title)
+#define MCFLOW_PARAM(type, name, default_value, min, max, unit, description) \
+  requireInRange<type>(#name, name, min, max, unit);
+#include "mc_flow/core/config_fields.def"
+#undef MCFLOW_PARAM
+#undef MCFLOW_SECTION
+  // Cross-field rules, which a per-field range cannot say.
   if (!(max_depth > min_depth))
     rangeError("max_depth", doubleText(max_depth), "must be > min_depth (" + doubleText(min_depth) + ")");
+}
 
-  requireIntAtLeast("coarsest_min_width", coarsest_min_width, 1);
-  requireIntIn("processing_level", processing_level, 0, 10);
-  requirePositive("depth_downsample_range", depth_downsample_range);
-
-  requireIntIn("initial_labels", initial_labels, 1, 64);
-  requireIntAtLeast("kmeans_max_iterations", kmeans_max_iterations, 1);
-  requireNonNegative("kmeans_tolerance", kmeans_tolerance);
-  requireIntIn("kmeans_level_offset", kmeans_level_offset, 0, 10);
-
-  requireIntAtLeast("outer_iterations", outer_iterations, 1);
-  requireNonNegative("outer_convergence", outer_convergence);
-  requireIntIn("label_level_offset", label_level_offset, 0, 10);
-
-  requireIntAtLeast("motion_iterations_per_level", motion_iterations_per_level, 1);
-  requireIntAtLeast("motion_iterations_refine", motion_iterations_refine, 1);
-  requireIntIn("motion_coarse_levels_after_first", motion_coarse_levels_after_first, 0, 10);
-  requireNonNegative("alpha", alpha);
-  requirePositive("cauchy_c_intensity", cauchy_c_intensity);
-  requirePositive("cauchy_c_depth", cauchy_c_depth);
-  requireNonNegative("motion_damping", motion_damping);
-  requireNonNegative("motion_min_update", motion_min_update);
-  requireFraction("min_label_weight", min_label_weight);
-  requireNonNegative("motion_min_label_pixels", motion_min_label_pixels);
-
-  if (regularizer != Regularizer::Quadratic && regularizer != Regularizer::TotalVariation)
-    rangeError("regularizer", std::to_string(int(regularizer)), "unknown enum value");
-  requirePositive("lambda_quadratic", lambda_quadratic);
-  requirePositive("lambda_tv", lambda_tv);
-  requireIntAtLeast("label_iterations", label_iterations, 1);
-  requireIntAtLeast("label_iterations_final", label_iterations_final, 1);
-  requireNonNegative("label_tolerance", label_tolerance);
-  requirePositive("outlier_cost", outlier_cost);
-  requireNonNegative("out_of_view_cost", out_of_view_cost);
-  requirePositive("min_geometric_weight", min_geometric_weight);
-  if (min_geometric_weight > 1)
-    rangeError("min_geometric_weight", doubleText(min_geometric_weight), "must be <= 1 (weights are in (0, 1])");
-
-  requireNonNegative("label_cost", label_cost);
-  requireIntIn("max_splits_per_iteration", max_splits_per_iteration, 0, 16);
-  requireIntIn("max_labels", max_labels, 1, 64);
-  requireFraction("min_support_fraction", min_support_fraction);
-
-  requireNonNegative("occlusion_kz", occlusion_kz);
-  requireNonNegative("occlusion_ko", occlusion_ko);
-
-  requireIntAtLeast("warm_outer_iterations", warm_outer_iterations, 1);
-  requireIntIn("warm_motion_coarse_levels", warm_motion_coarse_levels, 0, 10);
-  requirePositive("warm_depth_tolerance", warm_depth_tolerance);
-  requireFraction("warm_min_coverage", warm_min_coverage);
-  if (!(warm_max_energy_ratio >= 1) || !std::isfinite(warm_max_energy_ratio))
-    rangeError("warm_max_energy_ratio", doubleText(warm_max_energy_ratio), "must be finite and >= 1");
-  requireFraction("id_min_overlap", id_min_overlap);
-
-  if (backend != Backend::Auto && backend != Backend::Cpu && backend != Backend::Cuda)
-    rangeError("backend", std::to_string(int(backend)), "unknown enum value");
-  requireIntIn("threads", threads, 0, 1024);
+const std::vector<ConfigFieldInfo>& configFieldTable() {
+  static const std::vector<ConfigFieldInfo> table = {
+#define MCFLOW_SECTION(title)
+#define MCFLOW_PARAM(type, name, default_value, min, max, unit, description) \
+  ConfigFieldInfo{#name, #type, valueText(type(default_value)), valueText(type(min)), valueText(type(max)), unit, \
+                  description},
+#include "mc_flow/core/config_fields.def"
+#undef MCFLOW_PARAM
+#undef MCFLOW_SECTION
+  };
+  return table;
 }
 
 void Config::set(const std::string& name, const std::string& value) {
@@ -296,12 +217,7 @@ std::vector<std::pair<std::string, std::string>> Config::fields() const {
   out.reserve(sizeof(kFields) / sizeof(kFields[0]));
   for (const FieldEntry& field : kFields) {
     const std::string text = std::visit(Overloaded{
-                                            [&](double Config::*p) { return doubleText(this->*p); },
-                                            [&](int Config::*p) { return std::to_string(this->*p); },
-                                            [&](unsigned Config::*p) { return std::to_string(this->*p); },
-                                            [&](bool Config::*p) { return std::string(this->*p ? "true" : "false"); },
-                                            [&](Regularizer Config::*p) { return toString(this->*p); },
-                                            [&](Backend Config::*p) { return toString(this->*p); },
+                                            [&](auto Config::*p) { return valueText(this->*p); },
                                         },
                                         field.pointer);
     out.emplace_back(field.name, text);

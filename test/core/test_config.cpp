@@ -1,8 +1,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/error.h"
@@ -41,6 +44,79 @@ TEST(Config, BadValuesThrowNamingTheField) {
   expectInvalid("depth_downsample_range", [](Config& c) { c.depth_downsample_range = 0; });
   expectInvalid("threads", [](Config& c) { c.threads = -1; });
   expectInvalid("processing_level", [](Config& c) { c.processing_level = -1; });
+}
+
+// ---- the parameter table (config_fields.def) ----
+
+TEST(ConfigTable, ListsEveryFieldOnceWithItsDefault) {
+  const auto fields = Config().fields();
+  const auto& table = configFieldTable();
+  ASSERT_EQ(table.size(), fields.size());
+  for (std::size_t i = 0; i < table.size(); ++i) {
+    EXPECT_EQ(table[i].name, fields[i].first);
+    EXPECT_EQ(table[i].default_text, fields[i].second) << table[i].name;
+  }
+}
+
+TEST(ConfigTable, EveryFieldHasADescriptionAndAUnit) {
+  for (const ConfigFieldInfo& f : configFieldTable()) {
+    EXPECT_GE(f.description.size(), 10u) << f.name << ": description '" << f.description << "'";
+    EXPECT_FALSE(f.unit.empty()) << f.name;
+    const bool quantity = f.type == "double" || f.type == "int" || f.type == "unsigned";
+    EXPECT_EQ(f.unit == "-", !quantity) << f.name << ": '-' is the unit of flags and choices only";
+    EXPECT_EQ(f.description.find('"'), std::string::npos) << f.name << ": the .cfg reads descriptions as plain text";
+  }
+}
+
+// The GUI offers exactly [min, max] (cfg/McFlow.cfg reads the same table): each bound, with every other field
+// at its default, must pass validate().
+TEST(ConfigTable, ValidateAcceptsTheDefaultsAndEveryBound) {
+  EXPECT_NO_THROW(Config().validate());
+  for (const ConfigFieldInfo& f : configFieldTable()) {
+    for (const std::string& bound : {f.min_text, f.max_text}) {
+      Config c;
+      c.set(f.name, bound);
+      EXPECT_NO_THROW(c.validate()) << f.name << " = " << bound;
+    }
+  }
+}
+
+// Just outside a bound: the next representable value (doubles) or the next integer, where the type can hold it.
+TEST(ConfigTable, ValidateRejectsJustOutsideEveryBound) {
+  int checked = 0;
+  for (const ConfigFieldInfo& f : configFieldTable()) {
+    std::vector<std::string> outside;
+    if (f.type == "double") {
+      const double lo = std::stod(f.min_text), hi = std::stod(f.max_text);
+      for (double v : {std::nextafter(lo, -std::numeric_limits<double>::infinity()),
+                       std::nextafter(hi, std::numeric_limits<double>::infinity())}) {
+        // Beside 0 the next double is subnormal, which the parser refuses (ERANGE): take the smallest normal one.
+        if (std::abs(v) < std::numeric_limits<double>::min()) v = std::copysign(std::numeric_limits<double>::min(), v);
+        char text[64];
+        std::snprintf(text, sizeof(text), "%.17g", v);
+        outside.push_back(text);
+      }
+    } else if (f.type == "int" || f.type == "unsigned") {
+      const long long lo = std::stoll(f.min_text), hi = std::stoll(f.max_text);
+      if (f.type == "int" || lo > 0) outside.push_back(std::to_string(lo - 1));
+      outside.push_back(std::to_string(hi + 1));
+    } else {
+      continue;  // bool, enum: set() accepts only the values that exist
+    }
+    for (const std::string& text : outside) {
+      Config c;
+      c.set(f.name, text);
+      try {
+        c.validate();
+        ADD_FAILURE() << f.name << " = " << text << " accepted; table range [" << f.min_text << ", " << f.max_text
+                      << "]";
+      } catch (const ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find(f.name), std::string::npos) << e.what();
+        ++checked;
+      }
+    }
+  }
+  EXPECT_GT(checked, 80);
 }
 
 TEST(Config, MessageNamesTheValue) {

@@ -1,8 +1,11 @@
 // dynamic_reconfigure <-> mc_flow::Config: the .cfg's defaults are the core's (no drift possible).
 #include <gtest/gtest.h>
 
+#include <map>
 #include <set>
+#include <string>
 
+#include "mc_flow/core/config.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/ros/reconfigure.h"
 
@@ -37,6 +40,30 @@ TEST(Reconfigure, DefaultsLieInsideTheOfferedRanges) {
     if (*end != '\0') continue;
     EXPECT_LE(std::strtod(lows[i].second.c_str(), nullptr), value) << defaults[i].first;
     EXPECT_GE(std::strtod(highs[i].second.c_str(), nullptr), value) << defaults[i].first;
+  }
+}
+
+// The GUI must never offer a value that the core rejects: each offered bound, with every other parameter at its
+// default, passes Config::validate(), and the offered range is the core table's.
+TEST(Reconfigure, EveryOfferedBoundIsAcceptedByTheCore) {
+  const auto defaults = mc_flow_ros::parameterTexts(mc_flow::McFlowConfig::__getDefault__());
+  const auto lows = mc_flow_ros::parameterTexts(mc_flow::McFlowConfig::__getMin__());
+  const auto highs = mc_flow_ros::parameterTexts(mc_flow::McFlowConfig::__getMax__());
+  std::map<std::string, mc_flow::ConfigFieldInfo> table;
+  for (const auto& field : mc_flow::configFieldTable()) table[field.name] = field;
+  ASSERT_EQ(table.size(), defaults.size());
+  for (std::size_t i = 0; i < defaults.size(); ++i) {
+    const std::string& name = defaults[i].first;
+    ASSERT_EQ(table.count(name), 1u) << name;
+    const mc_flow::ConfigFieldInfo& row = table[name];
+    if (row.type != "double" && row.type != "int" && row.type != "unsigned") continue;
+    EXPECT_DOUBLE_EQ(std::stod(lows[i].second), std::stod(row.min_text)) << name;
+    EXPECT_DOUBLE_EQ(std::stod(highs[i].second), std::stod(row.max_text)) << name;
+    for (const std::string& bound : {lows[i].second, highs[i].second}) {
+      mc_flow::Config config;
+      config.set(name, bound);
+      EXPECT_NO_THROW(config.validate()) << name << " = " << bound << " is offered but rejected";
+    }
   }
 }
 
