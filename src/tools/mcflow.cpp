@@ -14,13 +14,16 @@
 #include <iostream>
 #include <map>
 #include <set>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/testing/synthetic_scene.h"
 #include "mc_flow/io/benchmark.h"
@@ -31,6 +34,8 @@
 #include "mc_flow/io/report_io.h"
 #include "mc_flow/io/resources.h"
 #include "mc_flow/io/result_io.h"
+#include "mc_flow/io/sequence_io.h"
+#include "mc_flow/io/visualization.h"
 
 namespace {
 
@@ -84,6 +89,31 @@ std::vector<Command> commands() {
     run.options.push_back(o);
   list.push_back(run);
 
+  Command run_seq{"run-seq",
+                  "mcflow run-seq (--tum DIR | --frames DIR) [--intrinsics FX,FY,CX,CY | --camera-info F] [--cold] --out DIR",
+                  "Solves every consecutive pair of an RGB-D sequence as a stream: each pair warm-starts from the "
+                  "previous one (unless --cold) and segments keep their ids. Writes DIR/pair_NNNN/ (the files of "
+                  "`mcflow run`; labels.png and segments.json hold the persistent ids), DIR/trajectories.csv (pair, "
+                  "stamp, id, vx, vy, vz, wx, wy, wz, support per segment and pair), DIR/ids_over_time.png and "
+                  "DIR/sequence.json (per pair: start kind, timings, ids, merges, resets).",
+                  {{"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000/m)"},
+                   {"frames", true, "directory with rgb/ and depth/ images paired in name order (depth 1000/m)"},
+                   {"fps", true, "frame rate of --frames [Hz] (default 30)"},
+                   {"intrinsics", true, "FX,FY,CX,CY in pixels (default: DIR/camera_info.yaml when present)"},
+                   {"camera-info", true, "ROS camera_info YAML file instead of --intrinsics"},
+                   {"depth-scale", true, "16-bit depth units per metre (default 5000 with --tum, 1000 with --frames)"},
+                   {"downsample", true, "input pixels per processing pixel: 0 = towards 320 px wide (default), or 1, 2, 4..."},
+                   {"max-pair-interval", true, "[s] a longer gap between frames starts a new sequence (default 1)"},
+                   {"cold", false, "solve every pair from scratch (ids are still matched by overlap)"},
+                   {"max-frames", true, "stop after this many frames"}}};
+  // The solver options of `run` (not its pair inputs).
+  for (const Option& o : run.options) {
+    bool input = false;
+    for (const Option& i : kInputOptions) input = input || i.name == o.name;
+    if (!input) run_seq.options.push_back(o);
+  }
+  list.push_back(run_seq);
+
   list.push_back({"synth",
                   "mcflow synth --out DIR [--variant K] [--width W --height H] [--noise] [--seed S]",
                   "Renders a synthetic RGB-D pair with ground truth: rgb1/2.png, depth1/2.png (16-bit mm), "
@@ -95,6 +125,9 @@ std::vector<Command> commands() {
                    {"height", true, "image height in pixels (default 240)"},
                    {"noise", false, "add Kinect-like intensity and depth noise"},
                    {"seed", true, "noise seed"},
+                   {"frames", true, "N >= 2: a sequence of N frames in the TUM RGB-D layout (rgb/, depth/ at 5000 units "
+                                    "per metre, rgb.txt, depth.txt, camera_info.yaml) with ground truth per pair in "
+                                    "gt/pair_NNNN/; parts move smoothly, one starts moving at frame 10, one leaves the view"},
                    {"help", false, "this help"}}});
 
   Command eval{"eval", "mcflow eval --result DIR [--gt DIR] [input options]",
@@ -336,6 +369,158 @@ int cmdRun(const Arguments& args) {
   return 0;
 }
 
+int cmdRunSeq(const Arguments& args) {
+  const std::string out = args.require("out");
+  if (args.has("tum") == args.has("frames")) throw UsageError("give one of --tum DIR or --frames DIR");
+  const std::string dir = args.has("tum") ? args.get("tum") : args.get("frames");
+  const double fps = args.has("fps") ? parseNumber("fps", args.get("fps")) : 30.0;
+  std::vector<io::SequenceFrameFiles> frames =
+      args.has("tum") ? io::listTumSequence(dir) : io::listNumberedFrames(dir, fps);
+  if (args.has("max-frames")) {
+    const int max_frames = parseInteger("max-frames", args.get("max-frames"));
+    if (max_frames < 2) throw InputError("--max-frames " + std::to_string(max_frames) + ": must be >= 2");
+    if (int(frames.size()) > max_frames) frames.resize(std::size_t(max_frames));
+  }
+  if (frames.size() < 2) throw InputError("sequence '" + dir + "' has " + std::to_string(frames.size()) + " frame(s)");
+  double depth_scale = args.has("tum") ? 5000.0 : 1000.0;
+  if (args.has("depth-scale")) {
+    depth_scale = parseNumber("depth-scale", args.get("depth-scale"));
+    if (!(depth_scale > 0)) throw InputError("--depth-scale '" + args.get("depth-scale") + "': must be > 0");
+  }
+  Arguments intrinsics_args = args;
+  const std::string default_info = (std::filesystem::path(dir) / "camera_info.yaml").string();
+  if (!args.has("intrinsics") && !args.has("camera-info")) {
+    if (!io::fileExists(default_info))
+      throw UsageError("missing --intrinsics FX,FY,CX,CY or --camera-info FILE (and no " + default_info + ")");
+    intrinsics_args.values["camera-info"] = default_info;
+  }
+  Config config = buildConfig(args);
+  if (args.has("cold")) config.warm_start = false;
+  const int downsample = args.has("downsample") ? parseInteger("downsample", args.get("downsample")) : 0;
+  const double max_interval = args.has("max-pair-interval") ? parseNumber("max-pair-interval", args.get("max-pair-interval")) : 1.0;
+  io::createOutputDirectory(out);
+  SequencePipeline pipeline(config, downsample, max_interval);
+
+  std::string csv = io::trajectoryCsvHeader();
+  std::vector<std::vector<std::pair<int, double>>> ids_per_pair;
+  std::ostringstream log;
+  log << "[\n";
+  int solved = 0, warm = 0, fallbacks = 0, failed = 0;
+  double total_ms = 0;
+  Intrinsics K;
+  bool have_K = false;
+  const auto start = std::chrono::steady_clock::now();
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const io::SequenceFrameFiles& f = frames[i];
+    StreamFrame sf;
+    ImageU8 colour;
+    sf.frame = io::loadRgbdFrame(f.rgb, f.depth, depth_scale, &colour);
+    if (!have_K) {
+      K = inputIntrinsics(intrinsics_args, sf.frame.width(), sf.frame.height());
+      have_K = true;
+    }
+    sf.K = K;
+    sf.stamp = f.stamp;
+    sf.source = dir;
+    // The colour at the processing resolution, for the pictures only.
+    const int factor = chooseDownsample(downsample, sf.frame.width());
+    if (factor > 1) {
+      cv::Mat small;
+      cv::resize(io::toMat(colour), small, cv::Size(sf.frame.width() / factor, sf.frame.height() / factor), 0, 0,
+                 cv::INTER_AREA);
+      colour.width = small.cols;
+      colour.height = small.rows;
+      colour.data.assign(small.data, small.data + small.total() * 3);
+    }
+    sf.extra = std::move(colour);
+    const SequenceStep step = pipeline.push(std::move(sf));
+    if (!step.reset_key.empty()) progress("frame " + std::to_string(i) + ": new sequence: " + step.reset_reason);
+    if (step.outcome == SequenceStep::Outcome::PairFailed) {
+      ++failed;
+      progress("frame " + std::to_string(i) + ": pair skipped: " + step.problem);
+    }
+    if (step.outcome != SequenceStep::Outcome::Solved) continue;
+    const Result& r = *step.result;
+    ++solved;
+    warm += r.start == StartKind::Warm;
+    fallbacks += r.start == StartKind::ColdFallback;
+    total_ms += r.timings.total;
+    char name[32];
+    std::snprintf(name, sizeof(name), "pair_%04ld", step.pair_index);
+    io::LoadedPair loaded{step.first->frame, step.second->frame, std::any_cast<const ImageU8&>(step.first->extra),
+                          std::any_cast<const ImageU8&>(step.second->extra)};
+    io::RunInfo info{frames[i - 1].rgb, frames[i - 1].depth, f.rgb, f.depth, depth_scale, 0, 0};
+    io::writeResultDirectory((std::filesystem::path(out) / name).string(), r, config, loaded, info);
+    csv += io::trajectoryCsvRows(step.pair_index, step.second->stamp, r);
+    std::vector<std::pair<int, double>> ids;
+    for (const Segment& s : r.segments) ids.emplace_back(s.id, s.support);
+    ids_per_pair.push_back(ids);
+    log << (solved > 1 ? ",\n" : "") << "  {\"pair\": " << step.pair_index << ", \"stamp\": " << step.second->stamp
+        << ", \"start\": \"" << toString(r.start) << "\", \"total_ms\": " << r.timings.total << ", \"ids\": [";
+    for (std::size_t k = 0; k < r.segments.size(); ++k) log << (k ? ", " : "") << r.segments[k].id;
+    log << "], \"merged\": [";
+    for (std::size_t k = 0; k < r.merged_ids.size(); ++k)
+      log << (k ? ", " : "") << "[" << r.merged_ids[k].first << ", " << r.merged_ids[k].second << "]";
+    log << "], \"ended\": [";
+    for (std::size_t k = 0; k < r.ended_ids.size(); ++k) log << (k ? ", " : "") << r.ended_ids[k];
+    log << "]}";
+    // Progress bar: pairs done of the frames' pairs, mean time per pair.
+    const int width = 30, done = int((i * width) / (frames.size() - 1));
+    std::fprintf(stderr, "\rmcflow: [%s%s] %d/%zu pairs, %.0f ms/pair (%s)   ", std::string(std::size_t(done), '#').c_str(),
+                 std::string(std::size_t(width - done), ' ').c_str(), solved, frames.size() - 1, total_ms / solved,
+                 toString(r.start).c_str());
+  }
+  std::fprintf(stderr, "\n");
+  log << "\n]\n";
+  io::writeTextFile((std::filesystem::path(out) / "trajectories.csv").string(), csv);
+  io::writeTextFile((std::filesystem::path(out) / "sequence.json").string(), log.str());
+  if (!ids_per_pair.empty())
+    io::writeImage((std::filesystem::path(out) / "ids_over_time.png").string(), io::idsOverTimeImage(ids_per_pair));
+  std::printf("%d pair(s) solved (%d warm, %d cold fallbacks, %d failed, %ld new sequence(s)), %.1f ms/pair solving, "
+              "%.1f s in all; wrote %s\n",
+              solved, warm, fallbacks, failed, pipeline.resets(), solved ? total_ms / solved : 0.0,
+              elapsedMs(start) / 1000.0, out.c_str());
+  return solved > 0 ? 0 : 1;
+}
+
+int cmdSynthSequence(const Arguments& args, SyntheticSceneOptions options, int frame_count) {
+  const std::string out = args.require("out");
+  if (frame_count < 2) throw InputError("--frames " + std::to_string(frame_count) + ": a sequence needs at least 2");
+  options.stream_events = true;
+  const double tum_scale = 5000.0, fps = 30.0;
+  io::createOutputDirectory(out);
+  std::filesystem::create_directories(std::filesystem::path(out) / "rgb");
+  std::filesystem::create_directories(std::filesystem::path(out) / "depth");
+  std::string rgb_list = "# timestamp filename\n", depth_list = "# timestamp filename\n";
+  Intrinsics K;
+  for (int t = 0; t < frame_count; ++t) {
+    RgbdFrame frame;
+    ImageU8 colour;
+    renderSyntheticFrame(options, t, frame, colour, K);
+    char name[32], stamp[32];
+    std::snprintf(name, sizeof(name), "%04d.png", t);
+    std::snprintf(stamp, sizeof(stamp), "%.6f", double(t) / fps);
+    io::saveRgb((std::filesystem::path(out) / "rgb" / name).string(), colour);
+    io::saveDepthPng16((std::filesystem::path(out) / "depth" / name).string(), frame.depth, tum_scale);
+    rgb_list += std::string(stamp) + " rgb/" + name + "\n";
+    depth_list += std::string(stamp) + " depth/" + name + "\n";
+    if (t + 1 < frame_count) {
+      options.first_frame = t;
+      char pair[32];
+      std::snprintf(pair, sizeof(pair), "pair_%04d", t);
+      io::writeSyntheticDirectory((std::filesystem::path(out) / "gt" / pair).string(), renderSyntheticPair(options));
+    }
+    std::fprintf(stderr, "\rmcflow: rendered %d/%d frames", t + 1, frame_count);
+  }
+  std::fprintf(stderr, "\n");
+  io::writeTextFile((std::filesystem::path(out) / "rgb.txt").string(), rgb_list);
+  io::writeTextFile((std::filesystem::path(out) / "depth.txt").string(), depth_list);
+  io::saveCameraInfo((std::filesystem::path(out) / "camera_info.yaml").string(), {K, options.width, options.height});
+  std::printf("wrote %s: %d frames in the TUM RGB-D layout (depth 5000 units/m), ground truth per pair in gt/; "
+              "run `mcflow run-seq --tum %s --out DIR`\n", out.c_str(), frame_count, out.c_str());
+  return 0;
+}
+
 int cmdSynth(const Arguments& args) {
   const std::string out = args.require("out");
   SyntheticSceneOptions options;
@@ -353,6 +538,7 @@ int cmdSynth(const Arguments& args) {
   if (options.width < 16 || options.height < 12)
     throw InputError("--width/--height " + std::to_string(options.width) + "x" + std::to_string(options.height) +
                      ": too small (at least 16x12)");
+  if (args.has("frames")) return cmdSynthSequence(args, options, parseInteger("frames", args.get("frames")));
   progress("rendering variant " + std::to_string(options.variant) + " at " + std::to_string(options.width) + "x" +
            std::to_string(options.height) + "...");
   const SyntheticPair pair = renderSyntheticPair(options);
@@ -505,6 +691,7 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (name == "run") return cmdRun(args);
+    if (name == "run-seq") return cmdRunSeq(args);
     if (name == "synth") return cmdSynth(args);
     if (name == "eval") return cmdEval(args);
     if (name == "bench-real") return cmdBenchReal(args);

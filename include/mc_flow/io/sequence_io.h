@@ -1,0 +1,46 @@
+/**
+ * @file sequence_io.h
+ * @brief RGB-D sequences on disk for `mcflow run-seq` and `mcflow synth --frames`: the TUM RGB-D layout
+ * (rgb.txt, depth.txt with "stamp file" lines, optional associations), folders of numbered frames, and the
+ * sequence outputs (trajectories.csv, the segment ids over time as a picture).
+ */
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "mc_flow/core/solver.h"
+
+namespace mc_flow {
+namespace io {
+
+/// @brief One frame of a sequence on disk.
+struct SequenceFrameFiles {
+  double stamp = 0;       ///< [s]
+  std::string rgb, depth; ///< paths
+};
+
+/// @brief The frames of a TUM RGB-D sequence directory: `associations.txt` or `associate.txt` ("t_rgb rgb t_depth
+/// depth" lines) when present, else rgb.txt and depth.txt matched by nearest stamp (within `max_difference`
+/// [s]; RGB frames without depth that close are skipped). '#' lines are comments. Throws InputError naming
+/// the file and line for a malformed line, a missing list or an empty sequence.
+std::vector<SequenceFrameFiles> listTumSequence(const std::string& dir, double max_difference = 0.02);
+
+/// @brief The frames of a folder with `rgb/` and `depth/` subfolders of images, paired in name order (the
+/// counts must match), stamped index / fps. Throws InputError naming the folder otherwise.
+std::vector<SequenceFrameFiles> listNumberedFrames(const std::string& dir, double fps);
+
+/// @brief Header of trajectories.csv.
+std::string trajectoryCsvHeader();
+/// @brief One row per segment of a solved pair: pair, stamp, id, vx, vy, vz [m], wx, wy, wz [rad] (over the
+/// pair interval), support [px].
+std::string trajectoryCsvRows(long pair, double stamp, const Result& result);
+
+/// @brief The segment ids over time: one column per pair, one row per id (ascending), a cell in the id's
+/// colour where the id exists in that pair, darker for smaller support. `ids_per_pair[p]` = (id, support).
+cv::Mat idsOverTimeImage(const std::vector<std::vector<std::pair<int, double>>>& ids_per_pair);
+
+}  // namespace io
+}  // namespace mc_flow
