@@ -14,8 +14,6 @@ std::string number(double v) {
   return buf;
 }
 
-std::string sizeText(const ImageF& im) { return std::to_string(im.width) + "x" + std::to_string(im.height); }
-
 }  // namespace
 
 void Intrinsics::validate() const {
@@ -32,13 +30,13 @@ std::string Intrinsics::toString() const {
 }
 
 void RgbdFrame::validate(const std::string& name) const {
-  if (intensity.empty()) throw InputError(name + ": intensity image is empty (" + sizeText(intensity) + ")");
-  if (depth.empty()) throw InputError(name + ": depth image is empty (" + sizeText(depth) + ")");
+  if (intensity.empty()) throw InputError(name + ": intensity image is empty (" + imageSizeText(intensity) + ")");
+  if (depth.empty()) throw InputError(name + ": depth image is empty (" + imageSizeText(depth) + ")");
   if (intensity.channels != 1)
     throw InputError(name + ": intensity has " + std::to_string(intensity.channels) + " channels, expected 1");
   if (depth.channels != 1) throw InputError(name + ": depth has " + std::to_string(depth.channels) + " channels, expected 1");
   if (!depth.sameSize(intensity))
-    throw InputError(name + ": depth is " + sizeText(depth) + " but intensity is " + sizeText(intensity));
+    throw InputError(name + ": depth is " + imageSizeText(depth) + " but intensity is " + imageSizeText(intensity));
   if (intensity.data.size() != intensity.pixelCount() || depth.data.size() != depth.pixelCount())
     throw InputError(name + ": image buffer size does not match its width x height");
 

@@ -10,6 +10,7 @@
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/sampling.h"
 #include "mc_flow/io/image_io.h"
+#include "mc_flow/testing/bench.h"
 
 namespace mc_flow {
 namespace io {
@@ -17,11 +18,6 @@ namespace io {
 namespace {
 
 constexpr double kRealPairDepthScale = 5000.0;  // TUM convention: value / 5000 = metres
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
 
 /// Median of each stage over the repetitions.
 StageTimings medianTimings(const std::vector<StageTimings>& runs) {

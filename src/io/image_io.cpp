@@ -83,7 +83,7 @@ ImageF intensityFromMat(const cv::Mat& image, const std::string& what) {
         v = row[x];
       } else {  // OpenCV order: B, G, R
         const float* p = row + std::size_t(x) * channels;
-        v = 0.114f * p[0] + 0.587f * p[1] + 0.299f * p[2];
+        v = float(greyFromRgb(p[2], p[1], p[0]));
       }
       out(x, y) = std::clamp(v, 0.f, 1.f);
     }

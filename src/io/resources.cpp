@@ -5,6 +5,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "mc_flow/core/image.h"
+
 namespace mc_flow {
 namespace io {
 namespace {
@@ -16,8 +18,6 @@ constexpr double kBytesPerProcessingPixel = 150.0;
 constexpr double kBytesPerProcessingPixelAndLabel = 2.5;
 constexpr double kCpuSecondsPerProcessingPixel = 15e-6;  // 1280x960 at level 0: 19 s on 2 cores
 constexpr int kMaxSuggestedLevel = 6;
-
-std::string sizeText(int width, int height) { return std::to_string(width) + "x" + std::to_string(height); }
 
 std::string durationText(double seconds) {
   char buffer[64];
@@ -83,8 +83,8 @@ SizeCheck checkRunSize(int width, int height, const Config& config, bool cpu, st
   SizeCheck check;
   const int level = config.processing_level;
   const ProcessingSize processing = processingSize(width, height, level);
-  const std::string what = "a " + sizeText(width, height) + " pair at processing level " + std::to_string(level) +
-                           " (" + sizeText(processing.width, processing.height) + ")";
+  const std::string what = "a " + imageSizeText(width, height) + " pair at processing level " + std::to_string(level) +
+                           " (" + imageSizeText(processing.width, processing.height) + ")";
 
   if (available_bytes > 0) {
     const std::uint64_t needed = estimateRunBytes(width, height, config);
@@ -96,8 +96,9 @@ SizeCheck checkRunSize(int width, int height, const Config& config, bool cpu, st
         if (estimateRunBytes(width, height, atLevel(config, l)) <= available_bytes) fitting = l;
       if (fitting >= 0) {
         const ProcessingSize s = processingSize(width, height, fitting);
-        check.error += "; --processing-level " + std::to_string(fitting) + " solves at " + sizeText(s.width, s.height) +
-                       " in about " + formatBytes(estimateRunBytes(width, height, atLevel(config, fitting)));
+        check.error += "; --processing-level " + std::to_string(fitting) + " solves at " +
+                       imageSizeText(s.width, s.height) + " in about " +
+                       formatBytes(estimateRunBytes(width, height, atLevel(config, fitting)));
       } else {
         check.error += "; even a coarser --processing-level does not fit: downscale the images first";
       }
@@ -113,7 +114,7 @@ SizeCheck checkRunSize(int width, int height, const Config& config, bool cpu, st
     check.warning = what + " is slow on the CPU: expect about " +
                     durationText(estimateCpuSolveSeconds(width, height, config)) +
                     " on 2 cores (less with more cores or the CUDA backend); --processing-level " +
-                    std::to_string(suggested) + " solves at " + sizeText(s.width, s.height) + " in about " +
+                    std::to_string(suggested) + " solves at " + imageSizeText(s.width, s.height) + " in about " +
                     durationText(estimateCpuSolveSeconds(width, height, atLevel(config, suggested))) +
                     " and still writes every output at the input resolution";
   }

@@ -25,13 +25,11 @@ constexpr double kMovingFlowPx = 0.5;  // ground-truth flow at least this long c
 
 std::string join(const std::string& dir, const std::string& name) { return (fs::path(dir) / name).string(); }
 
-std::string sizeText(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
-
 template <typename A, typename B>
 void requireSameSize(const A& a, const std::string& a_name, const B& b, const std::string& b_name) {
   if (!a.sameSize(b))
-    throw InputError("image size mismatch: " + a_name + " is " + sizeText(a.width, a.height) + " but " + b_name +
-                     " is " + sizeText(b.width, b.height));
+    throw InputError("image size mismatch: " + a_name + " is " + imageSizeText(a.width, a.height) + " but " + b_name +
+                     " is " + imageSizeText(b.width, b.height));
 }
 
 // Copy of `image` (any channel count) with every channel NaN where `reference` has a non-finite value.

@@ -16,15 +16,11 @@ namespace {
 
 constexpr double kRadToDeg = 57.29577951308232;
 
-std::string sizeText(int w, int h, int c) {
-  return std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(c);
-}
-
 template <typename A, typename B>
 void requireSameSize(const char* what, const char* name_a, const Image<A>& a, const char* name_b, const Image<B>& b) {
   if (!a.sameSize(b))
-    throw InputError(std::string(what) + ": " + name_a + " is " + sizeText(a.width, a.height, a.channels) + " but " +
-                     name_b + " is " + sizeText(b.width, b.height, b.channels));
+    throw InputError(std::string(what) + ": " + name_a + " is " + imageSizeText(a) + " but " + name_b + " is " +
+                     imageSizeText(b));
 }
 
 template <typename T>

@@ -562,7 +562,7 @@ void renderFrame(const SyntheticSceneOptions& options, const VariantSpec& spec, 
     color.data[3 * i] = r;
     color.data[3 * i + 1] = g;
     color.data[3 * i + 2] = b;
-    frame.intensity.data[i] = static_cast<float>((0.299 * r + 0.587 * g + 0.114 * b) / 255.0);
+    frame.intensity.data[i] = static_cast<float>(greyFromRgb(r, g, b) / 255.0);
     double z = depths[i];
     if (z > 0.0 && options.depth_noise > 0.0) z = std::max(0.0, z + options.depth_noise * z * z * normal(rng));
     frame.depth.data[i] = static_cast<float>(z);

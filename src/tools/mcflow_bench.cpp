@@ -4,98 +4,68 @@
 //
 //   mcflow_bench [--width 320] [--height 240] [--backend auto|cpu|cuda] [--repeat 3] [--noise]
 //                [--regularizer both|quad|tv] [--set name=value ...]
-#include <algorithm>
-#include <ctime>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
+#include <ctime>
 #include <string>
 #include <vector>
 
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/error.h"
-#include "mc_flow/testing/metrics.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/testing/bench.h"
+#include "mc_flow/testing/metrics.h"
 #include "mc_flow/testing/synthetic_scene.h"
 
 using namespace mc_flow;
 
-namespace {
-
-struct Options {
-  int width = 320, height = 240, repeat = 3;
-  bool noise = false;
-  std::string regularizers = "both";
-  Config config;
-};
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
-
-int usage(const char* argv0) {
-  std::fprintf(stderr,
-               "usage: %s [--width W] [--height H] [--backend auto|cpu|cuda] [--repeat N] [--noise]\n"
-               "          [--regularizer both|quad|tv] [--set name=value ...]\n",
-               argv0);
-  return 2;
-}
-
-}  // namespace
-
 int main(int argc, char** argv) {
-  Options opt;
+  CommandLine cli("mcflow_bench", {{"width", true, "image width (default 320)"},
+                                   {"height", true, "image height (default 240)"},
+                                   {"backend", true, "auto | cpu | cuda (default auto)"},
+                                   {"repeat", true, "solves per scene; times are the median (default 3)"},
+                                   {"noise", false, "add intensity and depth noise to the scenes"},
+                                   {"regularizer", true, "both | quad | tv (default both)"}});
   try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw ConfigError("missing value after " + a);
-        return argv[++i];
-      };
-      if (a == "--width") opt.width = std::stoi(next());
-      else if (a == "--height") opt.height = std::stoi(next());
-      else if (a == "--repeat") opt.repeat = std::max(1, std::stoi(next()));
-      else if (a == "--backend") opt.config.backend = parseBackend(next());
-      else if (a == "--noise") opt.noise = true;
-      else if (a == "--regularizer") opt.regularizers = next();
-      else if (a == "--set") {
-        const std::string kv = next();
-        const auto eq = kv.find('=');
-        if (eq == std::string::npos) throw ConfigError("--set expects name=value, got '" + kv + "'");
-        opt.config.set(kv.substr(0, eq), kv.substr(eq + 1));
-      } else if (a == "--help" || a == "-h") return usage(argv[0]), 0;
-      else {
-        std::fprintf(stderr, "unknown argument '%s'\n", a.c_str());
-        return usage(argv[0]);
-      }
-    }
-    std::vector<Regularizer> regs;
-    if (opt.regularizers == "both") regs = {Regularizer::Quadratic, Regularizer::TotalVariation};
-    else regs = {parseRegularizer(opt.regularizers)};
+    cli.parse(argc, argv);
+  } catch (const CommandLineError& e) {
+    std::fprintf(stderr, "mcflow_bench: %s\n%s", e.what(), cli.usage().c_str());
+    return 2;
+  }
+  if (cli.helpRequested()) {
+    std::printf("%s", cli.usage().c_str());
+    return 0;
+  }
+  try {
+    const int width = cli.integer("width", 320, 16, 8192), height = cli.integer("height", 240, 16, 8192);
+    const int repeat = cli.integer("repeat", 3, 1, 1000);
+    const bool noise = cli.has("noise");
+    Config base;
+    base.backend = parseBackend(cli.text("backend", "auto"));
+    cli.applySettings(base);
+    const std::vector<Regularizer> regs = regularizerChoice(cli.text("regularizer", "both"));
 
-    std::printf("# mcflow_bench: synthetic scenes %dx%d, noise %s, repeat %d (median times)\n", opt.width, opt.height,
-                opt.noise ? "on" : "off", opt.repeat);
+    std::printf("# mcflow_bench: synthetic scenes %dx%d, noise %s, repeat %d (median times)\n", width, height,
+                noise ? "on" : "off", repeat);
     std::printf("%-8s %-5s %7s %7s %8s %7s %7s %7s %7s %6s | %8s %8s %8s %8s %8s %8s %8s %8s\n", "scene", "reg", "EPE", "AAE",
                 "EPE3D_mm", "seg", "occ", "rmseI", "rmseZ", "labels", "total_ms", "cpu_ms", "pyr", "init", "motion",
                 "labels", "occl", "output");
     for (int variant = 0; variant < syntheticVariantCount(); ++variant) {
       SyntheticSceneOptions so;
-      so.width = opt.width;
-      so.height = opt.height;
+      so.width = width;
+      so.height = height;
       so.variant = variant;
-      if (opt.noise) {
+      if (noise) {
         so.intensity_noise = 0.01;
         so.depth_noise = 0.0015;
       }
       const SyntheticPair pair = renderSyntheticPair(so);
       for (Regularizer reg : regs) {
-        Config config = opt.config;
+        Config config = base;
         config.regularizer = reg;
         Solver solver(config);
         std::vector<double> total, cpu, pyr, init, motion, labels, occl, output;
         Result r;
-        for (int rep = 0; rep < opt.repeat; ++rep) {
+        for (int rep = 0; rep < repeat; ++rep) {
           const std::clock_t cpu_start = std::clock();
           r = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
           cpu.push_back(1000.0 * double(std::clock() - cpu_start) / CLOCKS_PER_SEC);
@@ -120,6 +90,9 @@ int main(int argc, char** argv) {
       }
     }
     return 0;
+  } catch (const CommandLineError& e) {
+    std::fprintf(stderr, "mcflow_bench: %s\n", e.what());
+    return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mcflow_bench: %s\n", e.what());
     return 1;

@@ -15,7 +15,6 @@
 #include <cmath>
 #include <cstdio>
 #include <random>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -23,32 +22,12 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/pyramid.h"
+#include "mc_flow/testing/bench.h"
 #include "mc_flow/testing/synthetic_scene.h"
 
 using namespace mc_flow;
 
 namespace {
-
-struct Options {
-  std::vector<std::pair<int, int>> sizes{{320, 240}, {640, 480}};
-  std::vector<int> labels{20, 4};
-  int iterations = 150, repeat = 7, warmup = 2, variant = 0;
-  std::string backends = "both", regularizers = "both";
-};
-
-std::vector<std::string> split(const std::string& text, char separator) {
-  std::vector<std::string> parts;
-  std::stringstream stream(text);
-  std::string part;
-  while (std::getline(stream, part, separator))
-    if (!part.empty()) parts.push_back(part);
-  return parts;
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
 
 // `count` labels: count - 1 motions (the scene's ground-truth twists first, then perturbed copies of them) and
 // the outlier label, as the solver would see them after a few outer iterations.
@@ -102,54 +81,51 @@ Timing timeOptimizer(LabelOptimizer& optimizer, const LabelProblem& problem, int
   return timing;
 }
 
-int usage(const char* argv0) {
-  std::fprintf(stderr,
-               "usage: %s [--sizes WxH,...] [--labels N,...] [--iterations 150] [--repeat 7] [--warmup 2]\n"
-               "          [--backend both|cpu|cuda] [--regularizer both|quad|tv] [--variant 0]\n",
-               argv0);
-  return 2;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
-  Options opt;
+  CommandLine cli("mcflow_bench_labels",
+                  {{"sizes", true, "WxH,... (default 320x240,640x480)"},
+                   {"labels", true, "label counts N,... in [2, 128] (default 20,4)"},
+                   {"iterations", true, "primal-dual iterations per call (default 150)"},
+                   {"repeat", true, "timed calls; times are the median (default 7)"},
+                   {"warmup", true, "untimed calls first (default 2)"},
+                   {"backend", true, "both | cpu | cuda (default both)"},
+                   {"regularizer", true, "both | quad | tv (default both)"},
+                   {"variant", true, "synthetic scene variant (default 0)"}});
   try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw ConfigError("missing value after " + a);
-        return argv[++i];
-      };
-      if (a == "--sizes") {
-        opt.sizes.clear();
-        for (const std::string& s : split(next(), ',')) {
-          const auto x = s.find('x');
-          if (x == std::string::npos) throw ConfigError("--sizes expects WxH, got '" + s + "'");
-          opt.sizes.emplace_back(std::stoi(s.substr(0, x)), std::stoi(s.substr(x + 1)));
-        }
-      } else if (a == "--labels") {
-        opt.labels.clear();
-        for (const std::string& s : split(next(), ',')) opt.labels.push_back(std::stoi(s));
-      } else if (a == "--iterations") opt.iterations = std::stoi(next());
-      else if (a == "--repeat") opt.repeat = std::max(1, std::stoi(next()));
-      else if (a == "--warmup") opt.warmup = std::max(0, std::stoi(next()));
-      else if (a == "--variant") opt.variant = std::stoi(next());
-      else if (a == "--backend") opt.backends = next();
-      else if (a == "--regularizer") opt.regularizers = next();
-      else if (a == "--help" || a == "-h") return usage(argv[0]), 0;
-      else {
-        std::fprintf(stderr, "unknown argument '%s'\n", a.c_str());
-        return usage(argv[0]);
-      }
+    cli.parse(argc, argv);
+  } catch (const CommandLineError& e) {
+    std::fprintf(stderr, "mcflow_bench_labels: %s\n%s", e.what(), cli.usage().c_str());
+    return 2;
+  }
+  if (cli.helpRequested()) {
+    std::printf("%s", cli.usage().c_str());
+    return 0;
+  }
+  try {
+    struct {
+      std::vector<std::pair<int, int>> sizes;
+      std::vector<int> labels;
+      int iterations, repeat, warmup, variant;
+      std::string backends;
+    } opt;
+    for (const std::string& s : cli.list("sizes", "320x240,640x480")) {
+      const auto x = s.find('x');
+      if (x == std::string::npos) throw CommandLineError("--sizes expects WxH, got '" + s + "'");
+      opt.sizes.emplace_back(std::stoi(s.substr(0, x)), std::stoi(s.substr(x + 1)));
     }
+    for (const std::string& s : cli.list("labels", "20,4")) opt.labels.push_back(std::stoi(s));
+    opt.iterations = cli.integer("iterations", 150, 0, 1000000);
+    opt.repeat = cli.integer("repeat", 7, 1, 10000);
+    opt.warmup = cli.integer("warmup", 2, 0, 10000);
+    opt.variant = cli.integer("variant", 0, 0, syntheticVariantCount() - 1);
+    opt.backends = cli.text("backend", "both");
     if (opt.backends != "both" && opt.backends != "cpu" && opt.backends != "cuda")
-      throw ConfigError("--backend must be both, cpu or cuda, got '" + opt.backends + "'");
-    std::vector<Regularizer> regularizers;
-    if (opt.regularizers == "both") regularizers = {Regularizer::Quadratic, Regularizer::TotalVariation};
-    else regularizers = {parseRegularizer(opt.regularizers)};
+      throw CommandLineError("--backend must be both, cpu or cuda, got '" + opt.backends + "'");
+    const std::vector<Regularizer> regularizers = regularizerChoice(cli.text("regularizer", "both"));
     for (int n : opt.labels)
-      if (n < 2 || n > 128) throw ConfigError("--labels: " + std::to_string(n) + " is outside [2, 128]");
+      if (n < 2 || n > 128) throw CommandLineError("--labels: " + std::to_string(n) + " is outside [2, 128]");
 
     const bool run_cpu = opt.backends != "cuda";
     std::string why;
@@ -192,6 +168,9 @@ int main(int argc, char** argv) {
         }
       }
     }
+  } catch (const CommandLineError& e) {
+    std::fprintf(stderr, "mcflow_bench_labels: %s\n", e.what());
+    return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mcflow_bench_labels: %s\n", e.what());
     return 1;

@@ -41,6 +41,19 @@ using ImageF = Image<float>;
 using ImageU8 = Image<std::uint8_t>;
 using ImageI32 = Image<std::int32_t>;
 
+/// @brief "WxH", or "WxHxC" when channels != 1: how messages name an image size.
+inline std::string imageSizeText(int width, int height, int channels = 1) {
+  std::string text = std::to_string(width) + "x" + std::to_string(height);
+  return channels == 1 ? text : text + "x" + std::to_string(channels);
+}
+template <typename T>
+std::string imageSizeText(const Image<T>& image) {
+  return imageSizeText(image.width, image.height, image.channels);
+}
+
+/// @brief The one grey conversion of colour input (ITU-R BT.601 luma), in the units of r, g and b.
+inline double greyFromRgb(double r, double g, double b) { return 0.299 * r + 0.587 * g + 0.114 * b; }
+
 /// @brief True when a depth value is a usable measurement (finite and > 0).
 inline bool isValidDepth(float z) { return std::isfinite(z) && z > 0.f; }
 
