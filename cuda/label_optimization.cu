@@ -34,7 +34,7 @@ namespace {
 
 using cuda_detail::DeviceBuffer;
 
-constexpr int kMaxLabels = 128;                 // the CPU's projectOntoSimplex limit
+constexpr int kMaxLabels = 128;                 // these kernels' bound (the CPU has none); Config allows 65: 64 + outlier
 constexpr int kConvergenceCheckInterval = 10;   // iterations between two max-change reductions
 constexpr int kBlockX = 32, kBlockY = 8;        // a warp spans 32 consecutive pixels of a row
 

@@ -50,7 +50,7 @@ using cuda_detail::divRn;
 using cuda_detail::mulRn;
 using cuda_detail::subRn;
 
-constexpr int kMaxMotionLabels = 128;  // the label step's limit
+constexpr int kMaxMotionLabels = 128;  // as the CUDA label step's kMaxLabels; Config allows 64 (max_labels)
 constexpr int kThreads = 256;          // one pixel per thread; warps span consecutive pixels of a row
 constexpr int kWarps = kThreads / 32;
 constexpr float kDepthEdgeJump = 0.1f;  // [m] as in src/core/motion_estimation.cpp

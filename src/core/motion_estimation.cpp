@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "mc_flow/core/error.h"
 #include "mc_flow/core/sampling.h"
 #include "mc_flow/core/scene_flow.h"
 
@@ -251,7 +252,10 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
                                         const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator) {
   const int motion_labels = labels.count - 1;
-  if (motion_labels <= 0 || int(twists.size()) != motion_labels) return MotionLevelStats{};  // stop = NoLabels
+  if (labels.count < 1 || int(twists.size()) != motion_labels)
+    throw InputError("estimateMotionsAtLevel: " + std::to_string(twists.size()) + " twists for " +
+                     std::to_string(labels.count) + " label planes (expected one twist per motion label, count - 1)");
+  if (motion_labels == 0) return MotionLevelStats{};  // stop = NoLabels: only the outlier label
   std::unique_ptr<MotionAccumulator> own;
   if (!accumulator) {
     own = makeCpuMotionAccumulator();

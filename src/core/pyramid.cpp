@@ -14,7 +14,7 @@ namespace {
 // centre sits at input coordinate 2i + 0.5, which is exactly what Intrinsics::scaled(0.5) assumes.
 int halved(int n) { return std::max(1, n / 2); }
 
-constexpr float kIntensityGradientEps = 1e-6f;  // ALGORITHM_NOTES 'Image gradients'
+constexpr float kIntensityGradientEps = 1e-6f;  // docs/ALGORITHM.md, 'Gradients' (the PD-Flow blend)
 constexpr float kDepthGradientEps = 0.005f;     // [m]
 
 // One-dimensional blended derivative at a pixel from its backward (f0 - fm) and forward (fp - f0) differences.
@@ -111,22 +111,6 @@ ImageF downsampleDepth(const ImageF& depth, double range) {
       }
       // The reference itself always passes, so sum_w > 0 here.
       out(x, y) = sum_z / sum_w;
-    }
-  }
-  return out;
-}
-
-ImageF downsampleAverage(const ImageF& image) {
-  if (image.empty()) throw InputError("downsampleAverage: empty image");
-  const int w = image.width, h = image.height, ow = halved(w), oh = halved(h), c = image.channels;
-  ImageF out(ow, oh, c);
-#pragma omp parallel for schedule(static)
-  for (int y = 0; y < oh; ++y) {
-    const int y0 = std::min(2 * y, h - 1), y1 = std::min(2 * y + 1, h - 1);
-    for (int x = 0; x < ow; ++x) {
-      const int x0 = std::min(2 * x, w - 1), x1 = std::min(2 * x + 1, w - 1);
-      for (int ch = 0; ch < c; ++ch)
-        out(x, y, ch) = 0.25f * (image(x0, y0, ch) + image(x1, y0, ch) + image(x0, y1, ch) + image(x1, y1, ch));
     }
   }
   return out;

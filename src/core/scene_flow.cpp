@@ -19,51 +19,23 @@ void requireTwistCount(const char* what, const SoftLabels& u, const std::vector<
                      std::to_string(u.count) + " label planes (expected one twist per motion label, count - 1)");
 }
 
-/// The motion label a pixel without (enough) motion-label mass takes: the fallback when valid, else the
-/// motion label with the largest value (the lowest index on ties).
-int fallbackMotionLabel(const SoftLabels& u, std::size_t k, int x, int y, const ImageI32* fallback_label) {
-  const int m = u.count - 1;
-  if (fallback_label) {
-    const int f = (*fallback_label)(x, y);
-    if (f >= 0 && f < m) return f;
-  }
+/// The motion label a pixel without (enough) motion-label mass takes: the one with the largest value (the lowest
+/// index on ties).
+int largestMotionLabel(const SoftLabels& u, std::size_t k) {
   int label = 0;
-  for (int i = 1; i < m; ++i)
+  for (int i = 1; i < u.count - 1; ++i)
     if (u.plane(i)[k] > u.plane(label)[k]) label = i;
   return label;
 }
 
 }  // namespace
 
-Vector6d interpolatedTwist(const SoftLabels& u, int x, int y, const std::vector<Vector6d>& twists,
-                           const ImageI32* fallback_label) {
-  requireTwistCount("interpolatedTwist", u, twists);
-  if (x < 0 || y < 0 || x >= u.width || y >= u.height)
-    throw InputError("interpolatedTwist: pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") outside " +
-                     std::to_string(u.width) + "x" + std::to_string(u.height));
-  const int m = u.count - 1;
-  if (m == 0) return Vector6d::Zero();
-  const std::size_t k = std::size_t(y) * u.width + x;
-  double mass = 0;
-  Vector6d xi = Vector6d::Zero();
-  for (int i = 0; i < m; ++i) {
-    const double v = u.plane(i)[k];
-    mass += v;
-    xi += v * twists[std::size_t(i)];
-  }
-  if (mass >= kMinMotionMass) return xi / mass;
-  return twists[std::size_t(fallbackMotionLabel(u, k, x, y, fallback_label))];
-}
-
-ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<Vector6d>& twists,
-                  const ImageI32* fallback_label) {
+ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<Vector6d>& twists) {
   requireTwistCount("warpPoints", u, twists);
   if (points.channels != 3 || !points.sameSize(u.width, u.height))
     throw InputError("warpPoints: points " + std::to_string(points.width) + "x" + std::to_string(points.height) + "x" +
                      std::to_string(points.channels) + " do not match labels " + std::to_string(u.width) + "x" +
                      std::to_string(u.height) + " (3 channels expected)");
-  if (fallback_label && !fallback_label->sameSize(points))
-    throw InputError("warpPoints: fallback label image size differs from the points");
   const int w = points.width, h = points.height, m = u.count - 1;
   const float nan = std::numeric_limits<float>::quiet_NaN();
 
@@ -109,7 +81,7 @@ ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<V
         const std::size_t xs = std::size_t(x);
         Eigen::Matrix4d T;
         if (mass[xs] < kMinMotionMass) {
-          T = label_transform[std::size_t(fallbackMotionLabel(u, std::size_t(y) * w + x, x, y, fallback_label))];
+          T = label_transform[std::size_t(largestMotionLabel(u, std::size_t(y) * w + x))];
         } else if (nonzero[xs] == 1) {
           T = label_transform[std::size_t(last_label[xs])];
         } else {

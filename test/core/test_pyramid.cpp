@@ -176,21 +176,6 @@ TEST(Pyramid, IntensityDownsampleKeepsConstantsAndRamps) {
   for (int x = 1; x < 7; ++x) EXPECT_NEAR(out(x, 2), 0.03f * (2 * x + 0.5f), 1e-6f);
 }
 
-TEST(Pyramid, DownsampleAverageAveragesBlocks) {
-  ImageF im(4, 2, 2, 0.f);
-  for (int x = 0; x < 4; ++x)
-    for (int y = 0; y < 2; ++y) {
-      im(x, y, 0) = float(x + 10 * y);
-      im(x, y, 1) = 1.f;
-    }
-  const ImageF out = downsampleAverage(im);
-  ASSERT_EQ(out.width, 2);
-  ASSERT_EQ(out.height, 1);
-  EXPECT_FLOAT_EQ(out(0, 0, 0), (0 + 1 + 10 + 11) / 4.f);
-  EXPECT_FLOAT_EQ(out(1, 0, 0), (2 + 3 + 12 + 13) / 4.f);
-  EXPECT_FLOAT_EQ(out(1, 0, 1), 1.f);
-}
-
 TEST(Pyramid, BackProjectInvertsProjection) {
   ImageF depth(320, 240, 1, 0.f);
   depth(100, 50) = 2.5f;

@@ -41,7 +41,8 @@ struct LabelStats {
   double energy = 0;       ///< E(u) of eq. 4 at the end
 };
 
-/// @brief Euclidean projection of v[0..n) onto the probability simplex (sort-based, Duchi et al. 2008).
+/// @brief Euclidean projection of v[0..n) onto the probability simplex (Michelot's active-set algorithm, see
+/// simplex_projection.h; the same result as the sort-based projection of Duchi et al. 2008).
 void projectOntoSimplex(float* v, int n);
 
 /// @brief Geometric weights r = footprint / max(footprint, |P(x) - P(neighbour)|), footprint = mean depth / f:

@@ -20,7 +20,7 @@ namespace mc_flow {
 
 /// @brief Why the IRLS loop of one level stopped (as dvo_slam reports per level).
 enum class MotionStop {
-  NoLabels,        ///< nothing to estimate (no motion label, or twists not matching the labels)
+  NoLabels,        ///< nothing to estimate (no motion label)
   IterationLimit,  ///< motion_iterations_per_level (or _refine) reached
   SmallUpdate,     ///< the largest twist update fell below motion_min_update
   TooFewPixels,    ///< fewer than 6 pixels carried residuals
@@ -70,8 +70,8 @@ std::unique_ptr<MotionAccumulator> makeCpuMotionAccumulator();
 double motionOutOfViewCost(const Config& config);
 
 /// @brief IRLS at one level. `labels` has the level's size; `occluded` (may be null) excludes pixels.
-/// `twists` holds one twist per motion label (labels.count - 1) and is updated in place. `accumulator`
-/// builds the normal equations (null: a CPU one).
+/// `twists` holds one twist per motion label (labels.count - 1; otherwise InputError) and is updated in place.
+/// `accumulator` builds the normal equations (null: a CPU one).
 MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
                                         const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator = nullptr);
@@ -80,9 +80,5 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
 /// device-resident one); `twists` holds one twist per motion label of that binding.
 MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::vector<Vector6d>& twists,
                                      const Config& config);
-
-/// @brief Robust per-pixel data cost of one residual pair (normalised Cauchy, used by both steps):
-/// ln(1 + (rI/cI)^2) + alpha * ln(1 + (rZ/cZ)^2).
-inline double cauchyCost(double r, double c) { const double q = r / c; return std::log1p(q * q); }
 
 }  // namespace mc_flow

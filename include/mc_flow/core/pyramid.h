@@ -40,9 +40,6 @@ ImageF downsampleIntensity(const ImageF& image);
 /// `range` metres of the median of the valid values of its central 2x2 block; 0 if none.
 ImageF downsampleDepth(const ImageF& depth, double range);
 
-/// @brief Halves a soft-label-like image by averaging each 2x2 block (all channels).
-ImageF downsampleAverage(const ImageF& image);
-
 /// @brief Back-projects depth into 3 channel points (NaN where invalid).
 ImageF backProject(const ImageF& depth, const Intrinsics& K);
 

@@ -12,14 +12,10 @@
 
 namespace mc_flow {
 
-/// @brief xi_bar(x) = sum_i w_i(x) xi_i over motion labels, w = u renormalised without the outlier label;
-/// pixels with (almost) no motion-label mass use `fallback_label` (may be null: then the largest motion label).
-Vector6d interpolatedTwist(const SoftLabels& u, int x, int y, const std::vector<Vector6d>& twists,
-                           const ImageI32* fallback_label);
-
-/// @brief P2(x) = exp(xi_bar(x)) P(x): 3 channels, NaN where the point is invalid.
-ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<Vector6d>& twists,
-                  const ImageI32* fallback_label = nullptr);
+/// @brief P2(x) = exp(xi_bar(x)) P(x): 3 channels, NaN where the point is invalid. xi_bar(x) = sum_i w_i(x) xi_i
+/// over the motion labels, w = u renormalised without the outlier label; a pixel with (almost) no motion-label
+/// mass moves with its largest motion label.
+ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<Vector6d>& twists);
 
 /// @brief Scene flow P2 - P (3 channels, m) and optical flow pi(P2) - x (2 channels, px); NaN where invalid.
 void sceneAndOpticalFlow(const ImageF& points, const ImageF& warped_points, const Intrinsics& K, ImageF& scene_flow,
