@@ -1,11 +1,5 @@
 # The nodelet library, its tools and its tests (gtest + rostest). Included after the core targets.
 
-# ROS-free piece of the ROS layer (segment id persistence): its own library so that its test needs no ROS.
-add_library(mc_flow_tracker STATIC src/ros/segment_tracker.cpp)
-target_include_directories(mc_flow_tracker PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include)
-target_link_libraries(mc_flow_tracker PUBLIC mcflow_core)
-target_compile_options(mc_flow_tracker PRIVATE -Wall -Wextra)
-
 add_library(mc_flow_nodelet SHARED
   src/ros/conversions.cpp
   src/ros/input_watch.cpp
@@ -14,7 +8,7 @@ add_library(mc_flow_nodelet SHARED
   src/ros/mc_flow_nodelet.cpp)
 target_include_directories(mc_flow_nodelet PUBLIC
   ${CMAKE_CURRENT_SOURCE_DIR}/include ${catkin_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
-target_link_libraries(mc_flow_nodelet PUBLIC mc_flow_tracker mcflow_core ${catkin_LIBRARIES} ${OpenCV_LIBS})
+target_link_libraries(mc_flow_nodelet PUBLIC mcflow_core ${catkin_LIBRARIES} ${OpenCV_LIBS})
 target_compile_options(mc_flow_nodelet PRIVATE -Wall -Wextra)
 add_dependencies(mc_flow_nodelet ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_gencfg)
 set_target_properties(mc_flow_nodelet PROPERTIES
@@ -41,9 +35,8 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     add_custom_target(tests)
   endif()
 
-  # Unit tests that need no running node: tracker (ROS-free), conversions, reconfigure mapping.
+  # Unit tests that need no running node: conversions, message validation, reconfigure mapping, input watch.
   add_executable(test_ros_units
-    test/ros/test_segment_tracker.cpp
     test/ros/test_conversions.cpp
     test/ros/test_message_validation.cpp
     test/ros/test_reconfigure.cpp
@@ -62,7 +55,6 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     test/ros/test_message_validation.cpp
     src/ros/message_validation.cpp
     src/ros/conversions.cpp
-    src/ros/segment_tracker.cpp
     src/core/buffer_layout.cpp)
   target_include_directories(test_message_validation_sanitized PRIVATE
     ${CMAKE_CURRENT_SOURCE_DIR}/include ${catkin_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})

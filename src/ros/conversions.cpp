@@ -1,5 +1,7 @@
 #include "mc_flow/ros/conversions.h"
 
+#include "mc_flow/core/sequence.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -14,17 +16,17 @@
 #include <sensor_msgs/point_cloud2_iterator.h>
 
 #include "mc_flow/core/se3.h"
-#include "mc_flow/ros/segment_tracker.h"
+#include "mc_flow/core/palette.h"
 
 namespace enc = sensor_msgs::image_encodings;
 
 namespace mc_flow_ros {
 
+using mc_flow::colourForId;
+using mc_flow::Rgb8;
+
 namespace {
 
-/// Depth samples of one downsampling block further than this behind the block's nearest sample belong
-/// to another surface and are not averaged in (averaging across an edge invents points in mid-air).
-constexpr float kDepthBlockRange = 0.05f;  // [m]
 
 std::string sizeText(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
@@ -80,36 +82,6 @@ cv::Mat depthToMetres(const cv_bridge::CvImageConstPtr& image, const std::string
   return metres;
 }
 
-/// Block average of the nearest surface in each factor x factor block (0 where the block has no depth).
-cv::Mat downsampleDepth(const cv::Mat& depth, int factor, int out_w, int out_h) {
-  cv::Mat out(out_h, out_w, CV_32F, cv::Scalar(0));
-  for (int y = 0; y < out_h; ++y) {
-    for (int x = 0; x < out_w; ++x) {
-      float nearest = std::numeric_limits<float>::infinity();
-      for (int dy = 0; dy < factor; ++dy) {
-        const float* row = depth.ptr<float>(y * factor + dy) + x * factor;
-        for (int dx = 0; dx < factor; ++dx) {
-          if (row[dx] > 0.f) nearest = std::min(nearest, row[dx]);
-        }
-      }
-      if (!std::isfinite(nearest)) continue;
-      double sum = 0;
-      int count = 0;
-      for (int dy = 0; dy < factor; ++dy) {
-        const float* row = depth.ptr<float>(y * factor + dy) + x * factor;
-        for (int dx = 0; dx < factor; ++dx) {
-          if (row[dx] > 0.f && row[dx] <= nearest + kDepthBlockRange) {
-            sum += row[dx];
-            ++count;
-          }
-        }
-      }
-      out.at<float>(y, x) = float(sum / count);
-    }
-  }
-  return out;
-}
-
 mc_flow::ImageF toImageF(const cv::Mat& m) {
   mc_flow::ImageF image(m.cols, m.rows, 1);
   for (int y = 0; y < m.rows; ++y) std::memcpy(&image(0, y), m.ptr<float>(y), sizeof(float) * std::size_t(m.cols));
@@ -128,21 +100,12 @@ sensor_msgs::ImagePtr emptyImage(const PairContext& pair, int w, int h, const st
   return msg;
 }
 
-std::uint32_t idOf(const PairContext& pair, int label) {
-  if (label <= 0 || label > int(pair.ids.size())) return 0;
-  return pair.ids[std::size_t(label - 1)];
+// Result::labels holds the segments' persistent ids (0 = outlier or no depth).
+std::uint32_t idAt(const mc_flow::Result& result, int x, int y) {
+  return result.labels.empty() ? 0u : std::uint32_t(std::max(0, result.labels(x, y)));
 }
 
 }  // namespace
-
-int chooseDownsample(int requested, int width) {
-  if (requested > 0) return requested;
-  int best = 1;
-  for (int factor = 1; factor <= 16; factor *= 2) {
-    if (std::abs(width / factor - 320) < std::abs(width / best - 320)) best = factor;
-  }
-  return best;
-}
 
 mc_flow::Intrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info, int width, int height) {
   validateCameraInfo(info);
@@ -154,7 +117,8 @@ mc_flow::Intrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info
 }
 
 FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs::Image& depth_message,
-                        const sensor_msgs::CameraInfo& info, int downsample_request, std::uint64_t max_pixels) {
+                        const sensor_msgs::CameraInfo& info, int downsample_request, std::uint64_t max_pixels,
+                        double depth_range) {
   // Nothing below (cv_bridge, OpenCV) may read a buffer whose header has not been checked in 64 bits.
   const EncodingLayout rgb_layout = validateImage(rgb_message, ImageRole::Colour, max_pixels);
   const EncodingLayout depth_layout = validateImage(depth_message, ImageRole::Depth, max_pixels);
@@ -172,7 +136,7 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs
     throw FrameInputError(InputProblem::Size, "RGB " + sizeText(w, h) + " and depth " + sizeText(dw, dh) +
                                                   " have different aspect ratios (is the depth registered to the colour camera?)");
   }
-  const int factor = chooseDownsample(downsample_request, w);
+  const int factor = mc_flow::chooseDownsample(downsample_request, w);
   const int out_w = w / factor, out_h = h / factor;
   if (out_w < 16 || out_h < 16) {
     throw FrameInputError(InputProblem::Size, "processing size " + sizeText(out_w, out_h) + " (RGB " + sizeText(w, h) +
@@ -205,19 +169,18 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs
   }
   // Crop to a multiple of the factor at the right/bottom: the principal point needs no change then.
   const cv::Rect crop(0, 0, out_w * factor, out_h * factor);
-  cv::Mat colour_small, intensity_small;
-  if (factor == 1) {
+  // The solver's frame: the core's downsampling rule (the pyramid's), as `mcflow run-seq` uses it. The
+  // colour picture is for display only.
+  cv::Mat colour_small;
+  if (factor == 1)
     colour_small = rgb8(crop).clone();
-    intensity_small = intensity(crop).clone();
-  } else {
+  else
     cv::resize(rgb8(crop), colour_small, cv::Size(out_w, out_h), 0, 0, cv::INTER_AREA);
-    cv::resize(intensity(crop), intensity_small, cv::Size(out_w, out_h), 0, 0, cv::INTER_AREA);
-  }
-  const cv::Mat depth_small = factor == 1 ? metres(crop).clone() : downsampleDepth(metres, factor, out_w, out_h);
-
+  mc_flow::RgbdFrame full;
+  full.intensity = toImageF(intensity(crop));
+  full.depth = toImageF(metres(crop));
   out.colour = colour_small;
-  out.frame.intensity = toImageF(intensity_small);
-  out.frame.depth = toImageF(depth_small);
+  out.frame = factor == 1 ? std::move(full) : mc_flow::downsampleFrame(full, factor, depth_range);
   for (float z : out.frame.depth.data) out.valid_depth += mc_flow::isValidDepth(z) ? 1 : 0;
   if (out.valid_depth == 0) {
     throw FrameInputError(InputProblem::Depth, "depth image (" + depth.encoding + ", " + sizeText(dw, dh) +
@@ -256,7 +219,7 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
   for (std::size_t i = 0; i < result.segments.size(); ++i) {
     const mc_flow::Segment& s = result.segments[i];
     mc_flow::MotionSegment out;
-    out.id = i < pair.ids.size() ? pair.ids[i] : 0;
+    out.id = std::uint32_t(s.id);
     out.twist.linear.x = s.twist(0) / dt;
     out.twist.linear.y = s.twist(1) / dt;
     out.twist.linear.z = s.twist(2) / dt;
@@ -304,7 +267,7 @@ sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairC
   auto msg = emptyImage(pair, result.labels.width, result.labels.height, enc::MONO16, 2);
   auto* out = reinterpret_cast<std::uint16_t*>(msg->data.data());
   for (std::size_t i = 0; i < result.labels.pixelCount(); ++i) {
-    out[i] = std::uint16_t(std::min<std::uint32_t>(idOf(pair, result.labels.data[i]), 65535u));
+    out[i] = std::uint16_t(std::min<std::uint32_t>(std::uint32_t(std::max(0, result.labels.data[i])), 65535u));
   }
   return msg;
 }
@@ -319,7 +282,7 @@ cv::Mat segmentationPicture(const mc_flow::Result& result, const PairContext& pa
   const mc_flow::SoftLabels& u = result.soft_labels;
   cv::Mat picture(u.height, u.width, CV_8UC3, cv::Scalar(0, 0, 0));
   std::vector<Rgb8> colours;
-  for (int c = 0; c < u.count; ++c) colours.push_back(colourForId(c < u.count - 1 ? idOf(pair, c + 1) : 0));
+  for (int c = 0; c < u.count; ++c) colours.push_back(colourForId(c < u.count - 1 && std::size_t(c) < result.segments.size() ? std::uint32_t(result.segments[std::size_t(c)].id) : 0u));
   const cv::Mat* background = (pair.previous && pair.previous->colour.cols == u.width && pair.previous->colour.rows == u.height)
                                   ? &pair.previous->colour
                                   : nullptr;
@@ -386,7 +349,7 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
       it_x[2] = valid ? z : nan;
       const bool flow_ok = valid && result.scene_flow.sameSize(result.width, result.height) && result.scene_flow.channels >= 3;
       for (int c = 0; c < 3; ++c) it_v[c] = flow_ok ? result.scene_flow(x, y, c) : nan;
-      const std::uint32_t id = idOf(pair, result.labels.empty() ? 0 : result.labels(x, y));
+      const std::uint32_t id = idAt(result, x, y);
       *it_label = id;
       *it_occ = (!result.occlusion.empty() && result.occlusion(x, y) > 0) ? 1 : 0;
       std::uint8_t r = 0, g = 0, b = 0;
@@ -417,7 +380,7 @@ visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result,
   const double dt = pair.interval();
   for (std::size_t i = 0; i < result.segments.size(); ++i) {
     const mc_flow::Segment& s = result.segments[i];
-    const std::uint32_t id = i < pair.ids.size() ? pair.ids[i] : 0;
+    const std::uint32_t id = std::uint32_t(result.segments[i].id);
     const Rgb8 c = colourForId(id);
     const Eigen::Vector3d velocity = centroidVelocity(s, dt);
     const Eigen::Vector3d tip = s.centroid + velocity * seconds_ahead;

@@ -58,7 +58,6 @@ void MCFlowNodelet::onInit() {
   nh_ = getNodeHandle();
   pnh_ = getPrivateNodeHandle();
   readParameters();
-  tracker_ = SegmentTracker(SegmentTracker::Options{tracker_min_overlap_});
 
   it_in_ = std::make_unique<image_transport::ImageTransport>(nh_);
   it_out_ = std::make_unique<image_transport::ImageTransport>(pnh_);
@@ -189,10 +188,13 @@ void MCFlowNodelet::readParameters() {
   pnh_.param("cloud_colour", cloud_colour, cloud_colour);
   pnh_.param("marker_seconds_ahead", marker_seconds_ahead_, marker_seconds_ahead_);
   pnh_.param("segmentation_blend", segmentation_blend_, segmentation_blend_);
-  pnh_.param("tracker_min_overlap", tracker_min_overlap_, tracker_min_overlap_);
   pnh_.param("print_summary", print_summary_, print_summary_);
   pnh_.param("save_dir", save_dir_, save_dir_);
 
+  if (downsample_ < 0 || (downsample_ & (downsample_ - 1)) != 0) {
+    NODELET_WARN("downsample %d is not 0 (automatic) or a power of two; using 0", downsample_);
+    downsample_ = 0;
+  }
   if (queue_size_ < 1) {
     NODELET_WARN("queue_size %d is below 1; using 1", queue_size_);
     queue_size_ = 1;
@@ -237,7 +239,7 @@ void MCFlowNodelet::logStartup() {
     << " s publish_tf=" << publish_tf_ << " segment_frame_prefix=" << segment_frame_prefix_
     << " cloud_colour=" << (cloud_colour_ == CloudColour::Image ? "image" : "segment")
     << " marker_seconds_ahead=" << marker_seconds_ahead_ << " s segmentation_blend=" << segmentation_blend_
-    << " tracker_min_overlap=" << tracker_min_overlap_ << " print_summary=" << print_summary_ << " save_dir='"
+    << " print_summary=" << print_summary_ << " save_dir='"
     << save_dir_ << "'\n  solver parameters (dynamic_reconfigure):";
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
@@ -287,7 +289,7 @@ void MCFlowNodelet::connectCb() {
     subscribed_ = false;
     NODELET_DEBUG("no output has a listener: unsubscribed from the inputs");
     // The next frame after a pause must not be paired with one from before it: the worker starts a new
-    // sequence (it owns previous_, so it is told through a flag).
+    // sequence (it owns the pipeline, so it is told through a flag).
     std::lock_guard<std::mutex> pending(pending_mutex_);
     pending_.reset();
     sequence_break_ = true;
@@ -348,20 +350,23 @@ void MCFlowNodelet::workerLoop() {
       pending_.reset();
       if (sequence_break_) {
         sequence_break_ = false;
-        previous_.reset();
-        tracker_.reset();
-        segment_orientation_.clear();
+        if (pipeline_) pipeline_->reset();
       }
       if (pending_config_) {
         const mc_flow::Config config = *pending_config_;
         pending_config_.reset();
         lock.unlock();
         try {
-          solver_ = std::make_unique<mc_flow::Solver>(config);
+          // New parameters: a new solver; the sequence (previous frame, prior, ids) goes on.
+          if (pipeline_)
+            pipeline_->setConfig(config);
+          else
+            pipeline_ = std::make_unique<mc_flow::SequencePipeline>(config, 1, max_pair_interval_);
+          solver_config_ = config;
           backend_reported_ = false;
         } catch (const std::exception& e) {
           NODELET_ERROR("cannot create the solver with these parameters (%s); %s", e.what(),
-                        solver_ ? "keeping the previous solver" : "no frame is processed until they are fixed");
+                        pipeline_ ? "keeping the previous solver" : "no frame is processed until they are fixed");
         }
       }
     }
@@ -376,20 +381,12 @@ void MCFlowNodelet::workerLoop() {
   }
 }
 
-void MCFlowNodelet::resetSequence(const std::string& key, const std::string& why) {
-  warnThrottled(key, why);
-  previous_.reset();
-  tracker_.reset();
-  segment_orientation_.clear();
-  std::lock_guard<std::mutex> lock(stats_mutex_);
-  ++sequence_resets_;
-}
-
 void MCFlowNodelet::process(const SyncedInput& input) {
-  if (!solver_) return;
+  if (!pipeline_) return;
   FrameInput current;
   try {
-    current = toFrameInput(*input.rgb, *input.depth, *input.info, downsample_, std::uint64_t(max_input_pixels_));
+    current = toFrameInput(*input.rgb, *input.depth, *input.info, downsample_, std::uint64_t(max_input_pixels_),
+                           solver_config_.depth_downsample_range);
   } catch (const FrameInputError& e) {
     // Throttled per distinct problem (digits removed: the same fault in every frame is one key).
     std::string key = std::string(inputProblemName(e.problem)) + ":" + e.what();
@@ -401,69 +398,63 @@ void MCFlowNodelet::process(const SyncedInput& input) {
     return;
   }
 
-  if (previous_) {
-    const double dt = (current.header.stamp - previous_->header.stamp).toSec();
-    if (dt == 0.0) {
-      warnThrottled("stamp", "frame skipped: stamp " + stampText(current.header.stamp) +
-                                 " repeats the previous frame's (is a driver or bag publishing duplicates?)");
-      std::lock_guard<std::mutex> lock(stats_mutex_);
-      ++frames_skipped_;
-      return;
-    }
-    if (dt < 0.0) {
-      resetSequence("reset:back", "stamp went back from " + stampText(previous_->header.stamp) + " to " +
-                    stampText(current.header.stamp) + " (stream reset or bag loop): starting a new sequence");
-    } else if (dt > max_pair_interval_) {
-      resetSequence("reset:gap", "gap of " + std::to_string(dt) + " s before stamp " + stampText(current.header.stamp) +
-                    " exceeds max_pair_interval " + std::to_string(max_pair_interval_) + " s: starting a new sequence");
-    } else if (!current.frame.intensity.sameSize(previous_->frame.intensity) ||
-               current.header.frame_id != previous_->header.frame_id) {
-      resetSequence("reset:input", "the input changed from " + previous_->header.frame_id + " " +
-                    std::to_string(previous_->input_width) + "x" + std::to_string(previous_->input_height) + " to " +
-                    current.header.frame_id + " " + std::to_string(current.input_width) + "x" +
-                    std::to_string(current.input_height) + ": starting a new sequence");
-    }
-  }
-  if (!previous_) {
-    previous_ = std::move(current);
-    return;
-  }
-
-  mc_flow::Result result;
+  // The frame is already at the processing resolution (toFrameInput applies the core's downsampling rule):
+  // the pipeline pairs, solves and tracks. The display data travel with the frame.
+  mc_flow::StreamFrame frame;
+  frame.frame = current.frame;
+  frame.K = current.K;
+  frame.stamp = current.header.stamp.toSec();
+  frame.source = current.header.frame_id;
+  const ros::Time stamp = current.header.stamp;
+  frame.extra = std::move(current);
   const ros::WallTime start = ros::WallTime::now();
+  mc_flow::SequenceStep step;
   try {
-    result = solver_->solve(previous_->frame, current.frame, previous_->K);
-  } catch (const mc_flow::BackendError& e) {
-    // The GPU failed at run time: continue on the CPU (said once), skip this pair.
-    NODELET_WARN("the %s backend failed (%s): continuing on the CPU", solver_->backendName().c_str(), e.what());
-    mc_flow::Config cpu = solver_->config();
-    cpu.backend = mc_flow::Backend::Cpu;
-    solver_ = std::make_unique<mc_flow::Solver>(cpu);
-    previous_ = std::move(current);
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++frames_skipped_;
-    return;
-  } catch (const std::exception& e) {
-    // Bad input (InputError) or parameters that do not fit this input (ConfigError, e.g. processing_level
-    // deeper than the pyramid): skip the pair, keep the sequence going with the newer frame.
-    warnThrottled("solver", "pair " + stampText(previous_->header.stamp) + " -> " + stampText(current.header.stamp) +
-                                " skipped: " + e.what());
-    previous_ = std::move(current);
+    step = pipeline_->push(std::move(frame));
+  } catch (const mc_flow::InputError& e) {
+    warnThrottled("input", "frame " + stampText(stamp) + " skipped: " + e.what());
     std::lock_guard<std::mutex> lock(stats_mutex_);
     ++frames_skipped_;
     return;
   }
   const double solve_ms = (ros::WallTime::now() - start).toSec() * 1e3;
+  if (!step.reset_key.empty()) {
+    warnThrottled("reset:" + step.reset_key, "frame " + stampText(stamp) + ": " + step.reset_reason +
+                                                 ": starting a new sequence");
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++sequence_resets_;
+  }
+  using Outcome = mc_flow::SequenceStep::Outcome;
+  if (step.outcome == Outcome::RepeatedStamp) {
+    warnThrottled("stamp", "frame skipped: stamp " + stampText(stamp) +
+                               " repeats the previous frame's (is a driver or bag publishing duplicates?)");
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++frames_skipped_;
+    return;
+  }
+  if (step.outcome == Outcome::Started) return;
+  if (step.outcome == Outcome::PairFailed) {
+    if (!step.backend_fallback.empty())
+      NODELET_WARN("%s: continuing on the CPU", step.problem.c_str());  // once: the pipeline switched backends
+    else
+      // Bad input or parameters that do not fit this input: the sequence goes on with the newer frame.
+      warnThrottled("solver", "pair ending at " + stampText(stamp) + " skipped: " + step.problem);
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++frames_skipped_;
+    return;
+  }
 
+  const mc_flow::Result& result = *step.result;
   reportBackend(result);
-
+  const FrameInput& first = std::any_cast<const FrameInput&>(step.first->extra);
+  const FrameInput& second = std::any_cast<const FrameInput&>(step.second->extra);
   PairContext pair;
-  pair.header = current.header;
-  pair.previous_stamp = previous_->header.stamp;
-  pair.previous = &*previous_;
-  pair.current = &current;
+  pair.header = second.header;
+  pair.previous_stamp = first.header.stamp;
+  pair.previous = &first;
+  pair.current = &second;
   pair.solve_time_ms = solve_ms;
-  pair.ids = tracker_.update(result.labels, int(result.segments.size()), result.optical_flow);
+  pair_index_ = step.pair_index;
 
   publish(result, pair);
   {
@@ -474,14 +465,12 @@ void MCFlowNodelet::process(const SyncedInput& input) {
     backend_ = result.backend;
     backend_note_ = result.backend_note;
   }
-  ++pair_index_;
-  previous_ = std::move(current);
 }
 
 void MCFlowNodelet::reportBackend(const mc_flow::Result& result) {
   if (backend_reported_) return;
   backend_reported_ = true;
-  const mc_flow::Backend requested = solver_->config().backend;
+  const mc_flow::Backend requested = solver_config_.backend;
   if (result.backend_kind == mc_flow::Backend::Cuda || requested == mc_flow::Backend::Cpu) {
     NODELET_INFO("solver backend: %s (%s)", result.backend.c_str(), result.backend_note.c_str());
   } else if (requested == mc_flow::Backend::Auto) {
@@ -521,21 +510,16 @@ void MCFlowNodelet::publish(const mc_flow::Result& result, const PairContext& pa
 
 void MCFlowNodelet::publishTf(const mc_flow::Result& result, const PairContext& pair) {
   // Child frame per segment: origin at the segment's centroid at the current stamp, orientation = the
-  // segment's rotation accumulated since it first appeared (identity then).
+  // segment's rotation accumulated since it appeared (SequencePipeline's tracks).
   std::vector<geometry_msgs::TransformStamped> transforms;
-  std::map<std::uint32_t, Eigen::Quaterniond> orientations;
-  for (std::size_t i = 0; i < result.segments.size() && i < pair.ids.size(); ++i) {
-    const mc_flow::Segment& s = result.segments[i];
-    const std::uint32_t id = pair.ids[i];
-    const Eigen::Quaterniond step(Eigen::Matrix3d(s.transform.topLeftCorner<3, 3>()));
-    const auto known = segment_orientation_.find(id);
-    const Eigen::Quaterniond orientation =
-        known == segment_orientation_.end() ? Eigen::Quaterniond::Identity() : (step * known->second).normalized();
-    orientations[id] = orientation;
-    const Eigen::Vector3d origin = s.transform.topLeftCorner<3, 3>() * s.centroid + s.transform.topRightCorner<3, 1>();
+  for (const mc_flow::Segment& s : result.segments) {
+    const auto track = pipeline_->tracks().find(s.id);
+    if (track == pipeline_->tracks().end()) continue;
+    const Eigen::Quaterniond orientation(Eigen::Matrix3d(track->second.pose.topLeftCorner<3, 3>()));
+    const Eigen::Vector3d& origin = track->second.origin;
     geometry_msgs::TransformStamped t;
     t.header = pair.header;
-    t.child_frame_id = segment_frame_prefix_ + std::to_string(id);
+    t.child_frame_id = segment_frame_prefix_ + std::to_string(s.id);
     t.transform.translation.x = origin.x();
     t.transform.translation.y = origin.y();
     t.transform.translation.z = origin.z();
@@ -545,7 +529,6 @@ void MCFlowNodelet::publishTf(const mc_flow::Result& result, const PairContext& 
     t.transform.rotation.w = orientation.w();
     transforms.push_back(t);
   }
-  segment_orientation_ = orientations;
   tf_broadcaster_->sendTransform(transforms);
 }
 
@@ -561,7 +544,7 @@ void MCFlowNodelet::saveAndSummarise(const mc_flow::Result& result, const PairCo
       const mc_flow::Segment& seg = result.segments[i];
       const double speed = centroidVelocity(seg, dt).norm();
       const double turn = seg.twist.tail<3>().norm() / dt * 180.0 / M_PI;
-      s << " | id " << (i < pair.ids.size() ? pair.ids[i] : 0) << ": " << speed << " m/s " << std::setprecision(1)
+      s << " | id " << seg.id << ": " << speed << " m/s " << std::setprecision(1)
         << turn << " deg/s, " << std::setprecision(0) << seg.support << " px" << std::setprecision(3);
     }
     long dropped = 0;

@@ -39,10 +39,6 @@ struct FrameInput {
   int valid_depth = 0;        ///< pixels with valid depth at the processing resolution
 };
 
-/// @brief Resolves the downsample factor: `requested` > 0 is used as is; 0 picks the factor that brings
-/// the width closest to 320 px (the paper's resolution; 640x480 -> 2, 320x240 -> 1, 1280x720 -> 4).
-int chooseDownsample(int requested, int width);
-
 /// @brief Pinhole intrinsics of an image of `width` x `height` pixels from camera_info. Uses P (the
 /// rectified projection), falling back to K when P is all zero; rescales when camera_info describes a
 /// different size than the image. Throws FrameInputError as validateCameraInfo() does.
@@ -53,10 +49,13 @@ mc_flow::Intrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info
 /// resampled when both have the same aspect ratio. Throws FrameInputError naming the bad value for an
 /// unsupported encoding, an inconsistent buffer, a size/aspect mismatch, all-invalid depth or unusable
 /// intrinsics. Colour: rgb8 bgr8 rgba8 bgra8 mono8 mono16; depth: 16UC1 (mm, 0 = invalid), 32FC1 (m, NaN/0 =
-/// invalid). `max_pixels` bounds each image's pixel count.
+/// invalid). `max_pixels` bounds each image's pixel count. The downsample factor is
+/// mc_flow::chooseDownsample(downsample_request, width) and intensity and depth are downsampled by the core's
+/// rule (mc_flow::downsampleFrame, depth neighbours within `depth_range` [m], Config::depth_downsample_range).
 FrameInput toFrameInput(const sensor_msgs::Image& rgb, const sensor_msgs::Image& depth,
                         const sensor_msgs::CameraInfo& info, int downsample_request,
-                        std::uint64_t max_pixels = mc_flow::kDefaultMaxInputPixels);
+                        std::uint64_t max_pixels = mc_flow::kDefaultMaxInputPixels,
+                        double depth_range = mc_flow::Config().depth_downsample_range);
 
 /// @brief Camera info of the processing resolution (outputs can be projected with it).
 sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input);
@@ -65,7 +64,6 @@ sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input);
 struct PairContext {
   std_msgs::Header header;       ///< stamp of the current frame, input frame_id
   ros::Time previous_stamp;      ///< stamp of the previous frame of the pair
-  std::vector<std::uint32_t> ids;  ///< persistent id of each segment (Result::segments order)
   const FrameInput* previous = nullptr;  ///< the pair's first frame (points of the scene flow cloud)
   const FrameInput* current = nullptr;   ///< the pair's second frame
   double solve_time_ms = 0;

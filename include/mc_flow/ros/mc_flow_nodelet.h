@@ -2,8 +2,9 @@
  * @file mc_flow_nodelet.h
  * @brief mc_flow/MCFlowNodelet: synchronised RGB-D in; segments, soft labels, occlusion, scene flow out.
  *
- * Thin wrapper around mc_flow::Solver. The synchroniser callback only hands the newest frame to a
- * worker thread (frames arriving while a pair is being solved replace the waiting one and are counted
+ * Thin shell around mc_flow::SequencePipeline (pairing, resets, warm starts, persistent segment ids and
+ * tracks live there, shared with `mcflow run-seq`). The synchroniser callback only hands the newest frame
+ * to a worker thread (frames arriving while a pair is being solved replace the waiting one and are counted
  * as dropped), so the camera's nodelet manager is never blocked by a solve. Each solved frame is paired
  * with the previously solved one. Inputs are subscribed only while an output has a listener.
  */
@@ -37,7 +38,7 @@
 #include "mc_flow/McFlowConfig.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/ros/conversions.h"
-#include "mc_flow/ros/segment_tracker.h"
+#include "mc_flow/core/sequence.h"
 
 namespace mc_flow_ros {
 
@@ -78,7 +79,6 @@ class MCFlowNodelet : public nodelet::Nodelet {
   void publish(const mc_flow::Result& result, const PairContext& pair);
   void publishTf(const mc_flow::Result& result, const PairContext& pair);
   void saveAndSummarise(const mc_flow::Result& result, const PairContext& pair, const cv::Mat& segmentation);
-  void resetSequence(const std::string& key, const std::string& why);
   void timerCb(const ros::WallTimerEvent& event);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
   /// Warns at most every `period` seconds per key (one key per distinct problem); the next warning of a
@@ -103,7 +103,6 @@ class MCFlowNodelet : public nodelet::Nodelet {
   CloudColour cloud_colour_ = CloudColour::Segment;
   double marker_seconds_ahead_ = 1.0;  // [s]
   double segmentation_blend_ = 0.6;
-  double tracker_min_overlap_ = 0.3;
   bool print_summary_ = false;
   std::string save_dir_;
 
@@ -139,10 +138,8 @@ class MCFlowNodelet : public nodelet::Nodelet {
   bool sequence_break_ = false;                     // guarded by pending_mutex_: inputs were unsubscribed
 
   // ---- worker state (worker thread only) ----
-  std::unique_ptr<mc_flow::Solver> solver_;
-  std::optional<FrameInput> previous_;
-  SegmentTracker tracker_;
-  std::map<std::uint32_t, Eigen::Quaterniond> segment_orientation_;  // accumulated, for TF
+  std::unique_ptr<mc_flow::SequencePipeline> pipeline_;
+  mc_flow::Config solver_config_;  // the pipeline's
   bool backend_reported_ = false;
   long pair_index_ = 0;
 
