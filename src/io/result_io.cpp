@@ -85,7 +85,9 @@ void writeResultDirectory(const std::string& dir, const Result& result, const Co
   saveMask(join(dir, "occlusion.png"), result.occlusion);
   writeTextFile(join(dir, "segments.json"), segmentsJson(result));
 
-  const cv::Mat segmentation = segmentationImage(result.soft_labels, pair.frame1.intensity);
+  std::vector<int> ids;
+  for (const Segment& segment : result.segments) ids.push_back(segment.id);
+  const cv::Mat segmentation = segmentationImage(result.soft_labels, ids, pair.frame1.intensity);
   const cv::Mat flow = flowColorImage(result.optical_flow);
   writeImage(join(dir, "segmentation.png"), segmentation);
   writeImage(join(dir, "flow.png"), flow);

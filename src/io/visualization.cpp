@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/palette.h"
 
 namespace mc_flow {
 namespace io {
@@ -50,19 +51,9 @@ cv::Vec3b flowColour(float u, float v) {
 
 }  // namespace
 
-cv::Vec3b segmentColor(int index) {
-  // Hand-picked well-separated colours first (BGR), then golden-ratio hues for any further segments.
-  static const cv::Vec3b palette[] = {
-      {75, 25, 230},  {75, 180, 60},  {25, 225, 255}, {200, 130, 0},  {48, 130, 245}, {180, 30, 145},
-      {240, 240, 70}, {230, 50, 240}, {60, 245, 210}, {212, 190, 250}, {128, 128, 0}, {255, 190, 220},
-      {40, 110, 170}, {200, 250, 255}, {0, 0, 128},   {195, 255, 170}, {0, 128, 128}, {180, 215, 255},
-      {128, 0, 0},    {128, 128, 128}};
-  const int count = int(sizeof(palette) / sizeof(palette[0]));
-  if (index >= 0 && index < count) return palette[index];
-  const double hue = std::fmod(0.618033988749895 * index, 1.0) * 180.0;
-  cv::Mat hsv(1, 1, CV_8UC3, cv::Scalar(hue, 200, 230)), bgr;
-  cv::cvtColor(hsv, bgr, cv::COLOR_HSV2BGR);
-  return bgr.at<cv::Vec3b>(0, 0);
+cv::Vec3b segmentColor(int id) {
+  const Rgb8 c = colourForId(std::uint32_t(std::max(id, 0)));
+  return {c.b, c.g, c.r};
 }
 
 cv::Mat intensityImage(const ImageF& intensity) {
@@ -74,20 +65,26 @@ cv::Mat intensityImage(const ImageF& intensity) {
   return bgr;
 }
 
-cv::Mat segmentationImage(const SoftLabels& labels, const ImageF& intensity) {
+cv::Mat segmentationImage(const SoftLabels& labels, const std::vector<int>& ids, const ImageF& intensity) {
   if (!intensity.sameSize(labels.width, labels.height))
     throw InputError("segmentation picture: soft labels are " + std::to_string(labels.width) + "x" +
                      std::to_string(labels.height) + " but the image is " + std::to_string(intensity.width) + "x" +
                      std::to_string(intensity.height));
+  const int motion_labels = labels.count - 1;
+  if (labels.count < 1 || int(ids.size()) != motion_labels)
+    throw InputError("segmentation picture: " + std::to_string(ids.size()) + " segment ids for " +
+                     std::to_string(labels.count) + " label planes (expected count - 1)");
+  std::vector<cv::Vec3b> colours;
+  for (const int id : ids) colours.push_back(segmentColor(id));
+  colours.push_back(segmentColor(0));  // the outlier plane
   cv::Mat out(labels.height, labels.width, CV_8UC3);
-  const int motion_labels = labels.count - 1;  // the last plane is the outlier label: black
   for (int y = 0; y < labels.height; ++y)
     for (int x = 0; x < labels.width; ++x) {
       float colour[3] = {0, 0, 0};
-      for (int i = 0; i < motion_labels; ++i) {
+      for (int i = 0; i < labels.count; ++i) {
         const float u = labels.at(i, x, y);
         if (!(u > 0.f)) continue;
-        const cv::Vec3b c = segmentColor(i);
+        const cv::Vec3b& c = colours[std::size_t(i)];
         for (int k = 0; k < 3; ++k) colour[k] += u * c[k];
       }
       const float grey = 255.f * std::clamp(intensity(x, y), 0.f, 1.f);

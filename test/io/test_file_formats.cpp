@@ -13,6 +13,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/palette.h"
 #include "mc_flow/core/se3.h"
 #include "mc_flow/io/camera_info.h"
 #include "mc_flow/io/config_file.h"
@@ -767,12 +768,14 @@ TEST(Visualization, SegmentationBlendsColoursOverImage) {
   u.at(0, 0, 0) = 1.f;    // pixel 0: segment 0
   u.at(2, 1, 0) = 1.f;    // pixel 1: outlier
   ImageF grey(2, 1, 1, 0.5f);
-  const cv::Mat image = io::segmentationImage(u, grey);
-  const cv::Vec3b c0 = io::segmentColor(0);
+  const cv::Mat image = io::segmentationImage(u, {7, 3}, grey);  // plane 0 is segment id 7
+  const cv::Vec3b c7 = io::segmentColor(7), outlier = io::segmentColor(0);
+  const Rgb8 palette7 = colourForId(7);
+  EXPECT_EQ(c7, cv::Vec3b(palette7.b, palette7.g, palette7.r)) << "the core palette, in BGR order";
   for (int k = 0; k < 3; ++k) {
-    EXPECT_NEAR(image.at<cv::Vec3b>(0, 0)[k], 0.6 * c0[k] + 0.4 * 127.5, 1.0);
-    EXPECT_NEAR(image.at<cv::Vec3b>(0, 1)[k], 0.4 * 127.5, 1.0);  // outlier is black under the blend
+    EXPECT_NEAR(image.at<cv::Vec3b>(0, 0)[k], 0.6 * c7[k] + 0.4 * 127.5, 1.0);
+    EXPECT_NEAR(image.at<cv::Vec3b>(0, 1)[k], 0.6 * outlier[k] + 0.4 * 127.5, 1.0);
   }
-  EXPECT_NE(io::segmentColor(0), io::segmentColor(1));
-  EXPECT_EQ(io::segmentColor(25), io::segmentColor(25));
+  EXPECT_NE(io::segmentColor(1), io::segmentColor(2));
+  EXPECT_THROW(io::segmentationImage(u, {7}, grey), InputError);
 }

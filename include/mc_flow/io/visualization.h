@@ -16,12 +16,14 @@
 namespace mc_flow {
 namespace io {
 
-/// @brief A fixed, distinct BGR colour for segment plane i (0-based); the same i always gives the same colour.
-cv::Vec3b segmentColor(int index);
+/// @brief The BGR colour of a segment id: mc_flow::colourForId (core/palette.h), the one palette of every
+/// picture, the nodelet's included; id 0 (outlier / no depth) is dark grey.
+cv::Vec3b segmentColor(int id);
 
-/// @brief Soft labels as a colour blend over the grey image: colour = sum_i u_i colour_i (outlier plane black),
-/// mixed 60 % colour / 40 % image.
-cv::Mat segmentationImage(const SoftLabels& labels, const ImageF& intensity);
+/// @brief Soft labels as a colour blend over the grey image: colour = sum_i u_i segmentColor(ids[i]), the outlier
+/// plane with id 0's colour, mixed 60 % colour / 40 % image. `ids` holds one segment id per motion label
+/// (Result::segments[i].id; labels.count - 1 of them).
+cv::Mat segmentationImage(const SoftLabels& labels, const std::vector<int>& ids, const ImageF& intensity);
 
 /// @brief Middlebury colour-wheel coding of a 2-channel flow; hue = direction, saturation = magnitude over
 /// `max_magnitude` (0 = the largest finite magnitude in the image after dropping its top 0.5 %, so that a few
