@@ -119,8 +119,6 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
                      " motion labels");
   const double price = labelCost(config, valid_pixels);
   std::vector<double> support = labels.supports();
-  std::vector<int> origin(static_cast<std::size_t>(n0));  // the label before the update each label stands for
-  for (int i = 0; i < n0; ++i) origin[std::size_t(i)] = i;
   // group[i]: the current label of original label i (-1: removed to the outlier label). The labels
   // themselves change once, at the end, by one remap.
   std::vector<int> group(static_cast<std::size_t>(n0));
@@ -163,8 +161,6 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
     model.curvature[std::size_t(keep)] = H;
     model.gradient[std::size_t(keep)] += model.gradient[std::size_t(drop)];
     support[std::size_t(keep)] += support[std::size_t(drop)];
-    stats.merged_into.emplace_back(origin[std::size_t(drop)], origin[std::size_t(keep)]);
-    origin.erase(origin.begin() + drop);
     dropLabel(drop, keep);
     support.erase(support.begin() + drop);
     twists.erase(twists.begin() + drop);
@@ -184,7 +180,6 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
       if (twists.size() <= 1) break;
       if (support[std::size_t(i)] < min_support) {
         dropLabel(i, -1);
-        origin.erase(origin.begin() + i);
         support.erase(support.begin() + i);
         twists.erase(twists.begin() + i);
         model.curvature.erase(model.curvature.begin() + i);
@@ -193,7 +188,6 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
       }
     }
   }
-  stats.identity_from = origin;
   if (stats.merged + stats.removed == 0) return stats;
   const int new_count = int(twists.size()) + 1;
   std::vector<int> target(std::size_t(n0) + 1, new_count - 1);
@@ -207,7 +201,6 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
                               const Config& config) {
   AdaptationStats stats;
   const int n = labels.labelCount() - 1;
-  for (int i = 0; i < n; ++i) stats.identity_from.push_back(i);
   const int room = config.max_labels - n;
   if (room <= 0 || config.max_splits_per_iteration <= 0) return stats;
   const double min_half = std::max(2.0 * config.min_support_fraction * double(valid_pixels), 32.0);
@@ -261,7 +254,6 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
     const Vector6d base = twists[std::size_t(p)];
     twists[std::size_t(p)] = base + gaussNewtonStep(model.curvature[std::size_t(p)], model.gradient[std::size_t(p)]);
     twists.push_back(base + gaussNewtonStep(model.curvature[std::size_t(n + c)], model.gradient[std::size_t(n + c)]));
-    stats.identity_from.push_back(-1);
     ++stats.split;
   }
   labels.applyCuts(taken);

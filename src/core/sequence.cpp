@@ -14,8 +14,6 @@ namespace {
 
 bool isPowerOfTwo(int v) { return v > 0 && (v & (v - 1)) == 0; }
 
-std::string sizeText(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
-
 }  // namespace
 
 int chooseDownsample(int requested, int width) {
@@ -80,7 +78,7 @@ PreparedFrame SequencePipeline::prepare(StreamFrame frame) const {
   out.downsample = chooseDownsample(downsample_request_, out.input_width);
   const int w = out.input_width / out.downsample, h = out.input_height / out.downsample;
   if (w < 16 || h < 16)
-    throw InputError("processing size " + sizeText(w, h) + " (input " + sizeText(out.input_width, out.input_height) +
+    throw InputError("processing size " + imageSizeText(w, h) + " (input " + imageSizeText(out.input_width, out.input_height) +
                      " / downsample " + std::to_string(out.downsample) + ") is too small: at least 16x16");
   out.frame = out.downsample == 1 ? std::move(frame.frame)
                                   : downsampleFrame(frame.frame, out.downsample, config_.depth_downsample_range);
@@ -111,8 +109,8 @@ SequenceStep SequencePipeline::push(StreamFrame input) {
     } else if (frame.source != previous.source || !frame.frame.intensity.sameSize(previous.frame.intensity)) {
       step.reset_key = "input";
       step.reset_reason = "the input changed from '" + previous.source + "' " +
-                          sizeText(previous.input_width, previous.input_height) + " to '" + frame.source + "' " +
-                          sizeText(frame.input_width, frame.input_height);
+                          imageSizeText(previous.input_width, previous.input_height) + " to '" + frame.source + "' " +
+                          imageSizeText(frame.input_width, frame.input_height);
     }
     if (!step.reset_key.empty()) {
       reset();

@@ -66,13 +66,11 @@ struct Prepared {
   int levels = 0, finest = 0, label_level = 0, kmeans_level = 0, valid_label_level = 0;
 };
 
-// What Algorithm 1 starts from: hard labels at the label level, one twist and one id per motion label.
+// What Algorithm 1 starts from: hard labels at the label level, one twist per motion label.
 struct Start {
   ImageI32 hard;
   int motion_labels = 0;
   std::vector<Vector6d> twists;
-  std::vector<int> ids;
-  int next_id = 1;
   int outer_iterations = 1;
   int first_motion_coarsest = 0;  // the first motion step's coarsest level
   bool first_motion_refines = false;  // the first motion step uses motion_iterations_refine
@@ -108,9 +106,8 @@ struct Solver::Impl {
   Result emptyResult(const Prepared& p, const Intrinsics& K) const;
   Start coldStart(const Prepared& p, Result& result);
   Start warmStart(const Prepared& p, CarriedLabels carried, const Result& previous, Result& result);
-  // Algorithm 1 from `start`, the final label step and the outputs. Segment ids follow the labels through
-  // merges and splits; `previous` (may be null) names the ids that existed before this pair.
-  void iterate(const Prepared& p, Start start, const Result* previous, Result& result);
+  // Algorithm 1 from `start`, the final label step and the outputs (segments numbered 1..m).
+  void iterate(const Prepared& p, Start start, Result& result);
 };
 
 Solver::Solver(const Config& config) : impl_(std::make_unique<Impl>()) {
@@ -186,33 +183,16 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   result.timings.preprocessing = elapsedMs(t);
 
   // Stream mode: the previous pair's segments on this frame 1 (for the warm start, or only for the ids).
-  ImageI32 carried_ids;
+  ImageI32 carried_ids, carried_dormant;
   if (previous) {
     t = Clock::now();
     carried_ids = carrySegmentIds(*previous, p.pyr1[0].points, config.warm_depth_tolerance);
+    if (!previous->dormant_ids.empty())
+      carried_dormant = carryIds(previous->dormant_regions, *previous, p.pyr1[0].points, config.warm_depth_tolerance);
     result.timings.initialisation += elapsedMs(t);
   }
 
-  auto solveCold = [&](Result& r) {
-    iterate(p, coldStart(p, r), previous, r);
-    if (previous) {
-      // Persistent ids by overlap with the carried segments.
-      ImageI32 index_labels(r.width, r.height, 1, 0);
-      for (std::size_t k = 0; k < index_labels.data.size(); ++k) {
-        const int id = r.labels.data[k];
-        for (std::size_t s = 0; s < r.segments.size(); ++s)
-          if (id > 0 && r.segments[s].id == id) index_labels.data[k] = int(s) + 1;
-      }
-      int next_id = std::max(previous->next_id, 1);
-      const std::vector<int> ids =
-          matchSegmentIds(index_labels, int(r.segments.size()), carried_ids, config.id_min_overlap, next_id);
-      for (std::size_t k = 0; k < r.labels.data.size(); ++k)
-        if (index_labels.data[k] > 0) r.labels.data[k] = ids[std::size_t(index_labels.data[k] - 1)];
-      for (std::size_t s = 0; s < r.segments.size(); ++s) r.segments[s].id = ids[s];
-      r.next_id = next_id;
-      r.merged_ids.clear();
-    }
-  };
+  auto solveCold = [&](Result& r) { iterate(p, coldStart(p, r), r); };
 
   if (previous && config.warm_start) {
     t = Clock::now();
@@ -224,7 +204,7 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
                           " of the valid pixels, below warm_min_coverage = " + std::to_string(config.warm_min_coverage);
       solveCold(result);
     } else {
-      iterate(p, warmStart(p, std::move(carried), *previous, result), previous, result);
+      iterate(p, warmStart(p, std::move(carried), *previous, result), result);
       result.start = StartKind::Warm;
       const double warm_per_pixel = result.energy / std::max(1, result.valid_pixels);
       const double previous_per_pixel = previous->energy / std::max(1, previous->valid_pixels);
@@ -250,15 +230,10 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
     solveCold(result);
   }
 
-  if (previous) {
-    // The previous pair's segments that neither continue nor merged have ended.
-    for (const Segment& s : previous->segments) {
-      bool alive = false;
-      for (const Segment& n : result.segments) alive = alive || n.id == s.id;
-      for (const auto& m : result.merged_ids) alive = alive || m.first == s.id;
-      if (!alive) result.ended_ids.push_back(s.id);
-    }
-  }
+  // Persistent ids: by overlap with the previous pair's segments carried into this frame 1, warm or cold.
+  // (The labels themselves merge and split during the solve; what persists is the region a person sees.)
+  if (previous)
+    assignStreamIds(result, carried_ids, carried_dormant, *previous, config.id_min_overlap, config.id_memory_pairs);
   result.timings.total = elapsedMs(start_time);
   return result;
 }
@@ -287,8 +262,6 @@ Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
     }
   }
   start.twists.assign(std::size_t(start.motion_labels), dominant);
-  for (int i = 0; i < start.motion_labels; ++i) start.ids.push_back(i + 1);
-  start.next_id = start.motion_labels + 1;
   start.outer_iterations = config.outer_iterations;
   start.first_motion_coarsest = p.levels - 1;
   result.timings.initialisation += elapsedMs(t);
@@ -301,8 +274,6 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
   const auto t = Clock::now();
   Start start;
   start.hard = std::move(carried.hard);
-  start.ids = carried.ids;
-  start.next_id = std::max(previous.next_id, 1);
   // Constant velocity: each carried segment starts from its previous motion.
   std::vector<double> covered(carried.ids.size(), 0.0);
   for (const int h : start.hard.data)
@@ -329,15 +300,12 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
                                     config.initial_labels);
     const KMeansResult kmeans =
         kmeansPoints(open_points, clusters, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
-    const int base = int(start.ids.size());
+    const int base = int(carried.ids.size());
     for (std::size_t k = 0; k < start.hard.data.size(); ++k)
       if (start.hard.data[k] < 0 && kmeans.assignment.data[k] >= 0) start.hard.data[k] = base + kmeans.assignment.data[k];
-    for (std::size_t c = 0; c < kmeans.centres.size(); ++c) {
-      start.twists.push_back(widest);
-      start.ids.push_back(start.next_id++);
-    }
+    for (std::size_t c = 0; c < kmeans.centres.size(); ++c) start.twists.push_back(widest);
   }
-  start.motion_labels = int(start.ids.size());
+  start.motion_labels = int(start.twists.size());
   backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
   start.outer_iterations = config.warm_outer_iterations;
   start.first_motion_coarsest = std::min(p.levels - 1, p.finest + config.warm_motion_coarse_levels);
@@ -348,20 +316,11 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
   return start;
 }
 
-void Solver::Impl::iterate(const Prepared& p, Start start, const Result* previous, Result& result) {
+void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
   SolveBackend& labels = *backend;
   const bool occlusions = config.detect_occlusions;
   const int finest = p.finest;
   std::vector<Vector6d>& twists = start.twists;
-  std::vector<int>& ids = start.ids;
-  std::vector<std::pair<int, int>> merges;  // (id, into id) as they happen
-  // Segment ids follow the labels: a merge keeps the larger label's id, a split gives the new half a new id.
-  auto followIdentity = [&](const AdaptationStats& as) {
-    for (const auto& [from, into] : as.merged_into) merges.emplace_back(ids[std::size_t(from)], ids[std::size_t(into)]);
-    std::vector<int> next;
-    for (const int from : as.identity_from) next.push_back(from >= 0 ? ids[std::size_t(from)] : start.next_id++);
-    ids = std::move(next);
-  };
   auto t = Clock::now();
 
   // ---- Algorithm 1
@@ -390,7 +349,6 @@ void Solver::Impl::iterate(const Prepared& p, Start start, const Result* previou
     t = Clock::now();
     LabelCostModel early_model = labels.costModel(twists, occlusions, config);
     const AdaptationStats early = adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false);
-    followIdentity(early);
     stats.merged += early.merged;
     result.timings.adaptation += elapsedMs(t);
 
@@ -411,14 +369,11 @@ void Solver::Impl::iterate(const Prepared& p, Start start, const Result* previou
     t = Clock::now();
     LabelCostModel model = labels.costModel(twists, occlusions, config);
     const AdaptationStats as = adaptLabelCount(labels, twists, model, p.valid_label_level, config, true);
-    followIdentity(as);
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.smallest_refused_merge = as.smallest_refused_merge;
     if (k + 1 < start.outer_iterations) {
-      const AdaptationStats splits = proposeSplits(labels, twists, occlusions, p.valid_label_level, config);
-      followIdentity(splits);
-      stats.split = splits.split;
+      stats.split = proposeSplits(labels, twists, occlusions, p.valid_label_level, config).split;
     }
     stats.labels_after = labels.labelCount() - 1;
     result.timings.adaptation += elapsedMs(t);
@@ -446,30 +401,10 @@ void Solver::Impl::iterate(const Prepared& p, Start start, const Result* previou
     result.timings.labels += elapsedMs(t);
   }
 
-  // ---- segment ids: 1..m for a pair solved alone; in a stream, the ids that followed the labels
-  if (!previous) {
-    for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = int(i) + 1;
-    start.next_id = int(ids.size()) + 1;
-    merges.clear();
-  }
-  result.next_id = start.next_id;
+  // Segments are numbered 1..m here; a stream solve gives them persistent ids afterwards (assignStreamIds).
+  result.next_id = int(twists.size()) + 1;
   result.merged_ids.clear();
-  for (const auto& [from, into] : merges) {
-    bool existed = false;
-    for (const Segment& s : previous->segments) existed = existed || s.id == from;
-    if (!existed) continue;
-    // Follow the chain to the id that is still there (a later merge may have absorbed the first target).
-    int final_into = into;
-    for (bool moved = true; moved;) {
-      moved = false;
-      for (const auto& [f, i] : merges)
-        if (f == final_into) {
-          final_into = i;
-          moved = true;
-        }
-    }
-    result.merged_ids.emplace_back(from, final_into);
-  }
+  result.ended_ids.clear();
 
   // ---- outputs at the input resolution
   t = Clock::now();
@@ -492,13 +427,13 @@ void Solver::Impl::iterate(const Prepared& p, Start start, const Result* previou
   for (std::size_t i = 0; i < argmax.data.size(); ++i) {
     const int a = argmax.data[i];
     result.labels.data[i] =
-        (a == result.soft_labels.outlier() || !std::isfinite(F0.points.data[i * 3 + 2])) ? 0 : ids[std::size_t(a)];
+        (a == result.soft_labels.outlier() || !std::isfinite(F0.points.data[i * 3 + 2])) ? 0 : a + 1;
   }
   const std::vector<Eigen::Vector3d> centroids = labelCentroids(result.soft_labels, F0.points);
   result.segments.clear();
   for (int i = 0; i < result.soft_labels.count - 1; ++i) {
     Segment s;
-    s.id = ids[std::size_t(i)];
+    s.id = i + 1;
     s.twist = twists[std::size_t(i)];
     s.transform = se3Exp(s.twist);
     s.support = result.soft_labels.support(i);

@@ -15,12 +15,16 @@
 namespace mc_flow {
 
 ImageI32 carrySegmentIds(const Result& previous, const ImageF& points, double depth_tolerance) {
+  return carryIds(previous.labels, previous, points, depth_tolerance);
+}
+
+ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& points, double depth_tolerance) {
   const int W = points.width, H = points.height;
   if (previous.width != W || previous.height != H)
     throw InputError("warm start: the previous result is " + std::to_string(previous.width) + "x" +
                      std::to_string(previous.height) + " but the frame is " + std::to_string(W) + "x" +
                      std::to_string(H));
-  if (previous.labels.data.size() != std::size_t(W) * H || previous.scene_flow.data.size() != std::size_t(W) * H * 3 ||
+  if (ids.data.size() != std::size_t(W) * H || previous.scene_flow.data.size() != std::size_t(W) * H * 3 ||
       previous.optical_flow.data.size() != std::size_t(W) * H * 2 ||
       previous.moved_depth.data.size() != std::size_t(W) * H)
     throw InputError("warm start: the previous result has no labels or flow at its " + std::to_string(W) + "x" +
@@ -30,7 +34,7 @@ ImageI32 carrySegmentIds(const Result& previous, const ImageF& points, double de
   ImageI32 splat(W, H, 1, 0);
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
-      const int id = previous.labels(x, y);
+      const int id = ids(x, y);
       if (id <= 0) continue;
       const float u = float(x) + previous.optical_flow(x, y, 0), v = float(y) + previous.optical_flow(x, y, 1);
       if (!std::isfinite(u) || !std::isfinite(v)) continue;
@@ -151,6 +155,103 @@ std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, cons
   for (int& id : ids)
     if (id == 0) id = next_id++;
   return ids;
+}
+
+void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32& carried_dormant,
+                     const Result& previous, double min_overlap, int memory_pairs) {
+  const int m = int(result.segments.size());
+  const int first_new = std::max(previous.next_id, 1);
+  int next_id = first_new;
+  std::vector<int> ids = matchSegmentIds(result.labels, m, carried_ids, min_overlap, next_id);
+
+  // Segments that would get a new id: a dormant id whose region they cover takes precedence.
+  result.revived_ids.clear();
+  if (!previous.dormant_ids.empty() && carried_dormant.sameSize(result.labels)) {
+    ImageI32 fresh(result.width, result.height, 1, 0);
+    std::vector<int> fresh_segment;  // fresh index -> segment index
+    std::map<int, int> fresh_of_label;
+    for (int i = 0; i < m; ++i)
+      if (ids[std::size_t(i)] >= first_new) {
+        fresh_segment.push_back(i);
+        fresh_of_label[i + 1] = int(fresh_segment.size());
+      }
+    if (!fresh_segment.empty()) {
+      for (std::size_t k = 0; k < fresh.data.size(); ++k) {
+        const auto it = fresh_of_label.find(result.labels.data[k]);
+        if (it != fresh_of_label.end()) fresh.data[k] = it->second;
+      }
+      const int none = std::numeric_limits<int>::max() / 2;
+      int unused = none;
+      const std::vector<int> revived =
+          matchSegmentIds(fresh, int(fresh_segment.size()), carried_dormant, min_overlap, unused);
+      for (std::size_t f = 0; f < fresh_segment.size(); ++f)
+        if (revived[f] < none) {
+          ids[std::size_t(fresh_segment[f])] = revived[f];
+          result.revived_ids.push_back(revived[f]);
+        }
+      // Keep the new ids dense: renumber the remaining fresh ones.
+      next_id = first_new;
+      for (std::size_t f = 0; f < fresh_segment.size(); ++f)
+        if (revived[f] >= none) ids[std::size_t(fresh_segment[f])] = next_id++;
+    }
+  }
+  for (int& label : result.labels.data)
+    if (label > 0 && label <= m) label = ids[std::size_t(label - 1)];
+  for (int i = 0; i < m; ++i) result.segments[std::size_t(i)].id = ids[std::size_t(i)];
+  result.next_id = next_id;
+
+  // Previous ids without a segment now: merged into the segment that holds most of their carried pixels.
+  std::map<int, std::map<int, double>> now_under;  // previous id -> (new id -> pixels)
+  std::map<int, double> carried_size;
+  for (std::size_t k = 0; k < carried_ids.data.size(); ++k) {
+    const int old_id = carried_ids.data[k];
+    if (old_id <= 0) continue;
+    carried_size[old_id] += 1;
+    if (result.labels.data[k] > 0) now_under[old_id][result.labels.data[k]] += 1;
+  }
+  std::map<int, bool> alive;
+  for (const Segment& s : result.segments) alive[s.id] = true;
+  result.merged_ids.clear();
+  result.ended_ids.clear();
+  for (const Segment& s : previous.segments) {
+    if (alive.count(s.id)) continue;
+    int into = 0;
+    double most = 0;
+    for (const auto& [id, pixels] : now_under[s.id])
+      if (pixels > most) {
+        most = pixels;
+        into = id;
+      }
+    if (into > 0 && most >= min_overlap * carried_size[s.id])
+      result.merged_ids.emplace_back(s.id, into);
+    else
+      result.ended_ids.push_back(s.id);
+  }
+
+  // Dormant ids: the earlier ones one pair older (not revived, not expired), then the ones that went now.
+  result.dormant_ids.clear();
+  result.dormant_regions = ImageI32(result.width, result.height, 1, 0);
+  if (memory_pairs <= 0) return;
+  std::map<int, bool> keep;
+  for (const auto& [id, age] : previous.dormant_ids)
+    if (!alive.count(id) && age + 1 <= memory_pairs) {
+      result.dormant_ids.emplace_back(id, age + 1);
+      keep[id] = true;
+    }
+  std::map<int, bool> went_now;
+  for (const Segment& s : previous.segments)
+    if (!alive.count(s.id)) {
+      result.dormant_ids.emplace_back(s.id, 0);
+      went_now[s.id] = true;
+    }
+  for (std::size_t k = 0; k < result.dormant_regions.data.size(); ++k) {
+    const int now = carried_ids.data[k];
+    const int earlier = carried_dormant.sameSize(result.labels) ? carried_dormant.data[k] : 0;
+    if (now > 0 && went_now.count(now))
+      result.dormant_regions.data[k] = now;
+    else if (earlier > 0 && keep.count(earlier))
+      result.dormant_regions.data[k] = earlier;
+  }
 }
 
 }  // namespace mc_flow

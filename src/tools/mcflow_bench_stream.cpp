@@ -6,18 +6,18 @@
 // warm starts fell back to a cold solve.
 //
 //   mcflow_bench_stream [--frames 30] [--variants 0,1,2] [--width 320] [--height 240] [--backend auto|cpu|cuda]
-//                       [--noise] [--set name=value ...]
+//                       [--noise] [--ids] [--set name=value ...]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <map>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/testing/bench.h"
 #include "mc_flow/testing/metrics.h"
 #include "mc_flow/testing/synthetic_scene.h"
 
@@ -29,6 +29,7 @@ struct Options {
   int frames = 30, width = 320, height = 240;
   std::vector<int> variants{0, 1, 2};
   bool noise = false;
+  bool print_ids = false;  // per pair, the majority id of each true part (stderr)
   Config config;
 };
 
@@ -61,17 +62,13 @@ std::map<int, int> majorityIds(const ImageI32& labels, const ImageI32& parts) {
   return out;
 }
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
 double mean(const std::vector<double>& v) {
   double s = 0;
   for (double x : v) s += x;
   return v.empty() ? 0.0 : s / double(v.size());
 }
 
-ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& config) {
+ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& config, bool print_ids) {
   ModeStats st;
   Solver solver(config);
   Result previous;
@@ -97,6 +94,13 @@ ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& con
     }
     st.epe.push_back(opticalFlowErrors(r.optical_flow, p.gt_optical_flow, &p.gt_occlusion).epe);
     const std::map<int, int> ids = majorityIds(r.labels, p.gt_parts);
+    if (print_ids) {
+      std::fprintf(stderr, "pair %2zu %-13s", t, toString(r.start).c_str());
+      for (const auto& [part, id] : ids) std::fprintf(stderr, " %d:%d", part, id);
+      std::fprintf(stderr, "  segments");
+      for (const Segment& s : r.segments) std::fprintf(stderr, " %d", s.id);
+      std::fprintf(stderr, "\n");
+    }
     if (t > 0)
       for (const auto& [part, id] : ids)
         if (previous_ids.count(part)) {
@@ -112,46 +116,36 @@ ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& con
   return st;
 }
 
-std::vector<int> parseList(const std::string& text) {
-  std::vector<int> out;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) out.push_back(std::stoi(item));
-  return out;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
   Options opt;
+  CommandLine line("mcflow_bench_stream",
+                   {{"frames", true, "frames per sequence (>= 3, default 30)"},
+                    {"variants", true, "comma-separated synthetic variants (default 0,1,2)"},
+                    {"width", true, "image width (default 320)"},
+                    {"height", true, "image height (default 240)"},
+                    {"backend", true, "auto | cpu | cuda"},
+                    {"noise", false, "Kinect-like intensity and depth noise"},
+                    {"ids", false, "print each pair's majority id per true part on stderr"}});
   try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw ConfigError("missing value after " + a);
-        return argv[++i];
-      };
-      if (a == "--frames") opt.frames = std::stoi(next());
-      else if (a == "--variants") opt.variants = parseList(next());
-      else if (a == "--width") opt.width = std::stoi(next());
-      else if (a == "--height") opt.height = std::stoi(next());
-      else if (a == "--backend") opt.config.backend = parseBackend(next());
-      else if (a == "--noise") opt.noise = true;
-      else if (a == "--set") {
-        const std::string kv = next();
-        const auto eq = kv.find('=');
-        if (eq == std::string::npos) throw ConfigError("--set expects name=value, got '" + kv + "'");
-        opt.config.set(kv.substr(0, eq), kv.substr(eq + 1));
-      } else {
-        std::fprintf(stderr, "unknown argument '%s'\nusage: %s [--frames N] [--variants 0,1,2] [--width W] "
-                     "[--height H] [--backend auto|cpu|cuda] [--noise] [--set name=value ...]\n", a.c_str(), argv[0]);
-        return 2;
-      }
+    line.parse(argc, argv);
+    if (line.helpRequested()) {
+      std::printf("%s", line.usage().c_str());
+      return 0;
     }
-    if (opt.frames < 3) throw ConfigError("--frames must be at least 3, got " + std::to_string(opt.frames));
+    opt.frames = line.integer("frames", 30, 3, 100000);
+    opt.width = line.integer("width", 320, 16, 8192);
+    opt.height = line.integer("height", 240, 16, 8192);
+    opt.variants.clear();
+    for (const std::string& v : line.list("variants", "0,1,2")) opt.variants.push_back(std::stoi(v));
+    if (line.has("backend")) opt.config.backend = parseBackend(line.text("backend", "auto"));
+    opt.noise = line.has("noise");
+    opt.print_ids = line.has("ids");
+    line.applySettings(opt.config);
     opt.config.validate();
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "mcflow_bench_stream: %s\n", e.what());
+    std::fprintf(stderr, "mcflow_bench_stream: %s\n%s", e.what(), line.usage().c_str());
     return 2;
   }
   std::printf("%-8s %-5s %6s %9s %9s %9s %8s %9s %9s %6s   %s\n", "variant", "mode", "pairs", "mean_ms", "median_ms",
@@ -175,7 +169,7 @@ int main(int argc, char** argv) {
     for (const bool warm : {false, true}) {
       Config config = opt.config;
       config.warm_start = warm;
-      const ModeStats st = runSequence(pairs, config);
+      const ModeStats st = runSequence(pairs, config, opt.print_ids);
       const double n = std::max<double>(1.0, double(st.ms.size()));
       const StageTimings& s = st.stages;
       std::printf("%-8d %-5s %6zu %9.1f %9.1f %9.4f %8.3f %9d %9d %6d   %.1f %.1f %.1f %.1f %.1f %.1f %.1f\n", variant,

@@ -138,6 +138,70 @@ TEST(WarmStart, MatchesIdsByOverlapEachIdOnce) {
   EXPECT_EQ(next_id, 31);
 }
 
+TEST(WarmStart, AnIdThatWentDormantComesBackWithItsRegion) {
+  // Previous pair: one segment (id 1) and id 5 dormant (it had merged into 1), its region on the right half.
+  // This pair: the right half is a segment of its own again: it takes id 5 back.
+  Result previous;
+  previous.next_id = 8;
+  Segment bg;
+  bg.id = 1;
+  previous.segments = {bg};
+  previous.dormant_ids = {{5, 3}};
+  ImageI32 carried(10, 2, 1, 1), dormant(10, 2, 1, 0);
+  for (int y = 0; y < 2; ++y)
+    for (int x = 6; x < 10; ++x) dormant(x, y) = 5;
+  Result r;
+  r.width = 10;
+  r.height = 2;
+  r.labels = ImageI32(10, 2, 1, 1);
+  for (int y = 0; y < 2; ++y)
+    for (int x = 5; x < 10; ++x) r.labels(x, y) = 2;
+  Segment a, b;
+  a.id = 1;
+  b.id = 2;
+  r.segments = {a, b};
+  Result kept = r;
+  assignStreamIds(r, carried, dormant, previous, 0.3, 30);
+  EXPECT_EQ(r.segments[0].id, 1);
+  EXPECT_EQ(r.segments[1].id, 5);
+  EXPECT_EQ(r.labels(9, 1), 5);
+  ASSERT_EQ(r.revived_ids.size(), 1u);
+  EXPECT_EQ(r.next_id, 8) << "no new id was used";
+  EXPECT_TRUE(r.dormant_ids.empty()) << "5 is alive again";
+  // Remembered for 3 pairs only: then the segment is new.
+  assignStreamIds(kept, carried, dormant, previous, 0.3, 3);
+  EXPECT_EQ(kept.segments[1].id, 5) << "age 3 is still within 3 pairs";
+  Result older = previous;
+  older.dormant_ids = {{5, 3}};
+  Result fresh;
+  fresh.width = 10;
+  fresh.height = 2;
+  fresh.labels = ImageI32(10, 2, 1, 1);
+  fresh.segments = {a};
+  assignStreamIds(fresh, carried, dormant, older, 0.3, 3);
+  EXPECT_TRUE(fresh.dormant_ids.empty()) << "age 4 > 3: forgotten";
+  // An id that merges now becomes dormant with its carried region.
+  Result two = previous;
+  two.dormant_ids.clear();
+  Segment gone;
+  gone.id = 4;
+  two.segments = {bg, gone};
+  ImageI32 carried_two(10, 2, 1, 1);
+  carried_two(0, 0) = 4;
+  carried_two(1, 0) = 4;
+  Result merged;
+  merged.width = 10;
+  merged.height = 2;
+  merged.labels = ImageI32(10, 2, 1, 1);
+  merged.segments = {a};
+  assignStreamIds(merged, carried_two, ImageI32(), two, 0.3, 30);
+  ASSERT_EQ(merged.merged_ids.size(), 1u);
+  EXPECT_EQ(merged.merged_ids[0], std::make_pair(4, 1));
+  ASSERT_EQ(merged.dormant_ids.size(), 1u);
+  EXPECT_EQ(merged.dormant_regions(1, 0), 4);
+  EXPECT_EQ(merged.dormant_regions(5, 0), 0);
+}
+
 // ---------------------------------------------------------------- the solver in stream mode
 
 SyntheticPair sequencePair(int variant, int first_frame, int width = 160, int height = 120) {

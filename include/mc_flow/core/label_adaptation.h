@@ -11,7 +11,6 @@
 #pragma once
 
 #include <memory>
-#include <utility>
 #include <vector>
 
 #include "mc_flow/core/config.h"
@@ -29,11 +28,6 @@ struct AdaptationStats {
   /// Smallest predicted data-cost increase of a merge that was refused (infinity when none was left)
   /// [normalised Cauchy cost, summed over the label level's pixels].
   double smallest_refused_merge = 0;
-  /// For each motion label after the update, the label before it whose identity it keeps (a merge keeps
-  /// the larger label's); -1 for a label a split created.
-  std::vector<int> identity_from;
-  /// (label, label it merged into), both as indices before the update, in the order the merges were taken.
-  std::vector<std::pair<int, int>> merged_into;
 };
 
 /// @brief Each motion label's data cost near its twist xi_i: E_i(xi_i + d) ~ E_i + 2 g_i^T d + d^T H_i d

@@ -77,6 +77,11 @@ struct Result {
   int next_id = 1;               ///< the id the next new segment gets (ids are never reused within a stream)
   std::vector<std::pair<int, int>> merged_ids;  ///< (id, id it merged into) for the previous pair's segments
   std::vector<int> ended_ids;    ///< ids of the previous pair's segments that neither continue nor merged
+  std::vector<int> revived_ids;  ///< ids that had merged or ended in an earlier pair and are back
+  /// Ids merged or ended within the last Config::id_memory_pairs pairs: (id, pairs since) and their regions on
+  /// frame 1 (0 = none), carried forward with the scene, so that such a segment can take its id back.
+  std::vector<std::pair<int, int>> dormant_ids;
+  ImageI32 dormant_regions;
   int processing_width = 0, processing_height = 0;
   int pyramid_levels = 0;
   Backend backend_kind = Backend::Cpu;  ///< the backend that ran (Cpu or Cuda, never Auto)

@@ -23,6 +23,8 @@ struct Result;
 /// within `depth_tolerance` [m] of the depth observed there (`points`: the next frame 1's 3D points, NaN
 /// where invalid). One-pixel gaps between splatted points are closed from neighbours at a similar depth.
 ImageI32 carrySegmentIds(const Result& previous, const ImageF& points, double depth_tolerance);
+/// @brief The same for another id image on the previous pair's frame-1 pixels (e.g. its dormant regions).
+ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& points, double depth_tolerance);
 
 /// @brief Carried ids as hard initial labels of a pyramid level.
 struct CarriedLabels {
@@ -37,10 +39,20 @@ struct CarriedLabels {
 /// of two) takes the id most of its input pixels carry, when they are at least half of them.
 CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& level_points, int scale);
 
-/// @brief Persistent ids for a cold-started pair: segment i (labels 1..m in `labels`, 0 = none) takes the
+/// @brief Persistent ids by overlap: segment i (labels 1..m in `labels`, 0 = none) takes the
 /// carried id it overlaps most when the overlap is at least `min_overlap` of the smaller of the two regions
 /// (largest overlaps matched first, each id once); the others get next_id, next_id + 1, ... (advanced).
 std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, const ImageI32& carried_ids,
                                  double min_overlap, int& next_id);
+
+/// @brief Gives a stream pair's segments their persistent ids: each previous id goes to the segment that
+/// overlaps its carried pixels most (matchSegmentIds with `min_overlap`), the others get new ids from
+/// previous.next_id on. A previous id that lost its segment is reported in Result::merged_ids when most of
+/// its carried pixels now belong to one segment (at least `min_overlap` of them), else in Result::ended_ids.
+/// A segment that would get a new id first takes back a dormant id (Result::dormant_ids of `previous`) whose
+/// carried region (`carried_dormant`) it overlaps enough (Result::revived_ids). Updates the dormant ids and
+/// regions (kept `memory_pairs` pairs). Sets Result::next_id. `result` has labels 1..m on entry.
+void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32& carried_dormant,
+                     const Result& previous, double min_overlap, int memory_pairs);
 
 }  // namespace mc_flow
