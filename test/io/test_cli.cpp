@@ -413,3 +413,52 @@ TEST(CliErrors, PairLargerThanAvailableMemoryIsRefusedNamingTheEstimate) {
   EXPECT_NE(run.err.find("only 1 MB is available (MemAvailable in /proc/meminfo)"), std::string::npos) << run.err;
   EXPECT_FALSE(fs::exists(workDir() / "e_memory" / "optical_flow.flo"));
 }
+
+// ---------------------------------------------------------------- sequences
+
+TEST(Cli, SynthSequenceThenRunSeqKeepsIdsAndWritesTheSequenceFiles) {
+  const fs::path seq = workDir() / "sequence", out = workDir() / "sequence_out";
+  const CliRun synth = runCli("synth --out " + quote(seq.string()) + " --frames 4 --width 96 --height 72");
+  ASSERT_EQ(synth.code, 0) << synth.err;
+  for (const char* f : {"rgb.txt", "depth.txt", "camera_info.yaml", "rgb/0003.png", "depth/0003.png",
+                        "gt/pair_0002/gt_optical_flow.flo"})
+    EXPECT_TRUE(fs::exists(seq / f)) << f;
+  EXPECT_FALSE(fs::exists(seq / "gt/pair_0003")) << "4 frames make 3 pairs";
+
+  const CliRun run = runCli("run-seq --tum " + quote(seq.string()) + " --out " + quote(out.string()));
+  ASSERT_EQ(run.code, 0) << run.err;
+  EXPECT_NE(run.out.find("3 pair(s) solved"), std::string::npos) << run.out;
+  for (const char* f : {"pair_0000/labels.png", "pair_0002/segments.json", "trajectories.csv", "sequence.json",
+                        "ids_over_time.png"})
+    EXPECT_TRUE(fs::exists(out / f)) << f;
+  EXPECT_TRUE(pythonJsonValid((out / "sequence.json").string()));
+  const std::string csv = io::readTextFile((out / "trajectories.csv").string());
+  EXPECT_EQ(csv.rfind("pair,stamp,id,vx,vy,vz,wx,wy,wz,support\n", 0), 0u) << csv.substr(0, 80);
+  const std::string log = io::readTextFile((out / "sequence.json").string());
+  EXPECT_NE(log.find("\"start\": \"warm\""), std::string::npos) << log;
+  // The background keeps its id: the same id covers the most pixels in the first and the last pair.
+  auto mostCommon = [](const ImageI32& labels) {
+    std::map<int, int> count;
+    for (int id : labels.data)
+      if (id > 0) ++count[id];
+    int best = 0, n = 0;
+    for (const auto& [id, c] : count)
+      if (c > n) best = id, n = c;
+    return best;
+  };
+  EXPECT_EQ(mostCommon(io::loadLabels((out / "pair_0000/labels.png").string())),
+            mostCommon(io::loadLabels((out / "pair_0002/labels.png").string())));
+
+  // --cold solves every pair from K-means; usage errors name the problem.
+  const CliRun cold = runCli("run-seq --tum " + quote(seq.string()) + " --cold --max-frames 2 --out " +
+                             quote((workDir() / "cold_out").string()));
+  ASSERT_EQ(cold.code, 0) << cold.err;
+  EXPECT_NE(cold.out.find("1 pair(s) solved (0 warm"), std::string::npos) << cold.out;
+  const CliRun both = runCli("run-seq --tum a --frames b --out " + quote((workDir() / "x").string()));
+  EXPECT_EQ(both.code, 2);
+  EXPECT_NE(both.err.find("one of --tum DIR or --frames DIR"), std::string::npos) << both.err;
+  const CliRun missing = runCli("run-seq --tum " + quote((workDir() / "nothing").string()) + " --out " +
+                                quote((workDir() / "y").string()));
+  EXPECT_EQ(missing.code, 1);
+  EXPECT_NE(missing.err.find("not a directory"), std::string::npos) << missing.err;
+}
