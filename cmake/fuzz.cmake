@@ -4,11 +4,11 @@
 # decode at only 4-30 inputs/s under the sanitizers, against thousands for the other loaders), on seeds from
 # `mcflow synth`.
 add_executable(fuzz_make_seeds ${CMAKE_CURRENT_SOURCE_DIR}/test/fuzz/make_seeds.cpp)
-target_link_libraries(fuzz_make_seeds PRIVATE mcflow_io)
+target_link_libraries(fuzz_make_seeds PRIVATE mc_flow_io)
 set(MCFLOW_FUZZ_TARGETS colour_image depth_image depth_pfm flo camera_info config_file)
 foreach(target ${MCFLOW_FUZZ_TARGETS})
   add_executable(fuzz_${target} ${CMAKE_CURRENT_SOURCE_DIR}/test/fuzz/fuzz_${target}.cpp)
-  target_link_libraries(fuzz_${target} PRIVATE mcflow_io)
+  target_link_libraries(fuzz_${target} PRIVATE mc_flow_io)
   target_link_options(fuzz_${target} PRIVATE -fsanitize=fuzzer)
   set_target_properties(fuzz_${target} PROPERTIES RUNTIME_OUTPUT_DIRECTORY $<TARGET_FILE_DIR:mcflow>)
   add_test(NAME fuzz.${target} COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/test/fuzz/run_fuzz.sh

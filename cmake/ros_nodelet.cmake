@@ -8,7 +8,7 @@ add_library(mc_flow_nodelet SHARED
   src/ros/mc_flow_nodelet.cpp)
 target_include_directories(mc_flow_nodelet PUBLIC
   ${CMAKE_CURRENT_SOURCE_DIR}/include ${catkin_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
-target_link_libraries(mc_flow_nodelet PUBLIC mcflow_core ${catkin_LIBRARIES} ${OpenCV_LIBS})
+target_link_libraries(mc_flow_nodelet PUBLIC mc_flow_core ${catkin_LIBRARIES} ${OpenCV_LIBS})
 target_compile_options(mc_flow_nodelet PRIVATE -Wall -Wextra)
 add_dependencies(mc_flow_nodelet ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_gencfg)
 set_target_properties(mc_flow_nodelet PROPERTIES
@@ -16,7 +16,7 @@ set_target_properties(mc_flow_nodelet PROPERTIES
 
 # Writes the demo bag: a synthetic RGB-D sequence with moving parts (no camera needed).
 add_executable(make_synthetic_bag src/ros/make_synthetic_bag.cpp)
-target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet mcflow_testing)
+target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet mc_flow_testing)
 set_target_properties(make_synthetic_bag PROPERTIES
   RUNTIME_OUTPUT_DIRECTORY ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_BIN_DESTINATION})
 
@@ -62,7 +62,7 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer -g -O1)
   target_link_options(test_message_validation_sanitized PRIVATE -fsanitize=address,undefined)
   target_link_libraries(test_message_validation_sanitized PRIVATE
-    mcflow_core ${catkin_LIBRARIES} ${OpenCV_LIBS} GTest::gtest GTest::gtest_main)
+    mc_flow_core ${catkin_LIBRARIES} ${OpenCV_LIBS} GTest::gtest GTest::gtest_main)
   add_dependencies(test_message_validation_sanitized ${PROJECT_NAME}_generate_messages_cpp)
   add_test(NAME ros.MessageValidationUnderAsanUbsan COMMAND test_message_validation_sanitized)
   set_tests_properties(ros.MessageValidationUnderAsanUbsan PROPERTIES
@@ -75,7 +75,7 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
   foreach(name ${MCFLOW_ROSTEST_NODES})
     add_rostest_gtest(rostest_${name} test/ros/${name}.test test/ros/rostest_${name}.cpp test/ros/rostest_common.cpp)
     target_include_directories(rostest_${name} PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/test/ros)
-    target_link_libraries(rostest_${name} mc_flow_nodelet mcflow_testing ${GTEST_LIBRARIES})
+    target_link_libraries(rostest_${name} mc_flow_nodelet mc_flow_testing ${GTEST_LIBRARIES})
     add_dependencies(rostest_${name} mc_flow_nodelet)
     add_dependencies(tests rostest_${name})
   endforeach()

@@ -163,25 +163,21 @@ __global__ void pixelEnergy(const float* __restrict__ u, const float* __restrict
   energy[i] = sum;
 }
 
-std::string sizeText(int w, int h, int n) {
-  return std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(n);
-}
-
 void validateProblem(const LabelProblem& problem, const SoftLabels& u) {
   const int W = problem.width, H = problem.height, n = problem.count;
   if (W <= 0 || H <= 0 || n < 1 || n > kMaxLabels)
-    throw InputError("CUDA label step: problem size " + sizeText(W, H, n) + " is empty or has more than " +
+    throw InputError("CUDA label step: problem size " + imageSizeText(W, H, n) + " is empty or has more than " +
                      std::to_string(kMaxLabels) + " labels");
   const std::size_t plane = std::size_t(W) * H;
   if (u.width != W || u.height != H || u.count != n)
-    throw InputError("label step: labels are " + sizeText(u.width, u.height, u.count) + " but the problem is " +
-                     sizeText(W, H, n));
+    throw InputError("label step: labels are " + imageSizeText(u.width, u.height, u.count) + " but the problem is " +
+                     imageSizeText(W, H, n));
   if (u.data.size() != plane * n)
     throw InputError("CUDA label step: soft-label buffer holds " + std::to_string(u.data.size()) + " values, expected " +
                      std::to_string(plane * n));
   if (problem.data_cost.size() != plane * n)
     throw InputError("CUDA label step: data_cost holds " + std::to_string(problem.data_cost.size()) +
-                     " values, expected " + std::to_string(plane * n) + " (" + sizeText(W, H, n) + ")");
+                     " values, expected " + std::to_string(plane * n) + " (" + imageSizeText(W, H, n) + ")");
   auto requirePlane = [&](const char* name, int w, int h, std::size_t values) {
     if (w != W || h != H || values != plane)
       throw InputError(std::string("CUDA label step: ") + name + " is " + std::to_string(w) + "x" + std::to_string(h) +
@@ -221,7 +217,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
                  double tolerance) override {
     const int W = problem.width, H = problem.height, n = problem.count;
     if (W <= 0 || H <= 0 || n < 1 || n > kMaxLabels)
-      throw InputError("CUDA label step: problem size " + sizeText(W, H, n) + " is empty or has more than " +
+      throw InputError("CUDA label step: problem size " + imageSizeText(W, H, n) + " is empty or has more than " +
                        std::to_string(kMaxLabels) + " labels");
     const std::size_t plane = std::size_t(W) * H;
     const bool tv = problem.regularizer == Regularizer::TotalVariation;

@@ -423,16 +423,12 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
 
 // ----------------------------------------------------------------- host side
 
-std::string sizeText(int w, int h, int c) {
-  return std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(c);
-}
-
 void requireImage(const char* name, const ImageF& image, int width, int height, int channels) {
   if (image.width != width || image.height != height || image.channels != channels ||
       image.data.size() != std::size_t(width) * height * channels)
     throw InputError(std::string("CUDA motion step: ") + name + " is " +
-                     sizeText(image.width, image.height, image.channels) + " with " +
-                     std::to_string(image.data.size()) + " values, expected " + sizeText(width, height, channels));
+                     imageSizeText(image.width, image.height, image.channels) + " with " +
+                     std::to_string(image.data.size()) + " values, expected " + imageSizeText(width, height, channels));
 }
 
 class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator {
@@ -452,7 +448,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   void setLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
                 const ImageU8* occluded, const Config& config) override {
     const int W = frame1.points.width, H = frame1.points.height;
-    if (W <= 0 || H <= 0) throw InputError("CUDA motion step: empty level " + sizeText(W, H, 3));
+    if (W <= 0 || H <= 0) throw InputError("CUDA motion step: empty level " + imageSizeText(W, H, 3));
     requireImage("frame-1 points", frame1.points, W, H, 3);
     requireImage("frame-1 intensity", frame1.intensity, W, H, 1);
     requireImage("frame-2 intensity", frame2.intensity, W, H, 1);
@@ -462,11 +458,11 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     const std::size_t plane = std::size_t(W) * H;
     if (labels.width != W || labels.height != H || labels.count < 1 ||
         labels.data.size() != plane * std::size_t(labels.count))
-      throw InputError("CUDA motion step: labels are " + sizeText(labels.width, labels.height, labels.count) +
+      throw InputError("CUDA motion step: labels are " + imageSizeText(labels.width, labels.height, labels.count) +
                        " with " + std::to_string(labels.data.size()) + " values, the level is " +
                        std::to_string(W) + "x" + std::to_string(H));
     if (occluded && (occluded->width != W || occluded->height != H || occluded->data.size() != plane))
-      throw InputError("CUDA motion step: occlusion mask is " + sizeText(occluded->width, occluded->height, 1) +
+      throw InputError("CUDA motion step: occlusion mask is " + imageSizeText(occluded->width, occluded->height, 1) +
                        ", the level is " + std::to_string(W) + "x" + std::to_string(H));
 
     points1_.reserve(plane * 3);
@@ -503,7 +499,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   void bind(const cuda_detail::DeviceLevel& level, const float* labels, int count, const std::uint8_t* occluded,
             const Config& config) override {
     if (level.width <= 0 || level.height <= 0 || count < 1)
-      throw InputError("CUDA motion step: binding an empty level " + sizeText(level.width, level.height, count));
+      throw InputError("CUDA motion step: binding an empty level " + imageSizeText(level.width, level.height, count));
     if (count - 1 > kMaxMotionLabels)
       throw InputError("CUDA motion step: " + std::to_string(count - 1) + " motion labels, at most " +
                        std::to_string(kMaxMotionLabels));

@@ -58,9 +58,13 @@ cv::Mat colourToIntensity(const cv_bridge::CvImageConstPtr& image, const std::st
   } else if (encoding == enc::MONO8) {
     image->image.convertTo(intensity, CV_32F, 1.0 / 255.0);
   } else {
-    cv::Mat grey;
-    cv::cvtColor(rgb8, grey, cv::COLOR_RGB2GRAY);
-    grey.convertTo(intensity, CV_32F, 1.0 / 255.0);
+    // The one grey conversion (mc_flow::greyFromRgb), as the command-line tool reads colour files.
+    intensity.create(rgb8.rows, rgb8.cols, CV_32F);
+    for (int y = 0; y < rgb8.rows; ++y) {
+      const cv::Vec3b* in = rgb8.ptr<cv::Vec3b>(y);
+      float* out = intensity.ptr<float>(y);
+      for (int x = 0; x < rgb8.cols; ++x) out[x] = float(mc_flow::greyFromRgb(in[x][0], in[x][1], in[x][2]) / 255.0);
+    }
   }
   return intensity;
 }
@@ -308,8 +312,7 @@ cv::Mat segmentationPicture(const mc_flow::Result& result, const PairContext& pa
   return picture;
 }
 
-sensor_msgs::ImagePtr makeSegmentationImage(const mc_flow::Result& result, const PairContext& pair, double blend) {
-  const cv::Mat picture = segmentationPicture(result, pair, blend);
+sensor_msgs::ImagePtr makeSegmentationImage(const cv::Mat& picture, const PairContext& pair) {
   return cv_bridge::CvImage(pair.header, enc::RGB8, picture).toImageMsg();
 }
 

@@ -494,7 +494,7 @@ void MCFlowNodelet::publish(const mc_flow::Result& result, const PairContext& pa
     segmentation = segmentationPicture(result, pair, segmentation_blend_);
   }
   if (segmentation_pub_.getNumSubscribers() > 0) {
-    segmentation_pub_.publish(cv_bridge::CvImage(pair.header, "rgb8", segmentation).toImageMsg());
+    segmentation_pub_.publish(makeSegmentationImage(segmentation, pair));
   }
   if (cloud_pub_.getNumSubscribers() > 0) cloud_pub_.publish(makeSceneFlowCloud(result, pair, cloud_colour_));
   if (markers_pub_.getNumSubscribers() > 0) {

@@ -312,7 +312,8 @@ TEST(Conversions, LabelAndOcclusionImages) {
   EXPECT_EQ(occlusion->encoding, "mono8");
   EXPECT_EQ(occlusion->data[2 * 4 + 3], 255);
   EXPECT_EQ(occlusion->data[0], 0);
-  const auto segmentation = mc_flow_ros::makeSegmentationImage(f.result, f.pair, 1.0);
+  const auto segmentation =
+      mc_flow_ros::makeSegmentationImage(mc_flow_ros::segmentationPicture(f.result, f.pair, 1.0), f.pair);
   EXPECT_EQ(segmentation->encoding, "rgb8");
   const auto c7 = mc_flow::colourForId(7), c0 = mc_flow::colourForId(0);
   EXPECT_NEAR(segmentation->data[(4 + 1) * 3], 0.75 * c7.r + 0.25 * c0.r, 1.0);  // soft blend of the labels

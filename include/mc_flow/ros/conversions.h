@@ -81,10 +81,8 @@ sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const P
 sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairContext& pair);
 /// @brief ~occlusion: mono8, 255 = occluded (or out of view) in the current frame.
 sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const PairContext& pair);
-/// @brief ~segmentation: rgb8, the previous frame's colour blended with the soft-label-weighted segment
-/// colours (`blend` = weight of the segment colours, 0..1).
-sensor_msgs::ImagePtr makeSegmentationImage(const mc_flow::Result& result, const PairContext& pair,
-                                            double blend = 0.6);
+/// @brief ~segmentation: rgb8 message of a segmentationPicture (below) with the pair's header.
+sensor_msgs::ImagePtr makeSegmentationImage(const cv::Mat& picture, const PairContext& pair);
 
 /// @brief How the ~scene_flow cloud's rgb field is filled.
 enum class CloudColour { Segment, Image };
@@ -104,7 +102,8 @@ visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result,
 /// @brief Velocity of a segment's centroid [m/s] over the pair interval.
 Eigen::Vector3d centroidVelocity(const mc_flow::Segment& segment, double interval);
 
-/// @brief The segmentation picture as a cv::Mat (CV_8UC3 RGB), shared by the image message and save_dir.
+/// @brief The segmentation picture (CV_8UC3 RGB): the previous frame's colour blended with the soft-label-weighted
+/// segment colours (`blend` = weight of the segment colours, 0..1); for the image message and save_dir.
 cv::Mat segmentationPicture(const mc_flow::Result& result, const PairContext& pair, double blend);
 
 }  // namespace mc_flow_ros
