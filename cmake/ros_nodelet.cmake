@@ -40,8 +40,10 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     test/ros/test_conversions.cpp
     test/ros/test_message_validation.cpp
     test/ros/test_reconfigure.cpp
-    test/ros/test_input_watch.cpp)
+    test/ros/test_input_watch.cpp
+    test/ros/test_node_parameters.cpp)
   target_link_libraries(test_ros_units PRIVATE mc_flow_nodelet GTest::gtest GTest::gtest_main)
+  target_compile_definitions(test_ros_units PRIVATE MCFLOW_LAUNCH_DIR="${CMAKE_CURRENT_SOURCE_DIR}/launch")
   gtest_discover_tests(test_ros_units DISCOVERY_MODE PRE_TEST TEST_PREFIX "ros." PROPERTIES LABELS test_ros_units)
   if(MCFLOW_SANITIZE)
     mcflow_sanitizer_environment(test_ros_units)

@@ -84,7 +84,7 @@ void MCFlowNodelet::onInit() {
   updater_->setHardwareID("mc_flow:" + rgb_topic_);
   updater_->add("MC-Flow", this, &MCFlowNodelet::diagnose);
 
-  if (publish_tf_) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+  if (params_.publish_tf) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
 
   worker_ = std::thread(&MCFlowNodelet::workerLoop, this);
 
@@ -110,17 +110,17 @@ void MCFlowNodelet::onInit() {
 void MCFlowNodelet::createSynchroniser() {
   approximate_sync_ptr_.reset();
   exact_sync_ptr_.reset();
-  if (approximate_sync_) {
-    ApproximatePolicy policy(queue_size_);
+  if (params_.approximate_sync) {
+    ApproximatePolicy policy(params_.queue_size);
     policy.setReset(true);  // a bag restarting under /clock clears the queues instead of stalling them
     approximate_sync_ptr_ = std::make_unique<message_filters::Synchronizer<ApproximatePolicy>>(
         std::as_const(policy), rgb_gate_, depth_gate_, info_gate_);
-    if (approximate_sync_max_interval_ > 0) {
-      approximate_sync_ptr_->setMaxIntervalDuration(ros::Duration(approximate_sync_max_interval_));
+    if (params_.approximate_sync_max_interval > 0) {
+      approximate_sync_ptr_->setMaxIntervalDuration(ros::Duration(params_.approximate_sync_max_interval));
     }
     approximate_sync_ptr_->registerCallback(boost::bind(&MCFlowNodelet::syncCb, this, boost::placeholders::_1, boost::placeholders::_2, boost::placeholders::_3));
   } else {
-    ExactPolicy policy(queue_size_);
+    ExactPolicy policy(params_.queue_size);
     policy.setReset(true);
     exact_sync_ptr_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(std::as_const(policy), rgb_gate_, depth_gate_, info_gate_);
     exact_sync_ptr_->registerCallback(boost::bind(&MCFlowNodelet::syncCb, this, boost::placeholders::_1, boost::placeholders::_2, boost::placeholders::_3));
@@ -174,52 +174,52 @@ bool MCFlowNodelet::admitInput(int topic, const std_msgs::Header& header) {
 }
 
 void MCFlowNodelet::readParameters() {
-  pnh_.param("queue_size", queue_size_, queue_size_);
-  pnh_.param("max_input_pixels", max_input_pixels_, max_input_pixels_);
-  pnh_.param("approximate_sync", approximate_sync_, approximate_sync_);
-  pnh_.param("approximate_sync_max_interval", approximate_sync_max_interval_, approximate_sync_max_interval_);
-  pnh_.param("downsample", downsample_, downsample_);
-  pnh_.param("max_stamp_difference", max_stamp_difference_, max_stamp_difference_);
-  pnh_.param("max_pair_interval", max_pair_interval_, max_pair_interval_);
-  pnh_.param("no_input_warning_after", no_input_warning_after_, no_input_warning_after_);
-  pnh_.param("publish_tf", publish_tf_, publish_tf_);
-  pnh_.param("segment_frame_prefix", segment_frame_prefix_, segment_frame_prefix_);
-  std::string cloud_colour = "segment";
-  pnh_.param("cloud_colour", cloud_colour, cloud_colour);
-  pnh_.param("marker_seconds_ahead", marker_seconds_ahead_, marker_seconds_ahead_);
-  pnh_.param("segmentation_blend", segmentation_blend_, segmentation_blend_);
-  pnh_.param("print_summary", print_summary_, print_summary_);
-  pnh_.param("save_dir", save_dir_, save_dir_);
+  pnh_.param("queue_size", params_.queue_size, params_.queue_size);
+  pnh_.param("max_input_pixels", params_.max_input_pixels, params_.max_input_pixels);
+  pnh_.param("approximate_sync", params_.approximate_sync, params_.approximate_sync);
+  pnh_.param("approximate_sync_max_interval", params_.approximate_sync_max_interval, params_.approximate_sync_max_interval);
+  pnh_.param("downsample", params_.downsample, params_.downsample);
+  pnh_.param("max_stamp_difference", params_.max_stamp_difference, params_.max_stamp_difference);
+  pnh_.param("max_pair_interval", params_.max_pair_interval, params_.max_pair_interval);
+  pnh_.param("no_input_warning_after", params_.no_input_warning_after, params_.no_input_warning_after);
+  pnh_.param("publish_tf", params_.publish_tf, params_.publish_tf);
+  pnh_.param("segment_frame_prefix", params_.segment_frame_prefix, params_.segment_frame_prefix);
+  pnh_.param("cloud_colour", params_.cloud_colour, params_.cloud_colour);
+  const std::string& cloud_colour = params_.cloud_colour;
+  pnh_.param("marker_seconds_ahead", params_.marker_seconds_ahead, params_.marker_seconds_ahead);
+  pnh_.param("segmentation_blend", params_.segmentation_blend, params_.segmentation_blend);
+  pnh_.param("print_summary", params_.print_summary, params_.print_summary);
+  pnh_.param("save_dir", params_.save_dir, params_.save_dir);
 
-  if (downsample_ < 0 || (downsample_ & (downsample_ - 1)) != 0) {
-    NODELET_WARN("downsample %d is not 0 (automatic) or a power of two; using 0", downsample_);
-    downsample_ = 0;
+  if (params_.downsample < 0 || (params_.downsample & (params_.downsample - 1)) != 0) {
+    NODELET_WARN("downsample %d is not 0 (automatic) or a power of two; using 0", params_.downsample);
+    params_.downsample = 0;
   }
-  if (queue_size_ < 1) {
-    NODELET_WARN("queue_size %d is below 1; using 1", queue_size_);
-    queue_size_ = 1;
+  if (params_.queue_size < 1) {
+    NODELET_WARN("queue_size %d is below 1; using 1", params_.queue_size);
+    params_.queue_size = 1;
   }
-  if (max_input_pixels_ < 256) {
-    NODELET_WARN("max_input_pixels %d is below 256; using 256", max_input_pixels_);
-    max_input_pixels_ = 256;
+  if (params_.max_input_pixels < 256) {
+    NODELET_WARN("max_input_pixels %d is below 256; using 256", params_.max_input_pixels);
+    params_.max_input_pixels = 256;
   }
-  if (downsample_ < 0) {
-    NODELET_WARN("downsample %d is negative; using 0 (automatic)", downsample_);
-    downsample_ = 0;
+  if (params_.downsample < 0) {
+    NODELET_WARN("downsample %d is negative; using 0 (automatic)", params_.downsample);
+    params_.downsample = 0;
   }
   if (cloud_colour == "image") {
     cloud_colour_ = CloudColour::Image;
   } else if (cloud_colour != "segment") {
     NODELET_WARN("cloud_colour '%s' is neither 'segment' nor 'image'; using 'segment'", cloud_colour.c_str());
   }
-  segmentation_blend_ = std::min(std::max(segmentation_blend_, 0.0), 1.0);
-  if (!save_dir_.empty()) {
+  params_.segmentation_blend = std::min(std::max(params_.segmentation_blend, 0.0), 1.0);
+  if (!params_.save_dir.empty()) {
     std::error_code error;
-    std::filesystem::create_directories(save_dir_, error);
-    if (error || !std::filesystem::is_directory(save_dir_, error)) {
-      NODELET_ERROR("save_dir '%s' cannot be created (%s); pictures will not be saved", save_dir_.c_str(),
+    std::filesystem::create_directories(params_.save_dir, error);
+    if (error || !std::filesystem::is_directory(params_.save_dir, error)) {
+      NODELET_ERROR("save_dir '%s' cannot be created (%s); pictures will not be saved", params_.save_dir.c_str(),
                     error ? error.message().c_str() : "it exists and is not a folder");
-      save_dir_.clear();
+      params_.save_dir.clear();
     }
   }
 }
@@ -227,20 +227,20 @@ void MCFlowNodelet::readParameters() {
 void MCFlowNodelet::logStartup() {
   std::ostringstream s;
   s << "MC-Flow nodelet " << getName() << " started.\n"
-    << "  inputs (synchronised, " << (approximate_sync_ ? "approximate" : "exact") << " time): " << rgb_topic_
+    << "  inputs (synchronised, " << (params_.approximate_sync ? "approximate" : "exact") << " time): " << rgb_topic_
     << ", " << depth_topic_ << ", " << info_topic_ << " (image_transport, parameter image_transport selects the transport)\n"
     << "  outputs: " << segments_pub_.getTopic() << ", " << soft_labels_pub_.getTopic() << ", " << labels_pub_.getTopic()
     << ", " << segmentation_pub_.getTopic() << ", " << occlusion_pub_.getTopic() << ", " << cloud_pub_.getTopic()
-    << ", " << markers_pub_.getTopic() << ", " << info_pub_.getTopic() << (publish_tf_ ? ", /tf" : "") << "\n"
-    << "  node parameters: queue_size=" << queue_size_ << " max_input_pixels=" << max_input_pixels_ << " approximate_sync=" << approximate_sync_
-    << " approximate_sync_max_interval=" << approximate_sync_max_interval_ << " s downsample=" << downsample_
-    << (downsample_ == 0 ? " (automatic)" : "") << " max_stamp_difference=" << max_stamp_difference_
-    << " s max_pair_interval=" << max_pair_interval_ << " s no_input_warning_after=" << no_input_warning_after_
-    << " s publish_tf=" << publish_tf_ << " segment_frame_prefix=" << segment_frame_prefix_
+    << ", " << markers_pub_.getTopic() << ", " << info_pub_.getTopic() << (params_.publish_tf ? ", /tf" : "") << "\n"
+    << "  node parameters: queue_size=" << params_.queue_size << " max_input_pixels=" << params_.max_input_pixels << " approximate_sync=" << params_.approximate_sync
+    << " approximate_sync_max_interval=" << params_.approximate_sync_max_interval << " s downsample=" << params_.downsample
+    << (params_.downsample == 0 ? " (automatic)" : "") << " max_stamp_difference=" << params_.max_stamp_difference
+    << " s max_pair_interval=" << params_.max_pair_interval << " s no_input_warning_after=" << params_.no_input_warning_after
+    << " s publish_tf=" << params_.publish_tf << " segment_frame_prefix=" << params_.segment_frame_prefix
     << " cloud_colour=" << (cloud_colour_ == CloudColour::Image ? "image" : "segment")
-    << " marker_seconds_ahead=" << marker_seconds_ahead_ << " s segmentation_blend=" << segmentation_blend_
-    << " print_summary=" << print_summary_ << " save_dir='"
-    << save_dir_ << "'\n  solver parameters (dynamic_reconfigure):";
+    << " marker_seconds_ahead=" << params_.marker_seconds_ahead << " s segmentation_blend=" << params_.segmentation_blend
+    << " print_summary=" << params_.print_summary << " save_dir='"
+    << params_.save_dir << "'\n  solver parameters (dynamic_reconfigure):";
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
     const mc_flow::Config config = pending_config_ ? *pending_config_ : mc_flow::Config();
@@ -258,7 +258,7 @@ bool MCFlowNodelet::anyListener() const {
 
 void MCFlowNodelet::connectCb() {
   std::lock_guard<std::mutex> lock(connect_mutex_);
-  const bool needed = anyListener() || print_summary_ || !save_dir_.empty() || publish_tf_;
+  const bool needed = anyListener() || params_.print_summary || !params_.save_dir.empty() || params_.publish_tf;
   if (needed && !subscribed_) {
     // The transport comes from ~image_transport. One whose plug-in is not installed would throw inside
     // image_transport and take the manager (and the camera) down: check first, fall back to raw.
@@ -274,7 +274,7 @@ void MCFlowNodelet::connectCb() {
     }
     // One queue length for the subscribers and the synchroniser: a burst the synchroniser could hold
     // must not be dropped before it (the losses that remain show in diagnostics).
-    const auto queue = std::uint32_t(queue_size_);
+    const auto queue = std::uint32_t(params_.queue_size);
     rgb_sub_.subscribe(*it_in_, "rgb/image_rect_color", queue, hints);
     depth_sub_.subscribe(*it_in_, "depth_registered/image_rect", queue, hints);
     info_sub_.subscribe(nh_, "rgb/camera_info", queue);
@@ -310,10 +310,10 @@ void MCFlowNodelet::syncCb(const sensor_msgs::ImageConstPtr& rgb, const sensor_m
     while (!sync_times_.empty() && (now - sync_times_.front()).toSec() > 10.0) sync_times_.pop_front();
   }
   const double stamp_difference = std::abs((rgb->header.stamp - depth->header.stamp).toSec());
-  if (stamp_difference > max_stamp_difference_) {
+  if (stamp_difference > params_.max_stamp_difference) {
     warnThrottled("stamps", "RGB stamp " + stampText(rgb->header.stamp) + " and depth stamp " +
                                 stampText(depth->header.stamp) + " differ by " + std::to_string(stamp_difference) +
-                                " s (> max_stamp_difference " + std::to_string(max_stamp_difference_) +
+                                " s (> max_stamp_difference " + std::to_string(params_.max_stamp_difference) +
                                 " s): motion between them biases the result; check the camera's sync settings");
   }
   bool dropped = false;
@@ -361,7 +361,7 @@ void MCFlowNodelet::workerLoop() {
           if (pipeline_)
             pipeline_->setConfig(config);
           else
-            pipeline_ = std::make_unique<mc_flow::SequencePipeline>(config, 1, max_pair_interval_);
+            pipeline_ = std::make_unique<mc_flow::SequencePipeline>(config, 1, params_.max_pair_interval);
           solver_config_ = config;
           backend_reported_ = false;
         } catch (const std::exception& e) {
@@ -385,7 +385,7 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   if (!pipeline_) return;
   FrameInput current;
   try {
-    current = toFrameInput(*input.rgb, *input.depth, *input.info, downsample_, std::uint64_t(max_input_pixels_),
+    current = toFrameInput(*input.rgb, *input.depth, *input.info, params_.downsample, std::uint64_t(params_.max_input_pixels),
                            solver_config_.depth_downsample_range);
   } catch (const FrameInputError& e) {
     // Throttled per distinct problem (digits removed: the same fault in every frame is one key).
@@ -490,22 +490,22 @@ void MCFlowNodelet::publish(const mc_flow::Result& result, const PairContext& pa
   if (labels_pub_.getNumSubscribers() > 0) labels_pub_.publish(makeLabelsImage(result, pair));
   if (occlusion_pub_.getNumSubscribers() > 0) occlusion_pub_.publish(makeOcclusionImage(result, pair));
   cv::Mat segmentation;
-  if (segmentation_pub_.getNumSubscribers() > 0 || !save_dir_.empty()) {
-    segmentation = segmentationPicture(result, pair, segmentation_blend_);
+  if (segmentation_pub_.getNumSubscribers() > 0 || !params_.save_dir.empty()) {
+    segmentation = segmentationPicture(result, pair, params_.segmentation_blend);
   }
   if (segmentation_pub_.getNumSubscribers() > 0) {
     segmentation_pub_.publish(makeSegmentationImage(segmentation, pair));
   }
   if (cloud_pub_.getNumSubscribers() > 0) cloud_pub_.publish(makeSceneFlowCloud(result, pair, cloud_colour_));
   if (markers_pub_.getNumSubscribers() > 0) {
-    markers_pub_.publish(makeMotionMarkers(result, pair, marker_seconds_ahead_));
+    markers_pub_.publish(makeMotionMarkers(result, pair, params_.marker_seconds_ahead));
   }
   if (info_pub_.getNumSubscribers() > 0) {
     sensor_msgs::CameraInfo info = processingCameraInfo(*pair.current);
     info_pub_.publish(info);
   }
-  if (publish_tf_) publishTf(result, pair);
-  if (print_summary_ || !save_dir_.empty()) saveAndSummarise(result, pair, segmentation);
+  if (params_.publish_tf) publishTf(result, pair);
+  if (params_.print_summary || !params_.save_dir.empty()) saveAndSummarise(result, pair, segmentation);
 }
 
 void MCFlowNodelet::publishTf(const mc_flow::Result& result, const PairContext& pair) {
@@ -519,7 +519,7 @@ void MCFlowNodelet::publishTf(const mc_flow::Result& result, const PairContext& 
     const Eigen::Vector3d& origin = track->second.origin;
     geometry_msgs::TransformStamped t;
     t.header = pair.header;
-    t.child_frame_id = segment_frame_prefix_ + std::to_string(s.id);
+    t.child_frame_id = params_.segment_frame_prefix + std::to_string(s.id);
     t.transform.translation.x = origin.x();
     t.transform.translation.y = origin.y();
     t.transform.translation.z = origin.z();
@@ -533,7 +533,7 @@ void MCFlowNodelet::publishTf(const mc_flow::Result& result, const PairContext& 
 }
 
 void MCFlowNodelet::saveAndSummarise(const mc_flow::Result& result, const PairContext& pair, const cv::Mat& segmentation) {
-  if (print_summary_) {
+  if (params_.print_summary) {
     const double dt = pair.interval();
     std::ostringstream s;
     s.setf(std::ios::fixed);
@@ -557,19 +557,19 @@ void MCFlowNodelet::saveAndSummarise(const mc_flow::Result& result, const PairCo
     NODELET_INFO_STREAM(s.str());
     std::fflush(stdout);  // one line per pair also when stdout is a file (roslaunch logs)
   }
-  if (!save_dir_.empty()) {
+  if (!params_.save_dir.empty()) {
     char name[64];
     cv::Mat bgr;
     cv::cvtColor(segmentation, bgr, cv::COLOR_RGB2BGR);
     std::snprintf(name, sizeof(name), "/segmentation_%06ld.png", pair_index_);
-    cv::imwrite(save_dir_ + name, bgr);
+    cv::imwrite(params_.save_dir + name, bgr);
     cv::Mat occlusion(result.occlusion.height, result.occlusion.width, CV_8UC1,
                       const_cast<std::uint8_t*>(result.occlusion.ptr()));
     std::snprintf(name, sizeof(name), "/occlusion_%06ld.png", pair_index_);
-    cv::imwrite(save_dir_ + name, occlusion);
+    cv::imwrite(params_.save_dir + name, occlusion);
     cv::cvtColor(pair.previous->colour, bgr, cv::COLOR_RGB2BGR);  // the pixels the labels belong to
     std::snprintf(name, sizeof(name), "/colour_%06ld.png", pair_index_);
-    cv::imwrite(save_dir_ + name, bgr);
+    cv::imwrite(params_.save_dir + name, bgr);
   }
 }
 
@@ -635,9 +635,9 @@ void MCFlowNodelet::timerCb(const ros::WallTimerEvent&) {
         new_since_sync = new_since_sync && counts[i] > sync_counts_[i];
       }
     }
-    snapshot.approximate_sync = approximate_sync_;
-    snapshot.approximate_sync_max_interval = approximate_sync_max_interval_;
-    const std::optional<InputWarning> warning = describeInputSilence(snapshot, no_input_warning_after_);
+    snapshot.approximate_sync = params_.approximate_sync;
+    snapshot.approximate_sync_max_interval = params_.approximate_sync_max_interval;
+    const std::optional<InputWarning> warning = describeInputSilence(snapshot, params_.no_input_warning_after);
     if (warning && warning->restart_synchroniser) {
       if (new_since_sync) {
         // A synchroniser confused by an irregular stream (dropped or skewed messages) can stay stuck:
@@ -652,7 +652,7 @@ void MCFlowNodelet::timerCb(const ros::WallTimerEvent&) {
         ++synchroniser_restarts_;
       }
     } else if (warning) {
-      warnThrottled(warning->key, warning->text, std::max(no_input_warning_after_, 15.0));
+      warnThrottled(warning->key, warning->text, std::max(params_.no_input_warning_after, 15.0));
     }
   }
   updater_->update();
@@ -666,7 +666,7 @@ void MCFlowNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   if (sync_times_.size() >= 2) {
     rate = double(sync_times_.size() - 1) / std::max((sync_times_.back() - sync_times_.front()).toSec(), 1e-6);
   }
-  const bool silent = subscribed_ && (now - std::max(last_sync_time_, subscribed_since_)).toSec() > no_input_warning_after_;
+  const bool silent = subscribed_ && (now - std::max(last_sync_time_, subscribed_since_)).toSec() > params_.no_input_warning_after;
   if (!subscribed_) {
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "idle: no listener on any output");
   } else if (silent) {
@@ -700,6 +700,31 @@ void MCFlowNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("stage outputs [ms]", last_timings_.outputs);
   status.add("backend", backend_.empty() ? std::string("(no pair solved yet)") : backend_ + ": " + backend_note_);
   status.add("last problem", last_problem_.empty() ? std::string("none") : last_problem_);
+}
+
+std::vector<std::pair<std::string, std::string>> NodeParameters::defaults() {
+  const NodeParameters d;
+  auto text = [](double v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+  };
+  auto flag = [](bool v) { return std::string(v ? "true" : "false"); };
+  return {{"queue_size", std::to_string(d.queue_size)},
+          {"max_input_pixels", std::to_string(d.max_input_pixels)},
+          {"approximate_sync", flag(d.approximate_sync)},
+          {"approximate_sync_max_interval", text(d.approximate_sync_max_interval)},
+          {"downsample", std::to_string(d.downsample)},
+          {"max_stamp_difference", text(d.max_stamp_difference)},
+          {"max_pair_interval", text(d.max_pair_interval)},
+          {"no_input_warning_after", text(d.no_input_warning_after)},
+          {"publish_tf", flag(d.publish_tf)},
+          {"segment_frame_prefix", d.segment_frame_prefix},
+          {"cloud_colour", d.cloud_colour},
+          {"marker_seconds_ahead", text(d.marker_seconds_ahead)},
+          {"segmentation_blend", text(d.segmentation_blend)},
+          {"print_summary", flag(d.print_summary)},
+          {"save_dir", d.save_dir}};
 }
 
 }  // namespace mc_flow_ros

@@ -38,6 +38,7 @@
 #include "mc_flow/McFlowConfig.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/ros/conversions.h"
+#include "mc_flow/ros/node_parameters.h"
 #include "mc_flow/core/sequence.h"
 
 namespace mc_flow_ros {
@@ -90,21 +91,8 @@ class MCFlowNodelet : public nodelet::Nodelet {
   bool anyListener() const;
 
   // ---- parameters (private namespace; see logStartup and the README for units) ----
-  int queue_size_ = 5;                          // input subscribers' and synchroniser's queues [messages]
-  int max_input_pixels_ = int(mc_flow::kDefaultMaxInputPixels);  // larger images are refused
-  bool approximate_sync_ = true;
-  double approximate_sync_max_interval_ = 0.0;  // [s], 0 = no limit
-  int downsample_ = 0;                          // 0 = automatic (towards 320 px wide)
-  double max_stamp_difference_ = 0.02;          // [s] between RGB and depth stamps before warning
-  double max_pair_interval_ = 1.0;              // [s] a longer gap starts a new sequence
-  double no_input_warning_after_ = 5.0;         // [s]
-  bool publish_tf_ = false;
-  std::string segment_frame_prefix_ = "mc_flow_segment_";
-  CloudColour cloud_colour_ = CloudColour::Segment;
-  double marker_seconds_ahead_ = 1.0;  // [s]
-  double segmentation_blend_ = 0.6;
-  bool print_summary_ = false;
-  std::string save_dir_;
+  NodeParameters params_;  // node_parameters.h: the defaults' one place
+  CloudColour cloud_colour_ = CloudColour::Segment;  // params_.cloud_colour, parsed
 
   // ---- ROS interfaces ----
   ros::NodeHandle nh_, pnh_;
