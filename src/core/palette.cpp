@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mc_flow/core/error.h"
+
 namespace mc_flow {
 
 namespace {
@@ -37,6 +39,35 @@ Rgb8 colourForId(std::uint32_t id) {
   const double value = (id % 2 == 0) ? 0.80 : 0.98;
   const double saturation = (id % 3 == 0) ? 0.60 : 0.85;
   return hsvToRgb(hue, saturation, value);
+}
+
+ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
+                            double blend) {
+  if (labels.count < 1 || int(ids.size()) != labels.count - 1)
+    throw InputError("segmentation picture: " + std::to_string(ids.size()) + " segment ids for " +
+                     std::to_string(labels.count) + " label planes (expected count - 1)");
+  std::vector<Rgb8> colours;
+  for (const int id : ids) colours.push_back(colourForId(std::uint32_t(std::max(id, 0))));
+  colours.push_back(colourForId(0));  // the outlier plane
+  const bool have_image = intensity && intensity->sameSize(labels.width, labels.height);
+  ImageU8 out(labels.width, labels.height, 3, 0);
+  auto to8 = [](double v) { return std::uint8_t(std::lround(std::clamp(v, 0.0, 255.0))); };
+  for (int y = 0; y < labels.height; ++y)
+    for (int x = 0; x < labels.width; ++x) {
+      double r = 0, g = 0, b = 0;
+      for (int i = 0; i < labels.count; ++i) {
+        const double u = labels.at(i, x, y);
+        if (!(u > 0)) continue;
+        r += u * colours[std::size_t(i)].r;
+        g += u * colours[std::size_t(i)].g;
+        b += u * colours[std::size_t(i)].b;
+      }
+      const double grey = have_image ? 255.0 * std::clamp(double((*intensity)(x, y)), 0.0, 1.0) : 128.0;
+      out(x, y, 0) = to8(blend * r + (1 - blend) * grey);
+      out(x, y, 1) = to8(blend * g + (1 - blend) * grey);
+      out(x, y, 2) = to8(blend * b + (1 - blend) * grey);
+    }
+  return out;
 }
 
 }  // namespace mc_flow

@@ -70,27 +70,10 @@ cv::Mat segmentationImage(const SoftLabels& labels, const std::vector<int>& ids,
     throw InputError("segmentation picture: soft labels are " + std::to_string(labels.width) + "x" +
                      std::to_string(labels.height) + " but the image is " + std::to_string(intensity.width) + "x" +
                      std::to_string(intensity.height));
-  const int motion_labels = labels.count - 1;
-  if (labels.count < 1 || int(ids.size()) != motion_labels)
-    throw InputError("segmentation picture: " + std::to_string(ids.size()) + " segment ids for " +
-                     std::to_string(labels.count) + " label planes (expected count - 1)");
-  std::vector<cv::Vec3b> colours;
-  for (const int id : ids) colours.push_back(segmentColor(id));
-  colours.push_back(segmentColor(0));  // the outlier plane
-  cv::Mat out(labels.height, labels.width, CV_8UC3);
-  for (int y = 0; y < labels.height; ++y)
-    for (int x = 0; x < labels.width; ++x) {
-      float colour[3] = {0, 0, 0};
-      for (int i = 0; i < labels.count; ++i) {
-        const float u = labels.at(i, x, y);
-        if (!(u > 0.f)) continue;
-        const cv::Vec3b& c = colours[std::size_t(i)];
-        for (int k = 0; k < 3; ++k) colour[k] += u * c[k];
-      }
-      const float grey = 255.f * std::clamp(intensity(x, y), 0.f, 1.f);
-      cv::Vec3b& px = out.at<cv::Vec3b>(y, x);
-      for (int k = 0; k < 3; ++k) px[k] = cv::saturate_cast<std::uint8_t>(0.6f * colour[k] + 0.4f * grey);
-    }
+  const ImageU8 rgb = segmentationPicture(labels, ids, &intensity, 0.6);
+  cv::Mat out(rgb.height, rgb.width, CV_8UC3);
+  for (int y = 0; y < rgb.height; ++y)
+    for (int x = 0; x < rgb.width; ++x) out.at<cv::Vec3b>(y, x) = cv::Vec3b(rgb(x, y, 2), rgb(x, y, 1), rgb(x, y, 0));
   return out;
 }
 

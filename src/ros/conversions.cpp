@@ -284,31 +284,14 @@ sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const Pa
 
 cv::Mat segmentationPicture(const mc_flow::Result& result, const PairContext& pair, double blend) {
   const mc_flow::SoftLabels& u = result.soft_labels;
-  cv::Mat picture(u.height, u.width, CV_8UC3, cv::Scalar(0, 0, 0));
-  std::vector<Rgb8> colours;
-  for (int c = 0; c < u.count; ++c) colours.push_back(colourForId(c < u.count - 1 && std::size_t(c) < result.segments.size() ? std::uint32_t(result.segments[std::size_t(c)].id) : 0u));
-  const cv::Mat* background = (pair.previous && pair.previous->colour.cols == u.width && pair.previous->colour.rows == u.height)
-                                  ? &pair.previous->colour
-                                  : nullptr;
-  for (int y = 0; y < u.height; ++y) {
-    auto* row = picture.ptr<cv::Vec3b>(y);
-    for (int x = 0; x < u.width; ++x) {
-      double r = 0, g = 0, b = 0;
-      for (int c = 0; c < u.count; ++c) {
-        const double weight = u.at(c, x, y);
-        r += weight * colours[std::size_t(c)].r;
-        g += weight * colours[std::size_t(c)].g;
-        b += weight * colours[std::size_t(c)].b;
-      }
-      double grey = 128;
-      if (background) {
-        const cv::Vec3b& p = background->at<cv::Vec3b>(y, x);
-        grey = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2];
-      }
-      auto mix = [&](double colour) { return cv::saturate_cast<std::uint8_t>(blend * colour + (1 - blend) * grey); };
-      row[x] = cv::Vec3b(mix(r), mix(g), mix(b));
-    }
-  }
+  std::vector<int> ids;
+  for (int c = 0; c + 1 < u.count; ++c)
+    ids.push_back(std::size_t(c) < result.segments.size() ? result.segments[std::size_t(c)].id : 0);
+  // The grey of the pixels the labels belong to: the previous frame's (the solver's intensity).
+  const mc_flow::ImageF* grey = pair.previous ? &pair.previous->frame.intensity : nullptr;
+  const mc_flow::ImageU8 rgb = mc_flow::segmentationPicture(u, ids, grey, blend);
+  cv::Mat picture(rgb.height, rgb.width, CV_8UC3);
+  std::copy(rgb.data.begin(), rgb.data.end(), picture.data);
   return picture;
 }
 

@@ -3,6 +3,7 @@
 
 #include <cmath>
 
+#include "mc_flow/core/error.h"
 #include "mc_flow/core/palette.h"
 
 namespace mc_flow {
@@ -22,6 +23,24 @@ TEST(Palette, ColoursAreStableAndDistinct) {
       EXPECT_GT(distance, 25.0) << "ids " << a << " and " << b << " look alike";
     }
   }
+}
+
+TEST(Palette, SegmentationPictureBlendsSegmentColoursOverTheImage) {
+  SoftLabels u(2, 1, 3, 0.f);  // two segments + outlier
+  u.at(0, 0, 0) = 0.75f;
+  u.at(2, 0, 0) = 0.25f;  // pixel 0: 3/4 segment id 7, 1/4 outlier
+  u.at(1, 1, 0) = 1.f;    // pixel 1: segment id 3
+  const ImageF grey(2, 1, 1, 0.2f);
+  const ImageU8 picture = segmentationPicture(u, {7, 3}, &grey, 0.6);
+  ASSERT_EQ(picture.channels, 3);
+  const Rgb8 c7 = colourForId(7), c0 = colourForId(0), c3 = colourForId(3);
+  EXPECT_NEAR(picture(0, 0, 0), 0.6 * (0.75 * c7.r + 0.25 * c0.r) + 0.4 * 51.0, 1.0);
+  EXPECT_NEAR(picture(0, 0, 2), 0.6 * (0.75 * c7.b + 0.25 * c0.b) + 0.4 * 51.0, 1.0);
+  EXPECT_NEAR(picture(1, 0, 1), 0.6 * c3.g + 0.4 * 51.0, 1.0);
+  // Without an image (or with one of another size): mid grey.
+  const ImageU8 no_image = segmentationPicture(u, {7, 3}, nullptr, 0.6);
+  EXPECT_NEAR(no_image(1, 0, 1), 0.6 * c3.g + 0.4 * 128.0, 1.0);
+  EXPECT_THROW(segmentationPicture(u, {7}, &grey, 0.6), InputError);
 }
 
 }  // namespace

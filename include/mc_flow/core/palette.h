@@ -5,6 +5,10 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
+
+#include "mc_flow/core/image.h"
+#include "mc_flow/core/soft_labels.h"
 
 namespace mc_flow {
 
@@ -16,5 +20,13 @@ struct Rgb8 {
 /// @brief Display colour of a persistent segment id: well separated hues for neighbouring ids; id 0
 /// (outlier / no depth) is dark grey.
 Rgb8 colourForId(std::uint32_t id);
+
+/// @brief The segmentation picture (3 channels, RGB): per pixel the segment colours weighted by the soft labels
+/// (plane i in colourForId(ids[i]), the outlier plane in id 0's grey), mixed `blend` colour / (1 - blend) image
+/// grey (`intensity` in [0, 1]; mid grey where it is null or of another size). `ids` holds labels.count - 1 ids.
+/// Throws InputError naming the counts when they do not fit. The one renderer of the CLI's and the nodelet's
+/// pictures.
+ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
+                            double blend);
 
 }  // namespace mc_flow
