@@ -27,9 +27,6 @@ using mc_flow::Rgb8;
 
 namespace {
 
-
-std::string sizeText(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
-
 cv::Mat colourToRgb8(const cv_bridge::CvImageConstPtr& image, const std::string& encoding) {
   cv::Mat rgb;
   if (encoding == enc::RGB8) {
@@ -137,14 +134,14 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs
   const int w = int(rgb.width), h = int(rgb.height), dw = int(depth.width), dh = int(depth.height);
   // Same aspect ratio within one pixel of the larger image, else the images do not show the same view.
   if (std::abs(double(w) * dh - double(h) * dw) > double(std::max(w, dw)) + double(std::max(h, dh))) {
-    throw FrameInputError(InputProblem::Size, "RGB " + sizeText(w, h) + " and depth " + sizeText(dw, dh) +
-                                                  " have different aspect ratios (is the depth registered to the colour camera?)");
+    throw FrameInputError(InputProblem::Size, "RGB " + mc_flow::imageSizeText(w, h) + " and depth " +
+                                                  mc_flow::imageSizeText(dw, dh) + " have different aspect ratios (is the depth registered to the colour camera?)");
   }
   const int factor = mc_flow::chooseDownsample(downsample_request, w);
   const int out_w = w / factor, out_h = h / factor;
   if (out_w < 16 || out_h < 16) {
-    throw FrameInputError(InputProblem::Size, "processing size " + sizeText(out_w, out_h) + " (RGB " + sizeText(w, h) +
-                                                  " / downsample " + std::to_string(factor) + ") is too small");
+    throw FrameInputError(InputProblem::Size, "processing size " + mc_flow::imageSizeText(out_w, out_h) +
+                                                  " (RGB " + mc_flow::imageSizeText(w, h) + " / downsample " + std::to_string(factor) + ") is too small");
   }
 
   cv_bridge::CvImageConstPtr rgb_cv, depth_cv;
@@ -187,7 +184,7 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs
   out.frame = factor == 1 ? std::move(full) : mc_flow::downsampleFrame(full, factor, depth_range);
   for (float z : out.frame.depth.data) out.valid_depth += mc_flow::isValidDepth(z) ? 1 : 0;
   if (out.valid_depth == 0) {
-    throw FrameInputError(InputProblem::Depth, "depth image (" + depth.encoding + ", " + sizeText(dw, dh) +
+    throw FrameInputError(InputProblem::Depth, "depth image (" + depth.encoding + ", " + mc_flow::imageSizeText(dw, dh) +
                                                    ") has no valid pixel: all zero or NaN");
   }
   return out;
