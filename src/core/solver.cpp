@@ -72,6 +72,7 @@ struct Start {
   int motion_labels = 0;
   std::vector<Vector6d> twists;
   int outer_iterations = 1;
+  int label_iterations = 1, label_iterations_final = 1;  // per label step inside the loop / the final one
   int first_motion_coarsest = 0;  // the first motion step's coarsest level
   bool first_motion_refines = false;  // the first motion step uses motion_iterations_refine
 };
@@ -263,6 +264,8 @@ Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
   }
   start.twists.assign(std::size_t(start.motion_labels), dominant);
   start.outer_iterations = config.outer_iterations;
+  start.label_iterations = config.label_iterations;
+  start.label_iterations_final = config.label_iterations_final;
   start.first_motion_coarsest = p.levels - 1;
   result.timings.initialisation += elapsedMs(t);
   progress("pyramid %d levels, labels at level %d, %d initial labels (K-means)", p.levels, p.label_level,
@@ -308,6 +311,8 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
   start.motion_labels = int(start.twists.size());
   backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
   start.outer_iterations = config.warm_outer_iterations;
+  start.label_iterations = config.warm_label_iterations;
+  start.label_iterations_final = config.warm_label_iterations_final;
   start.first_motion_coarsest = std::min(p.levels - 1, p.finest + config.warm_motion_coarse_levels);
   start.first_motion_refines = true;
   result.timings.initialisation += elapsedMs(t);
@@ -359,7 +364,7 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
 
     // 2. label step
     t = Clock::now();
-    const LabelStepStats ls = labels.labelStep(twists, occlusions, config.label_iterations, config.label_tolerance, config);
+    const LabelStepStats ls = labels.labelStep(twists, occlusions, start.label_iterations, config.label_tolerance, config);
     stats.label_iterations = ls.iterations;
     stats.energy = ls.energy;
     stats.label_change = ls.mean_change;
@@ -395,7 +400,7 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     result.timings.occlusion += elapsedMs(t);
     t = Clock::now();
     const LabelStepStats ls =
-        labels.labelStep(twists, occlusions, config.label_iterations_final, config.label_tolerance, config);
+        labels.labelStep(twists, occlusions, start.label_iterations_final, config.label_tolerance, config);
     result.energy = ls.energy;
     u_final = labels.downloadLabels();
     result.timings.labels += elapsedMs(t);
