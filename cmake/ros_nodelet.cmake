@@ -89,4 +89,8 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
   add_test(NAME ros.DemoLaunchWithARecordedBag
     COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/test/ros/check_bag_launch.sh ${CMAKE_CURRENT_SOURCE_DIR} ${CATKIN_DEVEL_PREFIX})
   set_tests_properties(ros.DemoLaunchWithARecordedBag PROPERTIES TIMEOUT 400 RUN_SERIAL TRUE)
+  # A standalone nodelet asked for a transport whose plug-in is missing: named, raw instead, clean exit.
+  add_test(NAME ros.MissingTransportFallsBackToRaw
+    COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/test/ros/check_transport_fallback.sh ${CATKIN_DEVEL_PREFIX})
+  set_tests_properties(ros.MissingTransportFallsBackToRaw PROPERTIES TIMEOUT 180)
 endif()

@@ -10,6 +10,7 @@
 #include <utility>
 
 #include <cv_bridge/cv_bridge.h>
+#include <image_transport/exception.h>
 
 #include <geometry_msgs/TransformStamped.h>
 #include <opencv2/imgcodecs.hpp>
@@ -34,6 +35,15 @@ std::string stampText(const ros::Time& t) {
   char buffer[48];
   std::snprintf(buffer, sizeof(buffer), "%u.%09u", t.sec, t.nsec);
   return buffer;
+}
+
+/// Hints that select `transport` whatever the parameters say. image_transport::TransportHints reads its
+/// transport from a parameter, `~image_transport` unless told otherwise; in a standalone nodelet `~` is this
+/// nodelet's private namespace, so hints for the raw fallback would read the missing transport again. An
+/// empty parameter name resolves to `nh`'s namespace itself, which is a dictionary or absent, never a
+/// string, so the default given here is what is used.
+image_transport::TransportHints transportHintsFor(const std::string& transport, const ros::NodeHandle& nh) {
+  return image_transport::TransportHints(transport, ros::TransportHints(), nh, "");
 }
 
 }  // namespace
@@ -270,13 +280,25 @@ void MCFlowNodelet::connectCb() {
       NODELET_ERROR("image_transport '%s' is not installed (installed:%s): install its plug-in package or set "
                     "~image_transport to one of those; subscribing with 'raw' instead",
                     hints.getTransport().c_str(), available.c_str());
-      hints = image_transport::TransportHints("raw");
+      hints = transportHintsFor("raw", pnh_);
     }
     // One queue length for the subscribers and the synchroniser: a burst the synchroniser could hold
     // must not be dropped before it (the losses that remain show in diagnostics).
     const auto queue = std::uint32_t(params_.queue_size);
-    rgb_sub_.subscribe(*it_in_, "rgb/image_rect_color", queue, hints);
-    depth_sub_.subscribe(*it_in_, "depth_registered/image_rect", queue, hints);
+    try {
+      rgb_sub_.subscribe(*it_in_, "rgb/image_rect_color", queue, hints);
+      depth_sub_.subscribe(*it_in_, "depth_registered/image_rect", queue, hints);
+    } catch (const image_transport::Exception& e) {
+      // A plug-in that is declared and loads but cannot subscribe. An exception out of onInit would make
+      // nodelet's loader destroy this nodelet after its callback queues (a crash): keep a plug-in's inside.
+      rgb_sub_.unsubscribe();
+      depth_sub_.unsubscribe();
+      NODELET_ERROR("image_transport '%s' cannot subscribe (%s); subscribing with 'raw' instead",
+                    hints.getTransport().c_str(), e.what());
+      hints = transportHintsFor("raw", pnh_);
+      rgb_sub_.subscribe(*it_in_, "rgb/image_rect_color", queue, hints);
+      depth_sub_.subscribe(*it_in_, "depth_registered/image_rect", queue, hints);
+    }
     info_sub_.subscribe(nh_, "rgb/camera_info", queue);
     subscribed_ = true;
     std::lock_guard<std::mutex> stats(stats_mutex_);
