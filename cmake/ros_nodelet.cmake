@@ -93,4 +93,7 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
   add_test(NAME ros.MissingTransportFallsBackToRaw
     COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/test/ros/check_transport_fallback.sh ${CATKIN_DEVEL_PREFIX})
   set_tests_properties(ros.MissingTransportFallsBackToRaw PROPERTIES TIMEOUT 180)
+  # rviz's view follows the Fixed Frame: optical (auto) along +z, a body frame (camera_link) along +x.
+  add_test(NAME ros.RvizViewFollowsTheFixedFrame
+    COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test/ros/check_rviz_view.py ${CMAKE_CURRENT_SOURCE_DIR})
 endif()

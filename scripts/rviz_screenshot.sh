@@ -4,8 +4,12 @@
 # Frame (fixed_frame:=auto), rendered under Xvfb, and a screenshot of the whole screen once the bag has
 # been played and solved.
 #
+# FIXED_FRAME=camera_link (any frame but auto) plays the bag with its /tf_static (camera_link -> optical frame)
+# instead and starts rviz in that frame: the view that start_rviz.py picks for a body frame.
+#
 # Usage: scripts/rviz_screenshot.sh [BUILD_DIR (build)] [OUTPUT_PNG (docs/rviz.png)]
-# Environment: FRAMES (10), RATE (0.2), MCFLOW_SCREENSHOT_PORT (11346), MCFLOW_SCREENSHOT_DISPLAY (:97).
+# Environment: FRAMES (10), RATE (0.2), SETTLE (8 s), FIXED_FRAME (auto), MCFLOW_SCREENSHOT_PORT (11346),
+# MCFLOW_SCREENSHOT_DISPLAY (:97).
 # Needs rviz, Xvfb and ImageMagick's `import` (scripts/install_deps.sh installs them).
 set -euo pipefail
 
@@ -26,8 +30,14 @@ source "$build/devel/setup.bash"
 set -u
 export ROS_MASTER_URI="http://localhost:$port"
 work=$(mktemp -d /tmp/mc_flow_screenshot.XXXXXX)
-bag="$work/three_topics.bag"
-"$build/devel/lib/mc_flow/make_synthetic_bag" "$bag" --frames "$frames" --rate 10 --no-tf >/dev/null
+fixed_frame=${FIXED_FRAME:-auto}
+if [ "$fixed_frame" = auto ]; then
+  bag="$work/three_topics.bag"
+  "$build/devel/lib/mc_flow/make_synthetic_bag" "$bag" --frames "$frames" --rate 10 --no-tf >/dev/null
+else
+  bag="$work/with_tf.bag"
+  "$build/devel/lib/mc_flow/make_synthetic_bag" "$bag" --frames "$frames" --rate 10 >/dev/null
+fi
 
 xvfb_pid="" launch_pid=""
 cleanup() {
@@ -40,9 +50,9 @@ trap cleanup EXIT
 Xvfb "$display" -screen 0 1500x900x24 -nolisten tcp >"$work/xvfb.log" 2>&1 &
 xvfb_pid=$!
 sleep 2
-echo "playing $bag (only the three camera topics) with rviz on Xvfb $display"
+echo "playing $bag ($([ "$fixed_frame" = auto ] && echo "only the three camera topics" || echo "with /tf_static")) with rviz on Xvfb $display, fixed_frame:=$fixed_frame"
 DISPLAY="$display" LIBGL_ALWAYS_SOFTWARE=1 roslaunch -p "$port" mc_flow demo.launch bag:="$bag" rate:="$rate" \
-    rviz:=true exit_when_done:=false save_dir:=none print_summary:=true >"$work/launch.log" 2>&1 &
+    rviz:=true fixed_frame:="$fixed_frame" exit_when_done:=false save_dir:=none print_summary:=true >"$work/launch.log" 2>&1 &
 launch_pid=$!
 
 # The player registers, plays and exits; then the last pair is solved and drawn.
@@ -55,7 +65,7 @@ for _ in $(seq 1 240); do
 done
 [ "$seen" = 1 ] || { tail -30 "$work/launch.log" >&2; echo "rviz_screenshot.sh: the player never ran" >&2; exit 1; }
 sleep "${SETTLE:-8}"
-grep -q "Fixed Frame" "$work/launch.log" && grep "Fixed Frame" "$work/launch.log" | tail -1
+grep -E "Fixed Frame|rviz: .* view" "$work/launch.log" | tail -2 || true
 mkdir -p "$(dirname "$png")"
 shot="$(dirname "$png")/.rviz_screenshot_$$.png"
 import -display "$display" -window root "$shot"
