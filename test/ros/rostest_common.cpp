@@ -112,6 +112,24 @@ std::vector<std::string> RosoutWatcher::all() const {
   return messages_;
 }
 
+std::string diagnosticValue(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key) {
+  const auto all = diagnostics.messages();
+  for (auto it = all.rbegin(); it != all.rend(); ++it) {
+    for (const auto& status : (*it)->status) {
+      if (status.name.find("MC-Flow") == std::string::npos) continue;
+      for (const auto& kv : status.values) {
+        if (kv.key == key) return kv.value;
+      }
+    }
+  }
+  return "";
+}
+
+long diagnosticCount(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key) {
+  const std::string v = diagnosticValue(diagnostics, key);
+  return v.empty() ? -1 : std::stol(v);
+}
+
 bool waitFor(const std::function<bool()>& done, double timeout_s) {
   const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(timeout_s);
   while (ros::ok() && ros::WallTime::now() < end) {

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <ros/ros.h>
 #include <rosgraph_msgs/Log.h>
 #include <sensor_msgs/CameraInfo.h>
@@ -87,6 +88,11 @@ class RosoutWatcher {
   mutable std::mutex mutex_;
   std::vector<std::string> messages_;
 };
+
+/// @brief Value of `key` in the last MC-Flow diagnostic status seen (empty when none).
+std::string diagnosticValue(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key);
+/// @brief diagnosticValue as a number; -1 when the key was not seen.
+long diagnosticCount(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key);
 
 /// @brief Waits (wall time, spinning in the background) until `done` or `timeout_s`; returns done().
 bool waitFor(const std::function<bool()>& done, double timeout_s);

@@ -9,6 +9,8 @@
 #include "rostest_common.h"
 
 using mcflow_test::Collector;
+using mcflow_test::diagnosticCount;
+using mcflow_test::diagnosticValue;
 using mcflow_test::SyntheticCamera;
 using mcflow_test::waitFor;
 
@@ -21,25 +23,6 @@ bool advertised(const std::string& topic) {
     if (t.name == topic) return true;
   }
   return false;
-}
-
-/// Value of `key` in the last MC-Flow diagnostic status seen (empty when none).
-std::string diagnosticValue(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key) {
-  const auto all = diagnostics.messages();
-  for (auto it = all.rbegin(); it != all.rend(); ++it) {
-    for (const auto& status : (*it)->status) {
-      if (status.name.find("MC-Flow") == std::string::npos) continue;
-      for (const auto& kv : status.values) {
-        if (kv.key == key) return kv.value;
-      }
-    }
-  }
-  return "";
-}
-
-long diagnosticCount(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key) {
-  const std::string v = diagnosticValue(diagnostics, key);
-  return v.empty() ? -1 : std::stol(v);
 }
 
 }  // namespace
