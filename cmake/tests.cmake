@@ -33,7 +33,12 @@ endif()
 set(MCFLOW_TEST_LIBS mc_flow_core mc_flow_testing)
 mcflow_add_gtest(test_core ${CMAKE_CURRENT_SOURCE_DIR}/test/core/*.cpp)
 # GPU tests skip (visibly, GTEST_SKIP with the reason) where no CUDA GPU is usable.
-mcflow_add_gtest(test_cuda ${CMAKE_CURRENT_SOURCE_DIR}/test/cuda/*.cpp)
+# Kernels of the tests themselves (a faulting kernel for the GPU-fault test) only where CUDA is compiled in.
+set(MCFLOW_TEST_CUDA_SOURCES ${CMAKE_CURRENT_SOURCE_DIR}/test/cuda/*.cpp)
+if(MCFLOW_HAVE_CUDA)
+  list(APPEND MCFLOW_TEST_CUDA_SOURCES ${CMAKE_CURRENT_SOURCE_DIR}/test/cuda/*.cu)
+endif()
+mcflow_add_gtest(test_cuda ${MCFLOW_TEST_CUDA_SOURCES})
 if(MCFLOW_WITH_OPENCV)
   set(MCFLOW_TEST_LIBS mc_flow_io)
   mcflow_add_gtest(test_io ${CMAKE_CURRENT_SOURCE_DIR}/test/io/*.cpp)

@@ -7,6 +7,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/pyramid.h"
+#include "mc_flow/core/solve_backend.h"
 
 namespace mc_flow {
 
@@ -49,16 +50,34 @@ std::string toString(SequenceStep::Outcome outcome) {
   return "unknown";
 }
 
-SequencePipeline::SequencePipeline(const Config& config, int downsample, double max_pair_interval)
-    : config_(config), downsample_request_(downsample), max_pair_interval_(max_pair_interval) {
+SequencePipeline::SequencePipeline(const Config& config, int downsample, double max_pair_interval,
+                                   SolveBackendFactory make_backend)
+    : config_(config),
+      downsample_request_(downsample),
+      max_pair_interval_(max_pair_interval),
+      make_backend_(std::move(make_backend)),
+      injected_fault_(backendFaultFromEnvironment()) {
   chooseDownsample(downsample, 320);  // validates the request
   if (!(max_pair_interval > 0) || !std::isfinite(max_pair_interval))
     throw ConfigError("max_pair_interval = " + std::to_string(max_pair_interval) + " s is invalid: must be finite and > 0");
-  solver_ = std::make_unique<Solver>(config_);
+  solver_ = makeSolver(config_);
+}
+
+std::unique_ptr<Solver> SequencePipeline::makeSolver(const Config& config, const std::string& why) {
+  config.validate();  // before a backend is made, as Solver(config) does
+  std::string note;
+  std::unique_ptr<SolveBackend> backend =
+      make_backend_ ? make_backend_(config.backend, &note) : makeSolveBackend(config.backend, &note);
+  if (!why.empty()) note = why;
+  if (injected_fault_) {
+    backend = withBackendFault(std::move(backend), *injected_fault_);
+    injected_fault_.reset();
+  }
+  return std::make_unique<Solver>(config, std::move(backend), note);
 }
 
 void SequencePipeline::setConfig(const Config& config) {
-  solver_ = std::make_unique<Solver>(config);
+  solver_ = makeSolver(config);
   config_ = config;
 }
 
@@ -131,10 +150,13 @@ SequenceStep SequencePipeline::push(StreamFrame input) {
   } catch (const BackendError& e) {
     // The GPU failed at run time: the following pairs run on the CPU.
     step.backend_fallback = std::string(e.what());
-    step.problem = "the " + solver_->backendName() + " backend failed: " + e.what();
+    const std::string failed = solver_->backendName();
+    step.problem = "the " + failed + " backend failed: " + e.what();
+    ++backend_fallbacks_;
     Config cpu = config_;
     cpu.backend = Backend::Cpu;
-    setConfig(cpu);
+    solver_ = makeSolver(cpu, "cpu (fallback: the " + failed + " backend failed)");
+    config_ = cpu;
   } catch (const InputError& e) {
     step.problem = e.what();
   } catch (const ConfigError& e) {

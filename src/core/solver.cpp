@@ -117,6 +117,15 @@ Solver::Solver(const Config& config) : impl_(std::make_unique<Impl>()) {
   impl_->backend = makeSolveBackend(config.backend, &impl_->backend_note);
 }
 
+Solver::Solver(const Config& config, std::unique_ptr<SolveBackend> backend, std::string backend_note)
+    : impl_(std::make_unique<Impl>()) {
+  config.validate();
+  if (!backend) throw ConfigError("Solver: the solve backend given is null");
+  impl_->config = config;
+  impl_->backend = std::move(backend);
+  impl_->backend_note = std::move(backend_note);
+}
+
 Solver::~Solver() = default;
 
 const Config& Solver::config() const { return impl_->config; }

@@ -7,17 +7,27 @@
 #pragma once
 
 #include <any>
+#include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <Eigen/Core>
 
 #include "mc_flow/core/config.h"
+#include "mc_flow/core/fault_injection.h"
 #include "mc_flow/core/image.h"
 #include "mc_flow/core/solver.h"
 
 namespace mc_flow {
+
+class SolveBackend;
+
+/// @brief Makes a pipeline's solve backends (the first one, a new one per setConfig, the CPU one after a GPU
+/// failure) for the requested Backend; `note` becomes Result::backend_note. The default is makeSolveBackend. A
+/// test hook: a factory may return a backend with an injected fault (fault_injection.h).
+using SolveBackendFactory = std::function<std::unique_ptr<SolveBackend>(Backend requested, std::string* note)>;
 
 /// @brief The downsampling factor for an input `width`: `requested` > 0 is used as is (a power of two,
 /// else ConfigError); 0 picks the power of two that brings the width closest to 320 px (the paper's
@@ -80,8 +90,12 @@ class SequencePipeline {
  public:
   /// `downsample`: see chooseDownsample (0 = automatic). `max_pair_interval` [s]: a longer gap starts a new
   /// sequence. Throws ConfigError for a bad config, a negative interval or a downsample that is not 0 or a
-  /// power of two; BackendError when CUDA is forced but unusable.
-  SequencePipeline(const Config& config, int downsample, double max_pair_interval);
+  /// power of two; BackendError when CUDA is forced but unusable. `make_backend`: see SolveBackendFactory (empty:
+  /// makeSolveBackend). When the environment variable MCFLOW_INJECT_BACKEND_FAULT is set ("SOLVE" or
+  /// "SOLVE:STAGE", backendFaultFromEnvironment), the pipeline's first backend gets that fault (a test hook for
+  /// the GPU-failure path; ConfigError when the value is malformed).
+  SequencePipeline(const Config& config, int downsample, double max_pair_interval,
+                   SolveBackendFactory make_backend = {});
 
   /// @brief Prepares the frame and, when it continues the sequence, solves the pair (previous, frame) (warm
   /// started from the previous pair's result when Config::warm_start). Frames whose stamps go back, follow a gap
@@ -99,20 +113,26 @@ class SequencePipeline {
   const std::map<int, SegmentTrack>& tracks() const { return tracks_; }
   long pairsSolved() const { return pairs_solved_; }
   long resets() const { return resets_; }
+  /// @brief How often a BackendError moved the pipeline to the CPU (SequenceStep::backend_fallback).
+  long backendFallbacks() const { return backend_fallbacks_; }
 
  private:
   PreparedFrame prepare(StreamFrame frame) const;
   void updateTracks(const Result& result);
+  // A solver on a backend from the factory; `why`, when given, replaces the factory's note (Result::backend_note).
+  std::unique_ptr<Solver> makeSolver(const Config& config, const std::string& why = "");
 
   Config config_;
   int downsample_request_ = 0;
   double max_pair_interval_ = 1.0;
+  SolveBackendFactory make_backend_;
+  std::optional<BackendFault> injected_fault_;  // MCFLOW_INJECT_BACKEND_FAULT, until the first backend takes it
   std::unique_ptr<Solver> solver_;
   std::unique_ptr<PreparedFrame> pair_first_;      // the last solved pair's first frame
   std::unique_ptr<PreparedFrame> previous_frame_;  // the next pair's first frame
   std::unique_ptr<Result> last_result_;            // the prior of the next pair (only while it ends at previous_frame_)
   std::map<int, SegmentTrack> tracks_;
-  long pairs_solved_ = 0, resets_ = 0;
+  long pairs_solved_ = 0, resets_ = 0, backend_fallbacks_ = 0;
 };
 
 std::string toString(SequenceStep::Outcome outcome);

@@ -18,6 +18,8 @@
 
 namespace mc_flow {
 
+class SolveBackend;
+
 /// @brief One rigid part. The twist and transform map frame-1 points to where they are in frame 2
 /// (camera optical frame of frame 1), over the frame interval (not per second).
 struct Segment {
@@ -95,6 +97,10 @@ class Solver {
   /// @brief Validates the config (throws ConfigError) and resolves the backend (throws BackendError
   /// when CUDA is forced but unusable).
   explicit Solver(const Config& config);
+  /// @brief With a backend made by the caller instead of from Config::backend (SequencePipeline's
+  /// SolveBackendFactory, e.g. one with an injected fault); `backend_note` becomes Result::backend_note.
+  /// Throws ConfigError for a bad config or a null backend.
+  Solver(const Config& config, std::unique_ptr<SolveBackend> backend, std::string backend_note);
   ~Solver();
   Solver(const Solver&) = delete;
   Solver& operator=(const Solver&) = delete;

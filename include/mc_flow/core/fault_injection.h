@@ -1,0 +1,46 @@
+/**
+ * @file fault_injection.h
+ * @brief A test hook: a SolveBackend that forwards every stage to another one and fails once, in the middle of a
+ * chosen solve, the way a GPU fault surfaces (BackendError out of a stage). SequencePipeline takes such a backend
+ * through its SolveBackendFactory, or wraps its first backend in one when the environment variable
+ * MCFLOW_INJECT_BACKEND_FAULT is set, so that the nodelet, `mcflow run-seq` and the soak benchmark can be driven
+ * into their GPU-fault path on any machine. docs/TESTING.md, "GPU faults".
+ */
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace mc_flow {
+
+class SolveBackend;
+
+/// @brief Where an injected fault strikes and what it does there.
+struct BackendFault {
+  /// The backend's solve it strikes in, 1-based, counted by its loadPyramids calls (one per solve attempt).
+  long solve = 1;
+  /// The first call of this stage within that solve fails (a name of backendFaultStages()).
+  std::string stage = "labelStep";
+  /// What happens in place of the stage call: empty = throw BackendError("injected fault: ..."). Another action
+  /// may make a real fault (a CUDA test poisons the context) and return; the stage then runs into it.
+  std::function<void(const std::string& stage)> action;
+};
+
+/// @brief The stage names a BackendFault can name: every SolveBackend and LabelStore operation.
+const std::vector<std::string>& backendFaultStages();
+
+/// @brief `backend` with `fault` injected (the fault strikes once). Throws ConfigError for solve < 1, an unknown
+/// stage or a null backend.
+std::unique_ptr<SolveBackend> withBackendFault(std::unique_ptr<SolveBackend> backend, BackendFault fault);
+
+/// @brief Parses "SOLVE" or "SOLVE:STAGE" (e.g. "3" or "3:motionAccumulator"); throws ConfigError naming the text.
+BackendFault parseBackendFault(const std::string& text);
+
+/// @brief The fault MCFLOW_INJECT_BACKEND_FAULT asks for (parseBackendFault of its value), nothing when it is unset
+/// or empty; throws ConfigError when it is malformed.
+std::optional<BackendFault> backendFaultFromEnvironment();
+
+}  // namespace mc_flow

@@ -1,0 +1,158 @@
+// The backend-fault test hook: a forwarding SolveBackend that fails once, in the middle of a chosen solve.
+#include "mc_flow/core/fault_injection.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <utility>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/solve_backend.h"
+
+namespace mc_flow {
+
+namespace {
+
+// Every operation forwards to the wrapped backend; a stage operation first calls strike(name). The cheap
+// queries (kind, labelLevel, labelCount) are not stages: they never reach the device.
+class FaultInjectingBackend final : public SolveBackend {
+ public:
+  FaultInjectingBackend(std::unique_ptr<SolveBackend> inner, BackendFault fault)
+      : inner_(std::move(inner)), fault_(std::move(fault)) {}
+
+  Backend kind() const override { return inner_->kind(); }
+
+  void loadPyramids(const Pyramid& frame1, const Pyramid& frame2, const Config& config) override {
+    ++solves_;
+    strike("loadPyramids");
+    inner_->loadPyramids(frame1, frame2, config);
+  }
+  void initialiseLabels(int level, const ImageI32& hard, int motion_labels) override {
+    strike("initialiseLabels");
+    inner_->initialiseLabels(level, hard, motion_labels);
+  }
+  int labelLevel() const override { return inner_->labelLevel(); }
+  void moveLabels(int level) override {
+    strike("moveLabels");
+    inner_->moveLabels(level);
+  }
+  MotionAccumulator& motionAccumulator(int level, MotionLabels which, bool use_occlusion,
+                                       const Config& config) override {
+    strike("motionAccumulator");
+    return inner_->motionAccumulator(level, which, use_occlusion, config);
+  }
+  void updateOcclusion(const std::vector<Vector6d>& twists, const Config& config) override {
+    strike("updateOcclusion");
+    inner_->updateOcclusion(twists, config);
+  }
+  LabelStepStats labelStep(const std::vector<Vector6d>& twists, bool use_occlusion, int iterations, double tolerance,
+                           const Config& config) override {
+    strike("labelStep");
+    return inner_->labelStep(twists, use_occlusion, iterations, tolerance, config);
+  }
+  SoftLabels downloadLabels() override {
+    strike("downloadLabels");
+    return inner_->downloadLabels();
+  }
+
+  int labelCount() const override { return inner_->labelCount(); }
+  std::vector<double> supports() override {
+    strike("supports");
+    return inner_->supports();
+  }
+  void remap(const std::vector<int>& target, int new_count) override {
+    strike("remap");
+    inner_->remap(target, new_count);
+  }
+  std::vector<LabelMoments> ownedMoments() override {
+    strike("ownedMoments");
+    return inner_->ownedMoments();
+  }
+  CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
+                     const Config& config) override {
+    strike("trialCuts");
+    return inner_->trialCuts(cuts, twists, use_occlusion, config);
+  }
+  void applyCuts(const std::vector<LabelCut>& cuts) override {
+    strike("applyCuts");
+    inner_->applyCuts(cuts);
+  }
+  LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
+    strike("costModel");
+    return inner_->costModel(twists, use_occlusion, config);
+  }
+
+ private:
+  void strike(const char* stage) {
+    if (struck_ || solves_ != fault_.solve || fault_.stage != stage) return;
+    struck_ = true;
+    if (fault_.action) {
+      fault_.action(stage);
+      return;
+    }
+    throw BackendError("injected fault in stage " + std::string(stage) + " of solve " + std::to_string(solves_) +
+                       " of the " + toString(inner_->kind()) + " backend (MCFLOW_INJECT_BACKEND_FAULT test hook)");
+  }
+
+  std::unique_ptr<SolveBackend> inner_;
+  BackendFault fault_;
+  long solves_ = 0;
+  bool struck_ = false;
+};
+
+}  // namespace
+
+const std::vector<std::string>& backendFaultStages() {
+  static const std::vector<std::string> stages{
+      "loadPyramids", "initialiseLabels", "moveLabels", "motionAccumulator", "updateOcclusion",
+      "labelStep",    "downloadLabels",   "supports",   "remap",             "ownedMoments",
+      "trialCuts",    "applyCuts",        "costModel"};
+  return stages;
+}
+
+namespace {
+
+// Empty when the fault can be injected, else why not.
+std::string faultProblem(const BackendFault& fault) {
+  if (fault.solve < 1) return "solve " + std::to_string(fault.solve) + " is invalid: solves count from 1";
+  const std::vector<std::string>& stages = backendFaultStages();
+  if (std::find(stages.begin(), stages.end(), fault.stage) != stages.end()) return "";
+  std::string names;
+  for (const std::string& s : stages) names += (names.empty() ? "" : ", ") + s;
+  return "unknown stage '" + fault.stage + "' (stages: " + names + ")";
+}
+
+}  // namespace
+
+std::unique_ptr<SolveBackend> withBackendFault(std::unique_ptr<SolveBackend> backend, BackendFault fault) {
+  if (!backend) throw ConfigError("injected fault: the backend given is null");
+  const std::string problem = faultProblem(fault);
+  if (!problem.empty()) throw ConfigError("injected fault: " + problem);
+  return std::make_unique<FaultInjectingBackend>(std::move(backend), std::move(fault));
+}
+
+BackendFault parseBackendFault(const std::string& text) {
+  const std::string bad = "backend fault '" + text + "' is invalid: expected SOLVE or SOLVE:STAGE (e.g. 3 or 3:labelStep)";
+  const std::size_t colon = text.find(':');
+  const std::string number = text.substr(0, colon);
+  if (number.empty() || number.size() > 9 ||
+      !std::all_of(number.begin(), number.end(), [](char c) { return c >= '0' && c <= '9'; }))
+    throw ConfigError(bad);
+  BackendFault fault;
+  fault.solve = std::stol(number);
+  if (colon != std::string::npos) fault.stage = text.substr(colon + 1);
+  const std::string problem = faultProblem(fault);
+  if (!problem.empty()) throw ConfigError(bad + ": " + problem);
+  return fault;
+}
+
+std::optional<BackendFault> backendFaultFromEnvironment() {
+  const char* value = std::getenv("MCFLOW_INJECT_BACKEND_FAULT");
+  if (!value || !*value) return std::nullopt;
+  try {
+    return parseBackendFault(value);
+  } catch (const ConfigError& e) {
+    throw ConfigError(std::string("MCFLOW_INJECT_BACKEND_FAULT: ") + e.what());
+  }
+}
+
+}  // namespace mc_flow

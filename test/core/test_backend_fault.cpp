@@ -1,0 +1,151 @@
+// GPU faults in the middle of a stream, on any machine: a backend fault injected through the pipeline's
+// SolveBackendFactory or MCFLOW_INJECT_BACKEND_FAULT (fault_injection.h) moves the stream to the CPU once, and
+// the stream goes on there. test/cuda/test_backend_fault_cuda.cpp does the same with a real CUDA fault.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/fault_injection.h"
+#include "mc_flow/core/sequence.h"
+#include "mc_flow/core/solve_backend.h"
+#include "mc_flow/core/solver.h"
+#include "mc_flow/testing/synthetic_scene.h"
+#include "fault_stream.h"
+
+namespace mc_flow {
+namespace {
+
+using test::runStream;
+using test::StreamRun;
+
+constexpr int kWidth = 96, kHeight = 72;
+
+
+// Sets an environment variable for the scope of a test.
+class ScopedEnvironment {
+ public:
+  ScopedEnvironment(const char* name, const char* value) : name_(name) { setenv(name, value, 1); }
+  ~ScopedEnvironment() { unsetenv(name_); }
+  ScopedEnvironment(const ScopedEnvironment&) = delete;
+  ScopedEnvironment& operator=(const ScopedEnvironment&) = delete;
+
+ private:
+  const char* name_;
+};
+
+TEST(BackendFault, AFaultMidStreamMovesTheStreamToTheCpuOnceAndItGoesOn) {
+  Config config;
+  config.backend = Backend::Cuda;  // what the GPU machine runs; the factory stands in for the CUDA backend
+  std::vector<Backend> requested;
+  BackendFault fault;
+  fault.solve = 3;
+  fault.stage = "labelStep";
+  SequencePipeline pipeline(config, 1, 0.5, [&](Backend backend, std::string* note) {
+    requested.push_back(backend);
+    *note = "test";
+    std::unique_ptr<SolveBackend> cpu = makeCpuSolveBackend();
+    return backend == Backend::Cuda ? withBackendFault(std::move(cpu), fault) : std::move(cpu);
+  });
+  const StreamRun run = runStream(pipeline, 8, kWidth, kHeight);
+
+  // Frames 1 and 2 are solved (solves 1 and 2; a warm pair that is re-solved cold takes two solves, so the
+  // fault may come one pair early, never later than frame 3).
+  const int fault_frame = run.fallbackFrame();
+  ASSERT_GE(fault_frame, 2) << "exactly one step reports the fallback, after at least one solved pair";
+  ASSERT_LE(fault_frame, 3);
+  EXPECT_NE(run.fallbacks[fault_frame].find("injected fault in stage labelStep of solve 3"), std::string::npos)
+      << run.fallbacks[fault_frame];
+  EXPECT_EQ(run.outcomes[fault_frame], SequenceStep::Outcome::PairFailed);
+  for (int t = 1; t < fault_frame; ++t) EXPECT_EQ(run.outcomes[t], SequenceStep::Outcome::Solved) << "frame " << t;
+
+  // One fallback, one CPU backend made for it, and every later pair solved there, without a new warning.
+  EXPECT_EQ(pipeline.backendFallbacks(), 1);
+  EXPECT_EQ(requested, (std::vector<Backend>{Backend::Cuda, Backend::Cpu}));
+  EXPECT_EQ(pipeline.solver().config().backend, Backend::Cpu);
+  for (int t = fault_frame + 1; t < 8; ++t) {
+    EXPECT_EQ(run.outcomes[t], SequenceStep::Outcome::Solved) << "frame " << t;
+    EXPECT_TRUE(run.fallbacks[t].empty()) << "frame " << t << ": " << run.fallbacks[t];
+    EXPECT_EQ(run.backends[t], Backend::Cpu) << "frame " << t;
+    EXPECT_EQ(run.notes[t], "cpu (fallback: the cpu backend failed)") << "frame " << t;
+  }
+  EXPECT_EQ(run.notes[1], "test");
+  // The stream continues from the failed pair's second frame, without a prior, then warm again.
+  EXPECT_EQ(run.first_frames[fault_frame + 1], fault_frame);
+  EXPECT_EQ(run.starts[fault_frame + 1], StartKind::Cold);
+  EXPECT_EQ(run.starts[fault_frame + 2], StartKind::Warm);
+}
+
+TEST(BackendFault, TheEnvironmentHookFaultsThePipelinesFirstBackendOnly) {
+  ScopedEnvironment hook("MCFLOW_INJECT_BACKEND_FAULT", "2:motionAccumulator");
+  Config config;
+  config.backend = Backend::Cpu;
+  SequencePipeline pipeline(config, 1, 0.5);
+  const StreamRun run = runStream(pipeline, 6, kWidth, kHeight);
+  const int fault_frame = run.fallbackFrame();
+  ASSERT_GE(fault_frame, 1);
+  EXPECT_NE(run.fallbacks[fault_frame].find("injected fault in stage motionAccumulator of solve 2"), std::string::npos)
+      << run.fallbacks[fault_frame];
+  EXPECT_EQ(pipeline.backendFallbacks(), 1);
+  for (int t = fault_frame + 1; t < 6; ++t) EXPECT_EQ(run.outcomes[t], SequenceStep::Outcome::Solved) << "frame " << t;
+
+  // A second pipeline in the same process reads the variable again: the hook is per pipeline.
+  SequencePipeline second(config, 1, 0.5);
+  EXPECT_EQ(runStream(second, 6, kWidth, kHeight).fallbackFrame(), fault_frame);
+}
+
+TEST(BackendFault, MalformedHookValuesAreRefusedByName) {
+  Config config;
+  for (const char* bad : {"x", "0", "-1", "3:", "3:noSuchStage", ":labelStep"}) {
+    ScopedEnvironment hook("MCFLOW_INJECT_BACKEND_FAULT", bad);
+    try {
+      SequencePipeline pipeline(config, 1, 0.5);
+      ADD_FAILURE() << "'" << bad << "' was accepted";
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string("'") + bad + "'"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("MCFLOW_INJECT_BACKEND_FAULT"), std::string::npos) << e.what();
+    }
+  }
+  const BackendFault parsed = parseBackendFault("12:trialCuts");
+  EXPECT_EQ(parsed.solve, 12);
+  EXPECT_EQ(parsed.stage, "trialCuts");
+  EXPECT_EQ(parseBackendFault("4").stage, "labelStep");
+  EXPECT_THROW(withBackendFault(nullptr, BackendFault{}), ConfigError);
+}
+
+TEST(BackendFault, TheFaultingBackendForwardsEveryStageUnchanged) {
+  // With an action that does not throw, the wrapped backend must give the plain backend's results bit for bit
+  // (every stage forwarded with its arguments), and the action runs once, in the named solve.
+  SyntheticSceneOptions o;
+  o.width = kWidth;
+  o.height = kHeight;
+  o.variant = 1;
+  const SyntheticPair pair = renderSyntheticPair(o);
+  Config config;
+  config.backend = Backend::Cpu;
+  config.threads = 1;
+  std::vector<std::string> struck;
+  BackendFault fault;
+  fault.solve = 2;
+  fault.stage = "remap";
+  fault.action = [&](const std::string& stage) { struck.push_back(stage); };
+  Solver plain(config);
+  Solver wrapped(config, withBackendFault(makeCpuSolveBackend(), fault), "wrapped");
+  for (int solve = 1; solve <= 3; ++solve) {
+    const Result a = plain.solve(pair.frame1, pair.frame2, pair.intrinsics);
+    const Result b = wrapped.solve(pair.frame1, pair.frame2, pair.intrinsics);
+    EXPECT_EQ(struck.size(), solve >= 2 ? 1u : 0u) << "after solve " << solve;
+    ASSERT_EQ(a.segments.size(), b.segments.size());
+    EXPECT_EQ(a.labels.data, b.labels.data);
+    EXPECT_EQ(a.soft_labels.data, b.soft_labels.data);
+    EXPECT_EQ(a.energy, b.energy);
+    EXPECT_EQ(b.backend_note, "wrapped");
+  }
+  EXPECT_EQ(struck, std::vector<std::string>{"remap"});
+  EXPECT_THROW(Solver(config, nullptr, ""), ConfigError);
+}
+
+}  // namespace
+}  // namespace mc_flow
