@@ -86,6 +86,80 @@ __device__ __forceinline__ void transformPointDevice(const float T[12], const fl
   }
 }
 
+/// @brief Frame 1's point P at pixel `idx` moved by its interpolated motion (warpPoints of src/core/scene_flow.cpp),
+/// in double: the labels' mean twist by the motion-label weights of `u` (`plane` values per label), a single
+/// label's own transform where only one has mass, the largest label's where (almost) none has. `motions` holds
+/// 18 doubles per motion label (the twist, then rows 0..2 of its exp).
+__device__ __forceinline__ void warpPointDevice(const float P[3], const float* __restrict__ u, std::size_t plane,
+                                                std::size_t idx, int motion_labels, const double* __restrict__ motions,
+                                                double Q[3]) {
+  constexpr double kMinMotionMass = 1e-3;  // as src/core/scene_flow.cpp
+  Q[0] = P[0];
+  Q[1] = P[1];
+  Q[2] = P[2];
+  const int m = motion_labels;
+  if (m <= 0) return;
+  double mass = 0, xi[6] = {0, 0, 0, 0, 0, 0};
+  int nonzero = 0, last = 0;
+  for (int i = 0; i < m; ++i) {
+    const double v = u[i * plane + idx];
+    if (v == 0.0) continue;
+    mass += v;
+    for (int c = 0; c < 6; ++c) xi[c] += v * motions[18 * i + c];
+    ++nonzero;
+    last = i;
+  }
+  double T[12];
+  const double* transform = T;
+  if (mass < kMinMotionMass) {
+    int label = 0;  // the motion label with the largest value, the lowest index on ties
+    for (int i = 1; i < m; ++i)
+      if (u[i * plane + idx] > u[label * plane + idx]) label = i;
+    transform = motions + 18 * label + 6;
+  } else if (nonzero == 1) {
+    transform = motions + 18 * last + 6;
+  } else {
+    for (int c = 0; c < 6; ++c) xi[c] /= mass;
+    se3ExpRowsDevice(xi, T);
+  }
+  for (int r = 0; r < 3; ++r)
+    Q[r] = transform[4 * r] * double(P[0]) + transform[4 * r + 1] * double(P[1]) + transform[4 * r + 2] * double(P[2]) +
+           transform[4 * r + 3];
+}
+
+/// @brief The 18 doubles per motion label that warpPointDevice reads: the twist, then rows 0..2 of its exp.
+void packMotions(const std::vector<Vector6d>& twists, double* out);
+
+// ---------------------------------------------------------------- pyramid (pyramid.cu)
+/// @brief One frame's images at one pyramid level on the device; `points` or the gradients may be null (not
+/// built). Level 0 holds the input intensity and raw depth before launchBuildPyramid.
+struct DevicePyramidLevel {
+  int width = 0, height = 0;
+  Intrinsics intrinsics;
+  float* intensity = nullptr;
+  float* depth = nullptr;           // [m], 0 = invalid
+  float* points = nullptr;          // 3 channels, NaN where depth is invalid
+  float* intensity_grad = nullptr;  // 2 channels
+  float* depth_grad = nullptr;      // 2 channels
+};
+/// @brief buildPyramid of one frame whose input sits in levels[0]: cleans the depth, then builds every coarser
+/// level and each level's points and gradients where asked; `valid_counts` (one int per level, or null) gets the
+/// valid pixels per level.
+void launchBuildPyramid(const std::vector<DevicePyramidLevel>& levels, const Config& config, int* valid_counts,
+                        cudaStream_t stream);
+
+// ---------------------------------------------------------------- outputs (scene_flow.cu)
+/// @brief The per-pixel outputs at level 0: pixels without a valid point go to the outlier label in `u` (in
+/// place); every point is warped by its interpolated motion; scene flow (3 channels), optical flow (2), moved
+/// depth and the argmax ids (1..m, 0 = outlier or no depth) are written; NaN where undefined.
+void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, const double* motions,
+                            const Intrinsics& K, float* scene_flow, float* optical_flow, float* moved_depth,
+                            int* ids, cudaStream_t stream);
+/// @brief labelCentroids: per motion label the u-weighted sums of the valid points and of u (4 doubles:
+/// x, y, z, weight), in a fixed order.
+void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels, double* out,
+                             cudaStream_t stream);
+
 // ---------------------------------------------------------------- motion step (motion_estimation.cu)
 /// @brief The motion step's accumulator on device-resident data (no uploads but the twists).
 class DeviceMotionAccumulator : public MotionAccumulator {

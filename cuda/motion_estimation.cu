@@ -42,13 +42,9 @@ namespace mc_flow {
 
 namespace {
 
-using cuda_detail::addRn;
 using cuda_detail::DeviceBuffer;
 using cuda_detail::DeviceImage;
 using cuda_detail::PinnedBuffer;
-using cuda_detail::divRn;
-using cuda_detail::mulRn;
-using cuda_detail::subRn;
 
 constexpr int kMaxMotionLabels = 128;  // as the CUDA label step's kMaxLabels; Config allows 64 (max_labels)
 constexpr int kThreads = 256;          // one pixel per thread; warps span consecutive pixels of a row

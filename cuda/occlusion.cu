@@ -15,7 +15,6 @@ namespace cuda_detail {
 namespace {
 
 constexpr int kThreads = 256;
-constexpr double kMinMotionMass = 1e-3;  // as src/core/scene_flow.cpp
 
 struct OcclusionParams {
   DeviceLevel level;
@@ -40,36 +39,8 @@ __global__ void warpKernel(const OcclusionParams q, long long* __restrict__ targ
     targets[idx] = -2;
     return;
   }
-  const int m = q.count - 1;
-  double Q[3] = {P[0], P[1], P[2]};
-  if (m > 0) {
-    double mass = 0, xi[6] = {0, 0, 0, 0, 0, 0};
-    int nonzero = 0, last = 0;
-    for (int i = 0; i < m; ++i) {
-      const double v = q.u[i * plane + idx];
-      if (v == 0.0) continue;
-      mass += v;
-      for (int c = 0; c < 6; ++c) xi[c] += v * q.motions[18 * i + c];
-      ++nonzero;
-      last = i;
-    }
-    double T[12];
-    const double* transform = T;
-    if (mass < kMinMotionMass) {
-      int label = 0;  // the motion label with the largest value, the lowest index on ties
-      for (int i = 1; i < m; ++i)
-        if (q.u[i * plane + idx] > q.u[label * plane + idx]) label = i;
-      transform = q.motions + 18 * label + 6;
-    } else if (nonzero == 1) {
-      transform = q.motions + 18 * last + 6;
-    } else {
-      for (int c = 0; c < 6; ++c) xi[c] /= mass;
-      se3ExpRowsDevice(xi, T);
-    }
-    for (int r = 0; r < 3; ++r)
-      Q[r] = transform[4 * r] * double(P[0]) + transform[4 * r + 1] * double(P[1]) + transform[4 * r + 2] * double(P[2]) +
-             transform[4 * r + 3];
-  }
+  double Q[3];
+  warpPointDevice(P, q.u, plane, idx, q.count - 1, q.motions, Q);
   const float Qf[3] = {float(Q[0]), float(Q[1]), float(Q[2])};
   warped_z[idx] = Qf[2];
   long long target = -1;

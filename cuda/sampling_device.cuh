@@ -1,22 +1,17 @@
 // Device versions of the sampling helpers of include/mc_flow/core/sampling.h for the CUDA motion step.
 //
-// Each float operation uses an explicitly rounded intrinsic (__fadd_rn, __fmul_rn, ...), which nvcc never
-// contracts into an FMA, in the order the CPU code evaluates it; the CPU build (x86-64 baseline, no FMA)
-// rounds every operation too, so a sample and the in-view decision match the CPU's bit for bit.
+// Each float operation is rounded on its own (mc_flow/core/rounded.h), in the order the CPU code evaluates
+// it, so a sample and the in-view decision match the CPU's bit for bit.
 // Included by cuda/*.cu only.
 #pragma once
 
 #include <cuda_runtime.h>
 
+#include "mc_flow/core/rounded.h"
 #include "mc_flow/core/sampling.h"
 
 namespace mc_flow {
 namespace cuda_detail {
-
-__device__ __forceinline__ float addRn(float a, float b) { return __fadd_rn(a, b); }
-__device__ __forceinline__ float subRn(float a, float b) { return __fsub_rn(a, b); }
-__device__ __forceinline__ float mulRn(float a, float b) { return __fmul_rn(a, b); }
-__device__ __forceinline__ float divRn(float a, float b) { return __fdiv_rn(a, b); }
 
 /// @brief An image on the device: row-major, `channels` interleaved floats per pixel.
 struct DeviceImage {

@@ -1,10 +1,12 @@
-// The CUDA backend of the solve's stages (src/core/solve_backend.cpp is the CPU one): the two pyramids go up
-// once per pair, and from there the labels, the dual variables, the data costs, the weights and the occlusion
-// mask live on the device until the final labels come down. Every stage runs on the backend's one stream;
-// the host reads only what a decision needs (supports, moments, normal equations, energies, counts).
+// The CUDA backend of the solve's stages (src/core/solve_backend.cpp is the CPU one): the two frames go up once
+// per pair, the pyramids are built on the device, and from there the labels, the dual variables, the data
+// costs, the weights and the occlusion mask live on the device until the outputs come down in one transfer.
+// Every stage runs on the backend's one stream; the host reads only what a decision needs (supports, moments,
+// normal equations, energies, counts, and frame 1's points at the levels K-means and the warm start use).
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -13,6 +15,7 @@
 #include "cuda_check.h"
 #include "device_stages.h"
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/solve_backend.h"
 
 namespace mc_flow {
@@ -34,7 +37,7 @@ using cuda_detail::DeviceLevel;
 using cuda_detail::PinnedBuffer;
 
 struct LevelBuffers {
-  DeviceBuffer<float> points1, intensity1, intensity2, depth2, intensity_grad2, depth_grad2;
+  DeviceBuffer<float> points1, intensity1, depth1, intensity2, depth2, intensity_grad2, depth_grad2;
 };
 
 class CudaSolveBackend final : public SolveBackend {
@@ -45,41 +48,80 @@ class CudaSolveBackend final : public SolveBackend {
 
   Backend kind() const override { return Backend::Cuda; }
 
-  void loadPyramids(const Pyramid& frame1, const Pyramid& frame2, const Config& config) override {
-    (void)config;
-    if (frame1.size() != frame2.size() || frame1.size() == 0)
-      throw InputError("loadPyramids: pyramids of " + std::to_string(frame1.size()) + " and " +
-                       std::to_string(frame2.size()) + " levels");
-    const int levels = frame1.size();
+  void buildPyramids(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, int levels,
+                     const Config& config) override {
+    const int W = frame1.width(), H = frame1.height();
+    if (levels < 1 || frame2.width() != W || frame2.height() != H || !frame1.depth.sameSize(frame1.intensity) ||
+        !frame2.depth.sameSize(frame2.intensity) || W < 1 || H < 1)
+      throw InputError("CUDA backend buildPyramids: frames " + imageSizeText(frame1.intensity) + " / " +
+                       imageSizeText(frame1.depth) + " and " + imageSizeText(frame2.intensity) + " / " +
+                       imageSizeText(frame2.depth) + ", " + std::to_string(levels) + " levels");
+    K_ = K;
     while (int(buffers_.size()) < levels) buffers_.push_back(std::make_unique<LevelBuffers>());
     levels_.assign(std::size_t(levels), DeviceLevel{});
+    std::vector<cuda_detail::DevicePyramidLevel> pyramid1(static_cast<std::size_t>(levels)),
+        pyramid2(static_cast<std::size_t>(levels));
     for (int l = 0; l < levels; ++l) {
-      const PyramidLevel& a = frame1[l];
-      const PyramidLevel& b = frame2[l];
-      const int W = a.points.width, H = a.points.height;
-      const std::size_t plane = std::size_t(W) * H;
+      const int w = pyramidLevelExtent(W, l), h = pyramidLevelExtent(H, l);
+      const std::size_t plane = std::size_t(w) * h;
       LevelBuffers& d = *buffers_[std::size_t(l)];
-      upload(d.points1, a.points.data, plane * 3);
-      upload(d.intensity1, a.intensity.data, plane);
-      upload(d.intensity2, b.intensity.data, plane);
-      upload(d.depth2, b.depth.data, plane);
-      upload(d.intensity_grad2, b.intensity_grad.data, plane * 2);
-      upload(d.depth_grad2, b.depth_grad.data, plane * 2);
+      for (DeviceBuffer<float>* b : {&d.intensity1, &d.depth1, &d.intensity2, &d.depth2}) b->reserve(plane);
+      d.points1.reserve(plane * 3);
+      d.intensity_grad2.reserve(plane * 2);
+      d.depth_grad2.reserve(plane * 2);
+      const Intrinsics Kl = K.scaled(std::ldexp(1.0, -l));
+      cuda_detail::DevicePyramidLevel& a = pyramid1[std::size_t(l)];
+      a.width = w, a.height = h, a.intrinsics = Kl;
+      a.intensity = d.intensity1.get(), a.depth = d.depth1.get(), a.points = d.points1.get();
+      cuda_detail::DevicePyramidLevel& b = pyramid2[std::size_t(l)];
+      b.width = w, b.height = h, b.intrinsics = Kl;
+      b.intensity = d.intensity2.get(), b.depth = d.depth2.get();
+      b.intensity_grad = d.intensity_grad2.get(), b.depth_grad = d.depth_grad2.get();
       DeviceLevel& v = levels_[std::size_t(l)];
-      v.width = W;
-      v.height = H;
-      v.intrinsics = a.intrinsics;
-      v.points1 = {d.points1.get(), W, H, 3};
-      v.intensity1 = {d.intensity1.get(), W, H, 1};
-      v.intensity2 = {d.intensity2.get(), W, H, 1};
-      v.depth2 = {d.depth2.get(), W, H, 1};
-      v.intensity_grad2 = {d.intensity_grad2.get(), W, H, 2};
-      v.depth_grad2 = {d.depth_grad2.get(), W, H, 2};
+      v.width = w;
+      v.height = h;
+      v.intrinsics = Kl;
+      v.points1 = {d.points1.get(), w, h, 3};
+      v.intensity1 = {d.intensity1.get(), w, h, 1};
+      v.intensity2 = {d.intensity2.get(), w, h, 1};
+      v.depth2 = {d.depth2.get(), w, h, 1};
+      v.intensity_grad2 = {d.intensity_grad2.get(), w, h, 2};
+      v.depth_grad2 = {d.depth_grad2.get(), w, h, 2};
     }
+    // The inputs go up through one page-locked staging buffer, then every level is built on the device.
+    const std::size_t plane = std::size_t(W) * H;
+    float* staged = staged_frames_.reserve(plane * 4);
+    const std::vector<float>* inputs[4] = {&frame1.intensity.data, &frame1.depth.data, &frame2.intensity.data,
+                                           &frame2.depth.data};
+    float* targets[4] = {pyramid1[0].intensity, pyramid1[0].depth, pyramid2[0].intensity, pyramid2[0].depth};
+    for (int i = 0; i < 4; ++i) {
+      std::copy_n(inputs[i]->data(), plane, staged + std::size_t(i) * plane);
+      MCFLOW_CUDA_CHECK(cudaMemcpyAsync(targets[i], staged + std::size_t(i) * plane, plane * sizeof(float),
+                                        cudaMemcpyHostToDevice, stream_.stream));
+    }
+    valid_counts_device_.reserve(std::size_t(levels));
+    cuda_detail::launchBuildPyramid(pyramid1, config, valid_counts_device_.get(), stream_.stream);
+    cuda_detail::launchBuildPyramid(pyramid2, config, nullptr, stream_.stream);
+    valid_counts_.assign(std::size_t(levels), 0);
+    download(valid_counts_.data(), valid_counts_device_.get(), std::size_t(levels), staged_ints_);
+    host_points_.assign(std::size_t(levels), ImageF());
     count_ = 0;
     level_ = 0;
     weights_level_ = -1;
   }
+
+  const ImageF& framePoints(int level) override {
+    const DeviceLevel& L = levelAt(level);
+    ImageF& points = host_points_[std::size_t(level)];
+    if (points.empty()) {
+      ImageF downloaded(L.width, L.height, 3);
+      download(downloaded.data.data(), L.points1.data, downloaded.data.size(), staged_floats_);
+      points = std::move(downloaded);
+    }
+    return points;
+  }
+
+  const std::vector<int>& validCounts() const override { return valid_counts_; }
 
   void initialiseLabels(int level, const ImageI32& hard, int motion_labels) override {
     const DeviceLevel& L = levelAt(level);
@@ -182,24 +224,14 @@ class CudaSolveBackend final : public SolveBackend {
   void updateOcclusion(const std::vector<Vector6d>& twists, const Config& config) override {
     requireTwists("updateOcclusion", twists);
     const DeviceLevel& L = levels_[std::size_t(level_)];
-    const std::size_t n = twists.size();
-    double* staged = staged_doubles_.reserve(n * 18);
-    for (std::size_t i = 0; i < n; ++i) {
-      const Eigen::Matrix4d T = se3Exp(twists[i]);
-      for (int k = 0; k < 6; ++k) staged[18 * i + std::size_t(k)] = twists[i](k);
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 4; ++c) staged[18 * i + 6 + std::size_t(r * 4 + c)] = T(r, c);
-    }
-    motions_.reserve(std::max<std::size_t>(n * 18, 1));
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(motions_.get(), staged, n * 18 * sizeof(double), cudaMemcpyHostToDevice,
-                                      stream_.stream));
+    uploadMotions(twists);
     const std::size_t p = plane();
     counts_.reserve(p);
     targets_.reserve(p);
     warped_z_.reserve(p);
     cuda_detail::launchOcclusion(L, labels(), count_, motions_.get(), config, counts_.get(), targets_.get(),
                                  warped_z_.get(), occlusion_.get(), stream_.stream);
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));  // the staging buffer is reused next
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));  // the motions' staging buffer is reused next
   }
 
   LabelStepStats labelStep(const std::vector<Vector6d>& twists, bool use_occlusion, int iterations, double tolerance,
@@ -250,6 +282,75 @@ class CudaSolveBackend final : public SolveBackend {
     out.energy = ls.energy;
     out.mean_change = *change / double(p);
     return out;
+  }
+
+  void outputs(const std::vector<Vector6d>& twists, const Config& config, Result& result) override {
+    requireTwists("outputs", twists);
+    moveLabels(0);  // carried up from the processing level; clears the occlusion mask
+    DeviceLevel L = levels_[0];
+    L.intrinsics = K_;  // the input's, as given (K.scaled(1) may differ in the last bit), as the CPU backend
+    const int W = L.width, H = L.height, n = count_ - 1;
+    const std::size_t p = plane();
+    cudaStream_t s = stream_.stream;
+    uploadMotions(twists);
+    scene_flow_.reserve(p * 3);
+    optical_flow_.reserve(p * 2);
+    moved_depth_.reserve(p);
+    ids_.reserve(p);
+    cuda_detail::launchSceneFlowOutputs(L.points1, labels(), count_, motions_.get(), K_, scene_flow_.get(),
+                                        optical_flow_.get(), moved_depth_.get(), ids_.get(), s);
+    if (config.detect_occlusions) {
+      counts_.reserve(p);
+      targets_.reserve(p);
+      warped_z_.reserve(p);
+      cuda_detail::launchOcclusion(L, labels(), count_, motions_.get(), config, counts_.get(), targets_.get(),
+                                   warped_z_.get(), occlusion_.get(), s);
+    }
+    scalar_.reserve(std::size_t(std::max(1, 5 * n)));
+    cuda_detail::launchLabelSupports(labels(), p, n, scalar_.get(), s);
+    cuda_detail::launchLabelCentroidSums(labels(), L.points1, n, scalar_.get() + n, s);
+
+    // One transfer down: every image into one page-locked buffer per type, then a single synchronisation.
+    const std::size_t label_values = p * std::size_t(count_);
+    float* floats = staged_floats_.reserve(label_values + p * 6);
+    float* const staged_labels = floats;
+    float* const staged_scene = staged_labels + label_values;
+    float* const staged_optical = staged_scene + p * 3;
+    float* const staged_moved = staged_optical + p * 2;
+    int* staged_ids = staged_ints_.reserve(p);
+    std::uint8_t* staged_occlusion = staged_bytes_.reserve(p);
+    double* staged_sums = staged_doubles_.reserve(std::size_t(std::max(1, 5 * n)));
+    auto down = [&](void* to, const void* from, std::size_t bytes) {
+      MCFLOW_CUDA_CHECK(cudaMemcpyAsync(to, from, bytes, cudaMemcpyDeviceToHost, s));
+    };
+    down(staged_labels, labels(), label_values * sizeof(float));
+    down(staged_scene, scene_flow_.get(), p * 3 * sizeof(float));
+    down(staged_optical, optical_flow_.get(), p * 2 * sizeof(float));
+    down(staged_moved, moved_depth_.get(), p * sizeof(float));
+    down(staged_ids, ids_.get(), p * sizeof(int));
+    down(staged_occlusion, occlusion_.get(), p);
+    if (n > 0) down(staged_sums, scalar_.get(), std::size_t(5 * n) * sizeof(double));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+
+    result.soft_labels = SoftLabels(W, H, count_);
+    std::copy_n(staged_labels, label_values, result.soft_labels.data.data());
+    result.scene_flow = ImageF(W, H, 3);
+    std::copy_n(staged_scene, p * 3, result.scene_flow.data.data());
+    result.optical_flow = ImageF(W, H, 2);
+    std::copy_n(staged_optical, p * 2, result.optical_flow.data.data());
+    result.moved_depth = ImageF(W, H, 1);
+    std::copy_n(staged_moved, p, result.moved_depth.data.data());
+    result.labels = ImageI32(W, H, 1);
+    std::copy_n(staged_ids, p, result.labels.data.data());
+    result.occlusion = ImageU8(W, H, 1);
+    std::copy_n(staged_occlusion, p, result.occlusion.data.data());
+    result.segments.assign(std::size_t(n), Segment());
+    for (int i = 0; i < n; ++i) {
+      Segment& segment = result.segments[std::size_t(i)];
+      segment.support = staged_sums[i];
+      const double* c = staged_sums + n + 4 * i;
+      segment.centroid = c[3] > 0 ? Eigen::Vector3d(c[0] / c[3], c[1] / c[3], c[2] / c[3]) : Eigen::Vector3d::Zero();
+    }
   }
 
   SoftLabels downloadLabels() override {
@@ -399,6 +500,16 @@ class CudaSolveBackend final : public SolveBackend {
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));  // the staging buffer is reused next
   }
 
+  // The twists and their transforms (cuda_detail::packMotions) into motions_.
+  void uploadMotions(const std::vector<Vector6d>& twists) {
+    const std::size_t n = twists.size();
+    double* staged = staged_motions_.reserve(n * 18);
+    cuda_detail::packMotions(twists, staged);
+    motions_.reserve(std::max<std::size_t>(n * 18, 1));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(motions_.get(), staged, n * 18 * sizeof(double), cudaMemcpyHostToDevice,
+                                      stream_.stream));
+  }
+
   void zeroDual(std::size_t p, int count) {
     dual_.reserve(p * std::size_t(count) * 2);
     MCFLOW_CUDA_CHECK(cudaMemsetAsync(dual_.get(), 0, p * std::size_t(count) * 2 * sizeof(float), stream_.stream));
@@ -434,9 +545,18 @@ class CudaSolveBackend final : public SolveBackend {
   PinnedBuffer<double> staged_doubles_;
   PinnedBuffer<cuda_detail::DeviceTransform> staged_transforms_;
   PinnedBuffer<unsigned long long> staged_counts_;
+  PinnedBuffer<std::uint8_t> staged_bytes_;
+  PinnedBuffer<double> staged_motions_;
+  PinnedBuffer<float> staged_frames_;
+  Intrinsics K_;
+  std::vector<int> valid_counts_;
+  DeviceBuffer<int> valid_counts_device_;
+  std::vector<ImageF> host_points_;  // frame 1's points per level, downloaded at the first request in a pair
   std::vector<std::unique_ptr<LevelBuffers>> buffers_;
   std::vector<DeviceLevel> levels_;
   DeviceBuffer<float> label_buffers_[2], level_labels_[2], before_, data_cost_, weight_x_, weight_y_, warped_z_;
+  DeviceBuffer<float> scene_flow_, optical_flow_, moved_depth_;
+  DeviceBuffer<int> ids_;
   DeviceBuffer<std::uint8_t> occlusion_, level_occlusion_, outlier_only_;
   DeviceBuffer<float> dual_;
   DeviceBuffer<double> scalar_, motions_, cuts_;

@@ -13,7 +13,7 @@ namespace mc_flow {
 namespace {
 
 // Every operation forwards to the wrapped backend; a stage operation first calls strike(name). The cheap
-// queries (kind, labelLevel, labelCount) are not stages: they never reach the device.
+// queries (kind, labelLevel, labelCount, validCounts) are not stages: they never reach the device.
 class FaultInjectingBackend final : public SolveBackend {
  public:
   FaultInjectingBackend(std::unique_ptr<SolveBackend> inner, BackendFault fault)
@@ -21,11 +21,17 @@ class FaultInjectingBackend final : public SolveBackend {
 
   Backend kind() const override { return inner_->kind(); }
 
-  void loadPyramids(const Pyramid& frame1, const Pyramid& frame2, const Config& config) override {
+  void buildPyramids(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, int levels,
+                     const Config& config) override {
     ++solves_;
-    strike("loadPyramids");
-    inner_->loadPyramids(frame1, frame2, config);
+    strike("buildPyramids");
+    inner_->buildPyramids(frame1, frame2, K, levels, config);
   }
+  const ImageF& framePoints(int level) override {
+    strike("framePoints");
+    return inner_->framePoints(level);
+  }
+  const std::vector<int>& validCounts() const override { return inner_->validCounts(); }
   void initialiseLabels(int level, const ImageI32& hard, int motion_labels) override {
     strike("initialiseLabels");
     inner_->initialiseLabels(level, hard, motion_labels);
@@ -52,6 +58,10 @@ class FaultInjectingBackend final : public SolveBackend {
   SoftLabels downloadLabels() override {
     strike("downloadLabels");
     return inner_->downloadLabels();
+  }
+  void outputs(const std::vector<Vector6d>& twists, const Config& config, Result& result) override {
+    strike("outputs");
+    inner_->outputs(twists, config, result);
   }
 
   int labelCount() const override { return inner_->labelCount(); }
@@ -103,9 +113,9 @@ class FaultInjectingBackend final : public SolveBackend {
 
 const std::vector<std::string>& backendFaultStages() {
   static const std::vector<std::string> stages{
-      "loadPyramids", "initialiseLabels", "moveLabels", "motionAccumulator", "updateOcclusion",
-      "labelStep",    "downloadLabels",   "supports",   "remap",             "ownedMoments",
-      "trialCuts",    "applyCuts",        "costModel"};
+      "buildPyramids", "framePoints", "initialiseLabels", "moveLabels", "motionAccumulator", "updateOcclusion",
+      "labelStep",     "downloadLabels", "outputs",        "supports",   "remap",             "ownedMoments",
+      "trialCuts",     "applyCuts",      "costModel"};
   return stages;
 }
 

@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/pyramid_pixel.h"
 
 namespace mc_flow {
 
@@ -13,16 +14,6 @@ namespace {
 // Every pyramid step halves with integer division: output pixel i covers input pixels 2i and 2i+1, so its
 // centre sits at input coordinate 2i + 0.5, which is exactly what Intrinsics::scaled(0.5) assumes.
 int halved(int n) { return std::max(1, n / 2); }
-
-constexpr float kIntensityGradientEps = 1e-6f;  // docs/ALGORITHM.md, 'Gradients' (the PD-Flow blend)
-constexpr float kDepthGradientEps = 0.005f;     // [m]
-
-// One-dimensional blended derivative at a pixel from its backward (f0 - fm) and forward (fp - f0) differences.
-inline float blend(float backward, float forward, float eps) {
-  const float r_back = std::fabs(backward) + eps, r_fwd = std::fabs(forward) + eps;
-  // Each difference is weighted by the other's magnitude, so the smaller difference dominates.
-  return (r_back * forward + r_fwd * backward) / (r_back + r_fwd);
-}
 
 }  // namespace
 
@@ -43,29 +34,34 @@ int pyramidLevelCount(int width, int height, int coarsest_min_width) {
   return levels;
 }
 
+int pyramidLevelExtent(int n, int level) {
+  for (int l = 0; l < level; ++l) n = halved(n);
+  return n;
+}
+
 ImageF downsampleIntensity(const ImageF& image) {
   if (image.empty()) throw InputError("downsampleIntensity: empty image");
   const int w = image.width, h = image.height, ow = halved(w), oh = halved(h), c = image.channels;
-  const float k[4] = {1.f / 8, 3.f / 8, 3.f / 8, 1.f / 8};
   ImageF horizontal(ow, h, c);
   ImageF out(ow, oh, c);
+  // The two passes of pyramid_pixel::downsampledIntensity, each pixel once.
 #pragma omp parallel
   {
 #pragma omp for schedule(static)
     for (int y = 0; y < h; ++y)
-      for (int x = 0; x < ow; ++x)
-        for (int ch = 0; ch < c; ++ch) {
-          float s = 0;
-          for (int t = 0; t < 4; ++t) s += k[t] * image(std::clamp(2 * x - 1 + t, 0, w - 1), y, ch);
-          horizontal(x, y, ch) = s;
-        }
+      for (int ch = 0; ch < c; ++ch) {
+        const auto at = [&](int xi, int yi) { return image(xi, yi, ch); };
+        for (int x = 0; x < ow; ++x) horizontal(x, y, ch) = pyramid_pixel::downsampleRow(at, w, x, y);
+      }
 #pragma omp for schedule(static)
     for (int y = 0; y < oh; ++y)
       for (int x = 0; x < ow; ++x)
         for (int ch = 0; ch < c; ++ch) {
-          float s = 0;
-          for (int t = 0; t < 4; ++t) s += k[t] * horizontal(x, std::clamp(2 * y - 1 + t, 0, h - 1), ch);
-          out(x, y, ch) = s;
+          const auto at = [&](int xi, int yi) { return horizontal(xi, yi, ch); };
+          out(x, y, ch) = pyramid_pixel::filter1331(at(x, pyramid_pixel::clampIndex(2 * y - 1, h)),
+                                                    at(x, pyramid_pixel::clampIndex(2 * y, h)),
+                                                    at(x, pyramid_pixel::clampIndex(2 * y + 1, h)),
+                                                    at(x, pyramid_pixel::clampIndex(2 * y + 2, h)));
         }
   }
   return out;
@@ -75,44 +71,12 @@ ImageF downsampleDepth(const ImageF& depth, double range) {
   if (depth.empty()) throw InputError("downsampleDepth: empty image");
   if (depth.channels != 1) throw InputError("downsampleDepth: " + std::to_string(depth.channels) + " channels, expected 1");
   const int w = depth.width, h = depth.height, ow = halved(w), oh = halved(h);
-  const float k[4] = {1.f, 3.f, 3.f, 1.f};
   const float max_diff = float(range);
+  const auto at = [&](int x, int y) { return depth(x, y); };
   ImageF out(ow, oh, 1, 0.f);
 #pragma omp parallel for schedule(static)
-  for (int y = 0; y < oh; ++y) {
-    for (int x = 0; x < ow; ++x) {
-      // Reference depth: the lower median of the valid values of the central 2x2 block. An actual sample
-      // (never the mean of two) so that a block straddling an edge picks one side instead of a phantom depth.
-      float centre[4];
-      int n = 0;
-      for (int dy = 0; dy < 2; ++dy)
-        for (int dx = 0; dx < 2; ++dx) {
-          const int xi = std::min(2 * x + dx, w - 1), yi = std::min(2 * y + dy, h - 1);
-          const float z = depth(xi, yi);
-          if (isValidDepth(z)) centre[n++] = z;
-        }
-      if (n == 0) continue;
-      std::sort(centre, centre + n);
-      const float reference = centre[(n - 1) / 2];
-
-      float sum_w = 0, sum_z = 0;
-      for (int t = 0; t < 4; ++t) {
-        const int yi = 2 * y - 1 + t;
-        if (yi < 0 || yi >= h) continue;
-        for (int s = 0; s < 4; ++s) {
-          const int xi = 2 * x - 1 + s;
-          if (xi < 0 || xi >= w) continue;
-          const float z = depth(xi, yi);
-          if (!isValidDepth(z) || std::fabs(z - reference) > max_diff) continue;
-          const float weight = k[t] * k[s];
-          sum_w += weight;
-          sum_z += weight * z;
-        }
-      }
-      // The reference itself always passes, so sum_w > 0 here.
-      out(x, y) = sum_z / sum_w;
-    }
-  }
+  for (int y = 0; y < oh; ++y)
+    for (int x = 0; x < ow; ++x) out(x, y) = pyramid_pixel::downsampledDepth(at, w, h, x, y, max_diff);
   return out;
 }
 
@@ -123,20 +87,15 @@ ImageF backProject(const ImageF& depth, const Intrinsics& K) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const double inv_fx = 1.0 / K.fx, inv_fy = 1.0 / K.fy;
 #pragma omp parallel for schedule(static)
-  for (int y = 0; y < h; ++y) {
-    const float ry = float((y - K.cy) * inv_fy);
+  for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const float z = depth(x, y);
       float* p = &points(x, y, 0);
-      if (!isValidDepth(z)) {
+      if (isValidDepth(z))
+        pyramid_pixel::backProjectPixel(z, x, y, K.cx, K.cy, inv_fx, inv_fy, p);
+      else
         p[0] = p[1] = p[2] = nan;
-        continue;
-      }
-      p[0] = z * float((x - K.cx) * inv_fx);
-      p[1] = z * ry;
-      p[2] = z;
     }
-  }
   return points;
 }
 
@@ -146,29 +105,11 @@ ImageF blendedGradient(const ImageF& f, const ImageF* validity_source, float eps
     throw InputError("blendedGradient: validity source size differs from the image");
   const int w = f.width, h = f.height;
   ImageF grad(w, h, 2, 0.f);
-  auto valid = [&](int x, int y) { return !validity_source || isValidDepth((*validity_source)(x, y)); };
+  const auto at = [&](int x, int y) { return f(x, y); };
+  const auto usable = [&](int x, int y) { return !validity_source || isValidDepth((*validity_source)(x, y)); };
 #pragma omp parallel for schedule(static)
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      if (!valid(x, y)) continue;
-      const float f0 = f(x, y);
-      // Along each axis: blend both one-sided differences when both neighbours are usable, else the one left.
-      for (int axis = 0; axis < 2; ++axis) {
-        const int xm = axis == 0 ? x - 1 : x, ym = axis == 0 ? y : y - 1;
-        const int xp = axis == 0 ? x + 1 : x, yp = axis == 0 ? y : y + 1;
-        const bool has_m = xm >= 0 && ym >= 0 && valid(xm, ym);
-        const bool has_p = xp < w && yp < h && valid(xp, yp);
-        float d = 0.f;
-        if (has_m && has_p)
-          d = blend(f0 - f(xm, ym), f(xp, yp) - f0, eps);
-        else if (has_m)
-          d = f0 - f(xm, ym);
-        else if (has_p)
-          d = f(xp, yp) - f0;
-        grad(x, y, axis) = d;
-      }
-    }
-  }
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) pyramid_pixel::blendedGradientAt(at, usable, w, h, x, y, eps, &grad(x, y, 0));
   return grad;
 }
 
@@ -189,8 +130,7 @@ Pyramid buildPyramid(const RgbdFrame& frame, const Intrinsics& K, int levels, co
   float* z = base.depth.ptr();
   const long n = long(base.depth.data.size());
 #pragma omp parallel for schedule(static)
-  for (long i = 0; i < n; ++i)
-    if (!(std::isfinite(z[i]) && z[i] >= min_depth && z[i] <= max_depth)) z[i] = 0.f;
+  for (long i = 0; i < n; ++i) z[i] = pyramid_pixel::cleanDepth(z[i], min_depth, max_depth);
 
   for (int l = 0; l < levels; ++l) {
     PyramidLevel& level = pyramid.levels[std::size_t(l)];
@@ -201,8 +141,8 @@ Pyramid buildPyramid(const RgbdFrame& frame, const Intrinsics& K, int levels, co
     }
     level.intrinsics = K.scaled(std::ldexp(1.0, -l));
     level.points = backProject(level.depth, level.intrinsics);
-    level.intensity_grad = blendedGradient(level.intensity, nullptr, kIntensityGradientEps);
-    level.depth_grad = blendedGradient(level.depth, &level.depth, kDepthGradientEps);
+    level.intensity_grad = blendedGradient(level.intensity, nullptr, pyramid_pixel::kIntensityGradientEps);
+    level.depth_grad = blendedGradient(level.depth, &level.depth, pyramid_pixel::kDepthGradientEps);
   }
   return pyramid;
 }

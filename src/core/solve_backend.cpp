@@ -60,13 +60,13 @@ class CpuSolveBackend final : public SolveBackend {
 
   Backend kind() const override { return Backend::Cpu; }
 
-  void loadPyramids(const Pyramid& frame1, const Pyramid& frame2, const Config& config) override {
-    if (frame1.size() != frame2.size() || frame1.size() == 0)
-      throw InputError("loadPyramids: pyramids of " + std::to_string(frame1.size()) + " and " +
-                       std::to_string(frame2.size()) + " levels");
-    pyr1_ = &frame1;
-    pyr2_ = &frame2;
-    (void)config;
+  void buildPyramids(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, int levels,
+                     const Config& config) override {
+    K_ = K;
+    pyramid1_ = buildPyramid(frame1, K, levels, config);
+    pyramid2_ = buildPyramid(frame2, K, levels, config);
+    valid_counts_.clear();
+    for (int l = 0; l < levels; ++l) valid_counts_.push_back(pyramid1_[l].validCount());
     u_ = SoftLabels();
     level_ = 0;
     occlusion_ = ImageU8();
@@ -75,7 +75,7 @@ class CpuSolveBackend final : public SolveBackend {
   }
 
   void initialiseLabels(int level, const ImageI32& hard, int motion_labels) override {
-    const PyramidLevel& L = (*pyr1_)[level];
+    const PyramidLevel& L = pyramid1_[level];
     validateHardLabels(hard, motion_labels, L.points.width, L.points.height);
     u_ = SoftLabels(L.points.width, L.points.height, motion_labels + 1, 0.f);
     for (std::size_t k = 0; k < hard.data.size(); ++k) {
@@ -87,10 +87,13 @@ class CpuSolveBackend final : public SolveBackend {
     dual_ = LabelDual();
   }
 
+  const ImageF& framePoints(int level) override { return levelOf(pyramid1_, level).points; }
+  const std::vector<int>& validCounts() const override { return valid_counts_; }
+
   int labelLevel() const override { return level_; }
 
   void moveLabels(int level) override {
-    u_ = labelsAtLevel(u_, level_, level, *pyr1_);
+    u_ = labelsAtLevel(u_, level_, level, pyramid1_);
     level_ = level;
     occlusion_ = ImageU8(u_.width, u_.height, 1, 0);
     dual_ = LabelDual();
@@ -98,32 +101,32 @@ class CpuSolveBackend final : public SolveBackend {
 
   MotionAccumulator& motionAccumulator(int level, MotionLabels which, bool use_occlusion,
                                        const Config& config) override {
-    const PyramidLevel& P = (*pyr1_)[level];
+    const PyramidLevel& P = pyramid1_[level];
     if (which == MotionLabels::AllValidAsOne) {
       level_labels_ = SoftLabels(P.points.width, P.points.height, 2, 0.f);
       for (std::size_t k = 0; k < level_labels_.planeSize(); ++k)
         level_labels_.plane(std::isfinite(P.points.data[k * 3 + 2]) ? 0 : 1)[k] = 1.f;
     } else {
-      level_labels_ = labelsAtLevel(u_, level_, level, *pyr1_);
+      level_labels_ = labelsAtLevel(u_, level_, level, pyramid1_);
     }
     if (use_occlusion) level_occlusion_ = resampleMask(occlusion_, P.points.width, P.points.height);
-    accumulator_->setLevel(P, (*pyr2_)[level], level_labels_, use_occlusion ? &level_occlusion_ : nullptr, config);
+    accumulator_->setLevel(P, pyramid2_[level], level_labels_, use_occlusion ? &level_occlusion_ : nullptr, config);
     return *accumulator_;
   }
 
   void updateOcclusion(const std::vector<Vector6d>& twists, const Config& config) override {
-    const PyramidLevel& L = (*pyr1_)[level_];
-    occlusion_ = detectOcclusions(warpPoints(L.points, u_, twists), (*pyr2_)[level_].depth, L.intrinsics, config);
+    const PyramidLevel& L = pyramid1_[level_];
+    occlusion_ = detectOcclusions(warpPoints(L.points, u_, twists), pyramid2_[level_].depth, L.intrinsics, config);
   }
 
   LabelStepStats labelStep(const std::vector<Vector6d>& twists, bool use_occlusion, int iterations, double tolerance,
                            const Config& config) override {
-    const PyramidLevel& L = (*pyr1_)[level_];
+    const PyramidLevel& L = pyramid1_[level_];
     if (weights_level_ != level_) {
       geometricWeights(L, config.min_geometric_weight, problem_.weight_x, problem_.weight_y);
       weights_level_ = level_;
     }
-    computeDataCosts(L, (*pyr2_)[level_], twists, use_occlusion ? &occlusion_ : nullptr, config, problem_);
+    computeDataCosts(L, pyramid2_[level_], twists, use_occlusion ? &occlusion_ : nullptr, config, problem_);
     const SoftLabels before = u_;
     const LabelStats ls = optimizer_->optimize(problem_, u_, dual_, iterations, tolerance);
     LabelStepStats out;
@@ -136,6 +139,38 @@ class CpuSolveBackend final : public SolveBackend {
   }
 
   SoftLabels downloadLabels() override { return u_; }
+
+  void outputs(const std::vector<Vector6d>& twists, const Config& config, Result& result) override {
+    if (int(twists.size()) != u_.count - 1)
+      throw InputError("CPU backend outputs: " + std::to_string(twists.size()) + " twists for " +
+                       std::to_string(u_.count - 1) + " motion labels");
+    const PyramidLevel& F0 = pyramid1_[0];
+    const int W = F0.points.width, H = F0.points.height;
+    result.soft_labels = level_ == 0 ? u_ : labelsAtLevel(u_, level_, 0, pyramid1_);
+    // Pixels without depth belong to the outlier label whatever the upsampling blended in.
+    const int outlier = result.soft_labels.outlier();
+    for (std::size_t k = 0; k < result.soft_labels.planeSize(); ++k)
+      if (!std::isfinite(F0.points.data[k * 3 + 2]))
+        for (int i = 0; i < result.soft_labels.count; ++i) result.soft_labels.plane(i)[k] = i == outlier ? 1.f : 0.f;
+    const ImageF warped = warpPoints(F0.points, result.soft_labels, twists);
+    sceneAndOpticalFlow(F0.points, warped, K_, result.scene_flow, result.optical_flow);
+    result.moved_depth = ImageF(W, H, 1);
+    for (std::size_t k = 0; k < result.moved_depth.data.size(); ++k) result.moved_depth.data[k] = warped.data[k * 3 + 2];
+    result.occlusion = config.detect_occlusions ? detectOcclusions(warped, pyramid2_[0].depth, K_, config)
+                                                : ImageU8(W, H, 1, 0);
+    const ImageI32 argmax = result.soft_labels.argmax();
+    result.labels = ImageI32(W, H, 1, 0);
+    for (std::size_t k = 0; k < argmax.data.size(); ++k) {
+      const int a = argmax.data[k];
+      result.labels.data[k] = (a == outlier || !std::isfinite(F0.points.data[k * 3 + 2])) ? 0 : a + 1;
+    }
+    const std::vector<Eigen::Vector3d> centroids = labelCentroids(result.soft_labels, F0.points);
+    result.segments.assign(twists.size(), Segment());
+    for (std::size_t i = 0; i < twists.size(); ++i) {
+      result.segments[i].support = result.soft_labels.support(int(i));
+      result.segments[i].centroid = centroids[i];
+    }
+  }
 
   // ---- LabelStore: the host store over the current labels
   int labelCount() const override { return u_.count; }
@@ -160,13 +195,21 @@ class CpuSolveBackend final : public SolveBackend {
 
  private:
   HostLabelStore store() {
-    return HostLabelStore(u_, (*pyr1_)[level_], (*pyr2_)[level_], &occlusion_, accumulator_.get());
+    return HostLabelStore(u_, pyramid1_[level_], pyramid2_[level_], &occlusion_, accumulator_.get());
   }
 
   std::unique_ptr<MotionAccumulator> accumulator_;
   std::unique_ptr<LabelOptimizer> optimizer_;
-  const Pyramid* pyr1_ = nullptr;
-  const Pyramid* pyr2_ = nullptr;
+  static const PyramidLevel& levelOf(const Pyramid& pyramid, int level) {
+    if (level < 0 || level >= pyramid.size())
+      throw InputError("CPU backend: pyramid level " + std::to_string(level) + " outside [0, " +
+                       std::to_string(pyramid.size()) + ")");
+    return pyramid[level];
+  }
+
+  Intrinsics K_;  // the input's, as given (level 0's are K.scaled(1), which may differ in the last bit)
+  Pyramid pyramid1_, pyramid2_;
+  std::vector<int> valid_counts_;
   SoftLabels u_, level_labels_;
   int level_ = 0;
   ImageU8 occlusion_, level_occlusion_;

@@ -59,9 +59,8 @@ class ThreadCountScope {
 
 namespace {
 
-// The pyramids and the levels a solve works at.
+// The levels a solve works at (the pyramids themselves live in the backend).
 struct Prepared {
-  Pyramid pyr1, pyr2;
   int width = 0, height = 0;  // input
   int levels = 0, finest = 0, label_level = 0, kmeans_level = 0, valid_label_level = 0;
 };
@@ -102,7 +101,8 @@ struct Solver::Impl {
   }
 
   Result run(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous);
-  Prepared prepare(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K) const;
+  // Checks the input, picks the levels and has the backend build both pyramids.
+  Prepared prepare(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K);
   // A result with the sizes, levels and backend of a solve filled in.
   Result emptyResult(const Prepared& p, const Intrinsics& K) const;
   Start coldStart(const Prepared& p, Result& result);
@@ -140,7 +140,7 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
   return impl_->run(frame1, frame2, K, &previous);
 }
 
-Prepared Solver::Impl::prepare(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K) const {
+Prepared Solver::Impl::prepare(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K) {
   K.validate();
   frame1.validate("frame1");
   frame2.validate("frame2");
@@ -156,13 +156,13 @@ Prepared Solver::Impl::prepare(const RgbdFrame& frame1, const RgbdFrame& frame2,
     throw ConfigError("processing_level = " + std::to_string(config.processing_level) + " but a " +
                       std::to_string(p.width) + "x" + std::to_string(p.height) + " input has only " +
                       std::to_string(p.levels) + " pyramid levels");
-  p.pyr1 = buildPyramid(frame1, K, p.levels, config);
-  p.pyr2 = buildPyramid(frame2, K, p.levels, config);
+  backend->buildPyramids(frame1, frame2, K, p.levels, config);
   p.finest = config.processing_level;
   p.label_level = std::min(p.levels - 1, p.finest + config.label_level_offset);
   p.kmeans_level = std::min(p.levels - 1, p.label_level + config.kmeans_level_offset);
-  p.valid_label_level = p.pyr1[p.label_level].validCount();
-  if (p.pyr1[p.finest].validCount() == 0 || p.valid_label_level == 0)
+  const std::vector<int>& valid = backend->validCounts();
+  p.valid_label_level = valid[std::size_t(p.label_level)];
+  if (valid[std::size_t(p.finest)] == 0 || p.valid_label_level == 0)
     throw InputError("frame1: no depth within [min_depth, max_depth] = [" + std::to_string(config.min_depth) + ", " +
                      std::to_string(config.max_depth) + "] m");
   return p;
@@ -177,9 +177,9 @@ Result Solver::Impl::emptyResult(const Prepared& p, const Intrinsics& K) const {
   result.backend = toString(result.backend_kind);
   result.backend_note = backend_note;
   result.pyramid_levels = p.levels;
-  result.processing_width = p.pyr1[p.finest].points.width;
-  result.processing_height = p.pyr1[p.finest].points.height;
-  result.valid_pixels = p.pyr1[p.finest].validCount();
+  result.processing_width = pyramidLevelExtent(p.width, p.finest);
+  result.processing_height = pyramidLevelExtent(p.height, p.finest);
+  result.valid_pixels = backend->validCounts()[std::size_t(p.finest)];
   return result;
 }
 
@@ -189,16 +189,15 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   auto t = Clock::now();
   const Prepared p = prepare(frame1, frame2, K);
   Result result = emptyResult(p, K);
-  backend->loadPyramids(p.pyr1, p.pyr2, config);
   result.timings.preprocessing = elapsedMs(t);
 
   // Stream mode: the previous pair's segments on this frame 1 (for the warm start, or only for the ids).
   ImageI32 carried_ids, carried_dormant;
   if (previous) {
     t = Clock::now();
-    carried_ids = carrySegmentIds(*previous, p.pyr1[0].points, config.warm_depth_tolerance);
+    carried_ids = carrySegmentIds(*previous, backend->framePoints(0), config.warm_depth_tolerance);
     if (!previous->dormant_ids.empty())
-      carried_dormant = carryIds(previous->dormant_regions, *previous, p.pyr1[0].points, config.warm_depth_tolerance);
+      carried_dormant = carryIds(previous->dormant_regions, *previous, backend->framePoints(0), config.warm_depth_tolerance);
     result.timings.initialisation += elapsedMs(t);
   }
 
@@ -206,7 +205,7 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
 
   if (previous && config.warm_start) {
     t = Clock::now();
-    CarriedLabels carried = carriedLabelsAtLevel(carried_ids, p.pyr1[p.label_level].points, 1 << p.label_level);
+    CarriedLabels carried = carriedLabelsAtLevel(carried_ids, backend->framePoints(p.label_level), 1 << p.label_level);
     result.timings.initialisation += elapsedMs(t);
     if (carried.coverage() < config.warm_min_coverage) {
       result.start = StartKind::ColdFallback;
@@ -251,14 +250,14 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
 Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
   // K-means on 3D points at a coarse level (a few hundred points, on the host), assigned at the label level.
   const auto t = Clock::now();
-  KMeansResult kmeans = kmeansPoints(p.pyr1[p.kmeans_level].points, config.initial_labels, config.kmeans_max_iterations,
-                                     config.kmeans_tolerance, config.seed);
+  KMeansResult kmeans = kmeansPoints(backend->framePoints(p.kmeans_level), config.initial_labels,
+                                     config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
   if (kmeans.centres.empty())
-    kmeans = kmeansPoints(p.pyr1[p.label_level].points, config.initial_labels, config.kmeans_max_iterations,
+    kmeans = kmeansPoints(backend->framePoints(p.label_level), config.initial_labels, config.kmeans_max_iterations,
                           config.kmeans_tolerance, config.seed);
   Start start;
   start.motion_labels = std::max(1, int(kmeans.centres.size()));
-  start.hard = assignToNearestCentre(p.pyr1[p.label_level].points, kmeans.centres);
+  start.hard = assignToNearestCentre(backend->framePoints(p.label_level), kmeans.centres);
   backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
   // Every label starts from the dominant motion (one label over all valid pixels, coarse to fine down to the
   // label level): with a moving camera all labels then start near the truth, and a small segment that is
@@ -300,7 +299,7 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
   // Pixels no carried segment covers (new surfaces, parts entering the view): K-means among them alone, as
   // many clusters as their share of the initial labels; too few of them stay with the outlier label, which
   // the label step hands to their neighbours.
-  const ImageF& points = p.pyr1[p.label_level].points;
+  const ImageF& points = backend->framePoints(p.label_level);
   const int uncovered = carried.valid - carried.covered;
   const double min_new = std::max(32.0, config.min_support_fraction * double(carried.valid));
   if (uncovered >= min_new) {
@@ -401,19 +400,15 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
 
   // ---- final label step at the processing level (also when that is the label level: labels removed in the
   // last update handed their pixels to the outlier label, and only a label step gives them back)
-  SoftLabels u_final;
-  {
-    t = Clock::now();
-    labels.moveLabels(finest);
-    if (occlusions) labels.updateOcclusion(twists, config);
-    result.timings.occlusion += elapsedMs(t);
-    t = Clock::now();
-    const LabelStepStats ls =
-        labels.labelStep(twists, occlusions, start.label_iterations_final, config.label_tolerance, config);
-    result.energy = ls.energy;
-    u_final = labels.downloadLabels();
-    result.timings.labels += elapsedMs(t);
-  }
+  t = Clock::now();
+  labels.moveLabels(finest);
+  if (occlusions) labels.updateOcclusion(twists, config);
+  result.timings.occlusion += elapsedMs(t);
+  t = Clock::now();
+  const LabelStepStats final_step =
+      labels.labelStep(twists, occlusions, start.label_iterations_final, config.label_tolerance, config);
+  result.energy = final_step.energy;
+  result.timings.labels += elapsedMs(t);
 
   // Segments are numbered 1..m here; a stream solve gives them persistent ids afterwards (assignStreamIds).
   result.next_id = int(twists.size()) + 1;
@@ -422,37 +417,12 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
 
   // ---- outputs at the input resolution
   t = Clock::now();
-  const PyramidLevel& F0 = p.pyr1[0];
-  result.soft_labels = finest == 0 ? u_final : upsampleLabels(u_final, result.width, result.height);
-  // Pixels without depth belong to the outlier label whatever the upsampling blended in.
-  for (int y = 0; y < result.height; ++y)
-    for (int x = 0; x < result.width; ++x)
-      if (!std::isfinite(F0.points(x, y, 2)))
-        for (int i = 0; i < result.soft_labels.count; ++i)
-          result.soft_labels.at(i, x, y) = i == result.soft_labels.outlier() ? 1.f : 0.f;
-  const ImageF warped = warpPoints(F0.points, result.soft_labels, twists);
-  sceneAndOpticalFlow(F0.points, warped, result.intrinsics, result.scene_flow, result.optical_flow);
-  result.moved_depth = ImageF(result.width, result.height, 1, std::numeric_limits<float>::quiet_NaN());
-  for (std::size_t k = 0; k < result.moved_depth.data.size(); ++k) result.moved_depth.data[k] = warped.data[k * 3 + 2];
-  result.occlusion = config.detect_occlusions ? detectOcclusions(warped, p.pyr2[0].depth, result.intrinsics, config)
-                                              : ImageU8(result.width, result.height, 1, 0);
-  const ImageI32 argmax = result.soft_labels.argmax();
-  result.labels = ImageI32(result.width, result.height, 1, 0);
-  for (std::size_t i = 0; i < argmax.data.size(); ++i) {
-    const int a = argmax.data[i];
-    result.labels.data[i] =
-        (a == result.soft_labels.outlier() || !std::isfinite(F0.points.data[i * 3 + 2])) ? 0 : a + 1;
-  }
-  const std::vector<Eigen::Vector3d> centroids = labelCentroids(result.soft_labels, F0.points);
-  result.segments.clear();
-  for (int i = 0; i < result.soft_labels.count - 1; ++i) {
-    Segment s;
-    s.id = i + 1;
-    s.twist = twists[std::size_t(i)];
+  labels.outputs(twists, config, result);
+  for (std::size_t i = 0; i < result.segments.size(); ++i) {
+    Segment& s = result.segments[i];
+    s.id = int(i) + 1;
+    s.twist = twists[i];
     s.transform = se3Exp(s.twist);
-    s.support = result.soft_labels.support(i);
-    s.centroid = centroids[std::size_t(i)];
-    result.segments.push_back(s);
   }
   result.timings.outputs += elapsedMs(t);
 }

@@ -45,6 +45,17 @@ TEST(Pyramid, BuildsLevelsOfHalvedSizeAndScaledIntrinsics) {
   }
 }
 
+TEST(Pyramid, LevelExtentIsTheBuiltLevelSize) {
+  const Config config;
+  const Pyramid p = buildPyramid(planeFrame(317, 239, 2.f), kCamera, 5, config);
+  for (int l = 0; l < p.size(); ++l) {
+    EXPECT_EQ(pyramidLevelExtent(317, l), p[l].points.width) << "level " << l;
+    EXPECT_EQ(pyramidLevelExtent(239, l), p[l].points.height) << "level " << l;
+  }
+  EXPECT_EQ(pyramidLevelExtent(317, 3), 39);  // 317 158 79 39
+  EXPECT_EQ(pyramidLevelExtent(1, 4), 1);     // never below one pixel
+}
+
 TEST(Pyramid, IntrinsicsScalingKeepsProjectionsConsistent) {
   // The same 3D point must project onto the same physical spot: x_l = (x_0 + 0.5) / 2^l - 0.5.
   const Eigen::Vector3d point(0.37, -0.21, 1.9);

@@ -20,7 +20,7 @@ class SolveBackend;
 
 /// @brief Where an injected fault strikes and what it does there.
 struct BackendFault {
-  /// The backend's solve it strikes in, 1-based, counted by its loadPyramids calls (one per solve attempt).
+  /// The backend's solve it strikes in, 1-based, counted by its buildPyramids calls (one per solve attempt).
   long solve = 1;
   /// The first call of this stage within that solve fails (a name of backendFaultStages()).
   std::string stage = "labelStep";

@@ -32,6 +32,10 @@ struct Pyramid {
 /// @brief Number of levels so that the coarsest is at least `coarsest_min_width` wide (>= 1).
 int pyramidLevelCount(int width, int height, int coarsest_min_width);
 
+/// @brief Width (or height) of pyramid level `level` for an input `n` pixels wide (or high): halved `level`
+/// times with integer division (an odd last column or row is dropped), at least 1.
+int pyramidLevelExtent(int n, int level);
+
 /// @brief Halves an intensity image with a separable [1 3 3 1]/8 kernel (clamped borders).
 ImageF downsampleIntensity(const ImageF& image);
 

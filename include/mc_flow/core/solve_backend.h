@@ -5,9 +5,11 @@
  * images (src/core/solve_backend.cpp), the CUDA backend in device buffers (cuda/solve_backend.cu) that
  * stay there from the upload of the pyramids to the download of the final labels.
  *
- * The host only takes the decisions (which labels merge or split, the Levenberg-Marquardt steps,
- * convergence) from small numbers the backend returns: per-label supports and moments, the normal
- * equations of the motion step, energies. Design and status: docs/GPU.md, "Stage-level backend".
+ * The frames go in once (buildPyramids) and the outputs come out once (outputs). In between the host only
+ * takes the decisions (which labels merge or split, the Levenberg-Marquardt steps, convergence) from small
+ * numbers the backend returns: per-label supports and moments, the normal equations of the motion step,
+ * energies, and frame 1's points at the coarse levels K-means and the carried segments need. Design and
+ * status: docs/GPU.md, "Stage-level backend".
  */
 #pragma once
 
@@ -23,6 +25,7 @@
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/se3.h"
 #include "mc_flow/core/soft_labels.h"
+#include "mc_flow/core/solver.h"
 
 namespace mc_flow {
 
@@ -45,9 +48,17 @@ class SolveBackend : public LabelStore {
   ~SolveBackend() override = default;
   virtual Backend kind() const = 0;
 
-  /// @brief Takes both frames' pyramids for the solve (the CUDA backend uploads every level once).
-  /// They must outlive the solve. Resets the labels, the occlusion mask and the dual variables.
-  virtual void loadPyramids(const Pyramid& frame1, const Pyramid& frame2, const Config& config) = 0;
+  /// @brief Builds both frames' pyramids (`levels` levels, the rules of pyramid.h) where the backend computes:
+  /// the CPU backend in host images, the CUDA backend on the device from one upload of each frame. Resets the
+  /// labels, the occlusion mask and the dual variables.
+  virtual void buildPyramids(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, int levels,
+                             const Config& config) = 0;
+  /// @brief Frame 1's points (3 channels, NaN where depth is invalid) at `level` in host memory, for the host's
+  /// decisions (K-means, carried segments); the CUDA backend downloads a level at its first request in a pair.
+  /// Valid until the next buildPyramids.
+  virtual const ImageF& framePoints(int level) = 0;
+  /// @brief Frame 1's valid pixels (depth within [min_depth, max_depth]) per level.
+  virtual const std::vector<int>& validCounts() const = 0;
 
   /// @brief Hard initial labels at `level` (K-means' assignment or labels carried from the previous pair):
   /// `hard` holds a motion label in [0, motion_labels) per pixel, or -1 for the outlier label; pixels
@@ -75,6 +86,12 @@ class SolveBackend : public LabelStore {
 
   /// @brief The current labels (at the label level) in host memory.
   virtual SoftLabels downloadLabels() = 0;
+
+  /// @brief Outputs at the input resolution, from the current labels carried to level 0: fills `result`'s
+  /// soft_labels (pixels without depth on the outlier label), labels (argmax id 1..m, 0 = outlier or no
+  /// depth), scene_flow, optical_flow, moved_depth, occlusion (all 0 unless detect_occlusions) and one Segment
+  /// per motion label with its support and centroid (id, twist and transform are the caller's).
+  virtual void outputs(const std::vector<Vector6d>& twists, const Config& config, Result& result) = 0;
 };
 
 /// @brief Checks initial hard labels (size, values in [-1, motion_labels), motion_labels >= 1); throws
