@@ -14,12 +14,13 @@
 // upper triangle of the symmetric 6x6 block only), and, when it has several active labels, to the
 // off-diagonal blocks of each label pair (symmetric too: 21 values).
 //  - Per label: each warp walks the labels present in it in ascending order and reduces the contributions
-//    of the lanes holding the current label with shuffles; the warps of a block add their sums into shared
-//    memory one warp after the other; each block writes its sums to its own slot, and a second kernel adds
-//    the slots in block order (one warp per value, fixed lane partition, shuffle tree).
+//    of the lanes holding the current label with shuffles into its own region of shared memory (all warps at
+//    once; where the regions of eight warps do not fit, warps share a region and take turns); the regions
+//    are added in warp order, each block writes its sums to its own slot, and a second kernel adds the slots
+//    in block order (one warp per value, fixed lane partition, shuffle tree).
 //  - Label pairs (blended pixels only): the per-pixel kernel stores the mass-weighted 6x6 upper triangle of
-//    the blended pixels; a pair kernel (one block per pair) sums w_a w_b times it over the image in a fixed
-//    order.
+//    the blended pixels and flags them; the flagged pixels are compacted in ascending order (CUB), and a
+//    pair kernel (one block per pair) sums w_a w_b times it over that list in a fixed order.
 #include <cuda_runtime.h>
 
 #include <Eigen/Core>
@@ -30,6 +31,8 @@
 #include <memory>
 #include <string>
 #include <vector>
+
+#include <cub/device/device_select.cuh>
 
 #include "cuda_check.h"
 #include "mc_flow/core/error.h"
@@ -72,6 +75,7 @@ struct KernelParams {
   const std::uint8_t* occluded = nullptr;  // may be null
   const LabelMotion* motions = nullptr;
   int width = 0, height = 0, motion_labels = 0;
+  int sum_regions = kWarps;  // shared-memory regions of the per-label sums (a divisor of kWarps)
   float fx = 0, fy = 0, cx = 0, cy = 0;
   float c_intensity = 0, c_depth = 0, alpha = 0, min_weight = 0;
   double out_of_view_cost = 0;
@@ -80,6 +84,8 @@ struct KernelParams {
   float* blended_hessian = nullptr;  // kUpper planes: mass * Hp of the blended pixels
   float* active_mass = nullptr;      // per pixel: sum of the active labels' weights (blended pixels)
   float* mass = nullptr;             // per pixel: motion-label mass (blended pixels)
+  const int* blended_list = nullptr;   // the blended pixels in ascending order (compacted after the pixel pass)
+  const int* blended_count = nullptr;  // their number
 };
 
 // ----------------------------------------------------------------- SE(3) in double (as src/core/se3.cpp)
@@ -179,10 +185,12 @@ __device__ __forceinline__ int warpMin(int v) {
 }
 
 __global__ void __launch_bounds__(kThreads) accumulateNormalEquations(const KernelParams p) {
-  extern __shared__ double block_sums[];  // motion_labels * kLabelStride, then cost, pixels
+  // sum_regions regions of block_values each: motion_labels * kLabelStride, then cost, pixels
+  extern __shared__ double block_sums[];
   const int n = p.motion_labels;
   const int block_values = n * kLabelStride + 2;
-  for (int k = threadIdx.x; k < block_values; k += blockDim.x) block_sums[k] = 0.0;
+  const int regions = p.sum_regions;
+  for (int k = threadIdx.x; k < regions * block_values; k += blockDim.x) block_sums[k] = 0.0;
   __syncthreads();
 
   const std::size_t plane = std::size_t(p.width) * p.height;
@@ -319,14 +327,15 @@ __global__ void __launch_bounds__(kThreads) accumulateNormalEquations(const Kern
       warpSum(!valid ? 0.0 : in_view ? double(mass) * cost : double(mass) * p.out_of_view_cost);
   const double total_pixels = warpSum(in_view ? 1.0 : 0.0);
 
-  // Per-label sums: the warps take turns (a fixed order of the shared-memory additions); a warp visits the
-  // labels its lanes hold, in ascending order.
+  // Per-label sums: each warp into its region; warps sharing a region take turns (a fixed order of the
+  // shared-memory additions). A warp visits the labels its lanes hold, in ascending order.
   const int warp = threadIdx.x >> 5;
-  for (int turn = 0; turn < kWarps; ++turn) {
-    if (warp == turn) {  // warp-uniform: whole warps enter, so the shuffles see all 32 lanes
+  double* region = block_sums + (warp % regions) * block_values;
+  for (int turn = 0; turn < kWarps / regions; ++turn) {
+    if (warp / regions == turn) {  // warp-uniform: whole warps enter, so the shuffles see all 32 lanes
       if (lane == 0) {
-        block_sums[n * kLabelStride] += total_cost;
-        block_sums[n * kLabelStride + 1] += total_pixels;
+        region[n * kLabelStride] += total_cost;
+        region[n * kLabelStride + 1] += total_pixels;
       }
       int cursor = valid ? first : n;
       for (int label = warpMin(cursor); label < n; label = warpMin(cursor)) {
@@ -337,7 +346,7 @@ __global__ void __launch_bounds__(kThreads) accumulateNormalEquations(const Kern
           w_float = divRn(rawWeight(p, plane, idx, label, mass), active_mass);
           w = double(w_float);
         }
-        double* sums = block_sums + label * kLabelStride;
+        double* sums = region + label * kLabelStride;
         const double ww = w * w;
 #pragma unroll
         for (int k = 0; k < kUpper; ++k) {
@@ -363,7 +372,16 @@ __global__ void __launch_bounds__(kThreads) accumulateNormalEquations(const Kern
     __syncthreads();
   }
   double* partial = p.block_partials + std::size_t(blockIdx.x) * block_values;
-  for (int k = threadIdx.x; k < block_values; k += blockDim.x) partial[k] = block_sums[k];
+  for (int k = threadIdx.x; k < block_values; k += blockDim.x) {
+    double sum = 0.0;
+    for (int r = 0; r < regions; ++r) sum += block_sums[r * block_values + k];
+    partial[k] = sum;
+  }
+}
+
+__global__ void pixelIndicesKernel(int* __restrict__ indices, int count) {
+  const int i = int(blockIdx.x * blockDim.x + threadIdx.x);
+  if (i < count) indices[i] = i;
 }
 
 // Adds the blocks' partial sums in block order: one warp per value, lane l takes blocks l, l + 32, ...
@@ -393,8 +411,9 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
   double acc[kUpper];
 #pragma unroll
   for (int k = 0; k < kUpper; ++k) acc[k] = 0.0;
-  for (std::size_t idx = threadIdx.x; idx < plane; idx += blockDim.x) {
-    if (!p.blended[idx]) continue;
+  const int blended = *p.blended_count;
+  for (int j = threadIdx.x; j < blended; j += blockDim.x) {
+    const std::size_t idx = std::size_t(p.blended_list[j]);
     const float mass = p.mass[idx];
     const float wa_raw = rawWeight(p, plane, idx, a, mass), wb_raw = rawWeight(p, plane, idx, b, mass);
     if (!(wa_raw >= p.min_weight && wb_raw >= p.min_weight)) continue;
@@ -431,6 +450,10 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
  public:
   /// `stream` null: the accumulator's own stream.
   explicit CudaMotionAccumulator(cudaStream_t stream) {
+    int device = 0, optin = 0;
+    MCFLOW_CUDA_CHECK(cudaGetDevice(&device));
+    MCFLOW_CUDA_CHECK(cudaDeviceGetAttribute(&optin, cudaDevAttrMaxSharedMemoryPerBlockOptin, device));
+    max_shared_bytes_ = std::size_t(std::max(optin, 48 * 1024));
     if (stream) {
       stream_ = stream;
     } else {
@@ -575,7 +598,24 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     p.active_mass = active_mass_.get();
     p.mass = mass_.get();
 
-    const std::size_t shared_bytes = block_values * sizeof(double);
+    // One shared-memory region per warp where they fit (the warps then reduce at once), else shared regions.
+    const std::size_t region_bytes = block_values * sizeof(double);
+    int regions = kWarps;
+    while (regions > 1 && std::size_t(regions) * region_bytes > max_shared_bytes_) regions /= 2;
+    const std::size_t shared_bytes = std::size_t(regions) * region_bytes;
+    if (shared_bytes > max_shared_bytes_)
+      throw BackendError("CUDA motion step: " + std::to_string(n) + " motion labels need " +
+                         std::to_string(shared_bytes) + " bytes of shared memory, the device allows " +
+                         std::to_string(max_shared_bytes_));
+    if (shared_bytes > shared_bytes_allowed_) {
+      MCFLOW_CUDA_CHECK(cudaFuncSetAttribute(accumulateNormalEquations, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                             int(shared_bytes)));
+      shared_bytes_allowed_ = shared_bytes;
+    }
+    p.sum_regions = regions;
+    if (pairs > 0) prepareBlendedList(plane);
+    p.blended_list = blended_list_.get();
+    p.blended_count = blended_count_.get();
     accumulateNormalEquations<<<blocks, kThreads, shared_bytes, s>>>(p);
     MCFLOW_CUDA_CHECK_LAUNCH("accumulateNormalEquations");
     const unsigned reduce_blocks = unsigned((block_values * 32 + kThreads - 1) / kThreads);
@@ -583,6 +623,9 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
                                                           sums_.get());
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
     if (pairs > 0) {
+      std::size_t temp_bytes = select_temp_bytes_;
+      MCFLOW_CUDA_CHECK(cub::DeviceSelect::Flagged(select_temp_.get(), temp_bytes, pixel_indices_.get(), blended_.get(),
+                                                   blended_list_.get(), blended_count_.get(), int(plane), s));
       accumulatePairs<<<unsigned(pairs), kThreads, 0, s>>>(p, sums_.get() + block_values);
       MCFLOW_CUDA_CHECK_LAUNCH("accumulatePairs");
     }
@@ -621,6 +664,24 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   }
 
  private:
+  // The pixel indices 0..plane-1, the compaction's output and its scratch, grown to `plane` pixels.
+  void prepareBlendedList(std::size_t plane) {
+    if (plane > indexed_pixels_) {
+      pixel_indices_.reserve(plane);
+      blended_list_.reserve(plane);
+      pixelIndicesKernel<<<unsigned((plane + kThreads - 1) / kThreads), kThreads, 0, stream_>>>(pixel_indices_.get(),
+                                                                                               int(plane));
+      MCFLOW_CUDA_CHECK_LAUNCH("pixelIndicesKernel");
+      std::size_t bytes = 0;
+      MCFLOW_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, pixel_indices_.get(), blended_.get(),
+                                                   blended_list_.get(), blended_count_.get(), int(plane)));
+      select_temp_.reserve(std::max<std::size_t>(bytes, 1));
+      select_temp_bytes_ = std::max(select_temp_bytes_, bytes);
+      indexed_pixels_ = plane;
+    }
+    blended_count_.reserve(1);
+  }
+
   template <typename T>
   void upload(T* device, const T* host, std::size_t count) {
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(device, host, count * sizeof(T), cudaMemcpyHostToDevice, stream_));
@@ -638,6 +699,10 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   DeviceBuffer<std::uint8_t> occluded_, blended_;
   DeviceBuffer<LabelMotion> motions_;
   DeviceBuffer<double> sums_, partials_;
+  DeviceBuffer<int> pixel_indices_, blended_list_, blended_count_;
+  DeviceBuffer<unsigned char> select_temp_;
+  std::size_t select_temp_bytes_ = 0, indexed_pixels_ = 0;
+  std::size_t max_shared_bytes_ = 48 * 1024, shared_bytes_allowed_ = 48 * 1024;
   PinnedBuffer<LabelMotion> host_motions_;
   PinnedBuffer<double> host_sums_;
 };
