@@ -4,13 +4,20 @@
 
 #include <cuda_runtime.h>
 
+#include <atomic>
 #include <cstddef>
+#include <cstdint>
 #include <string>
 
 #include "mc_flow/core/error.h"
 
 namespace mc_flow {
 namespace cuda_detail {
+
+/// Kernel launches of this process (every launch site checks with MCFLOW_CUDA_CHECK_LAUNCH, which counts it;
+/// a CUB algorithm call counts as one, MCFLOW_CUDA_CHECK_CUB), and the device and page-locked allocations
+/// of the grow-only buffers. Read by cudaCounters().
+inline std::atomic<std::uint64_t> kernel_launches{0}, device_allocations{0}, pinned_allocations{0};
 
 /// @brief Throws BackendError naming the call, the place and the CUDA error when `status` is not cudaSuccess.
 inline void check(cudaError_t status, const char* what, const char* file, int line) {
@@ -38,6 +45,7 @@ class DeviceBuffer {
     data_ = nullptr;
     capacity_ = 0;
     check(cudaMalloc(reinterpret_cast<void**>(&data_), count * sizeof(T)), "cudaMalloc", __FILE__, __LINE__);
+    device_allocations.fetch_add(1, std::memory_order_relaxed);
     capacity_ = count;
   }
   T* get() { return data_; }
@@ -55,8 +63,13 @@ class DeviceBuffer {
 /// Checks a CUDA runtime call; throws mc_flow::BackendError with the CUDA error string.
 #define MCFLOW_CUDA_CHECK(call) ::mc_flow::cuda_detail::check((call), #call, __FILE__, __LINE__)
 /// Checks the launch of the kernel just enqueued (configuration errors, missing kernel image).
-#define MCFLOW_CUDA_CHECK_LAUNCH(kernel_name) \
-  ::mc_flow::cuda_detail::check(cudaGetLastError(), "launch of " kernel_name, __FILE__, __LINE__)
+#define MCFLOW_CUDA_CHECK_LAUNCH(kernel_name)                                                   \
+  (::mc_flow::cuda_detail::kernel_launches.fetch_add(1, std::memory_order_relaxed),            \
+   ::mc_flow::cuda_detail::check(cudaGetLastError(), "launch of " kernel_name, __FILE__, __LINE__))
+/// Checks a CUB device algorithm call that launches kernels (counted as one launch).
+#define MCFLOW_CUDA_CHECK_CUB(call)                                                  \
+  (::mc_flow::cuda_detail::kernel_launches.fetch_add(1, std::memory_order_relaxed), \
+   ::mc_flow::cuda_detail::check((call), #call, __FILE__, __LINE__))
 
 namespace mc_flow {
 namespace cuda_detail {
@@ -79,6 +92,7 @@ class PinnedBuffer {
     data_ = nullptr;
     capacity_ = 0;
     MCFLOW_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&data_), count * sizeof(T)));
+    pinned_allocations.fetch_add(1, std::memory_order_relaxed);
     capacity_ = count;
     return data_;
   }

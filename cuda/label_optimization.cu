@@ -248,7 +248,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
       done = round_end;
       stats.iterations = done;
       std::size_t bytes = temp_bytes_;
-      MCFLOW_CUDA_CHECK(cub::DeviceReduce::Max(temp_.get(), bytes, change_.get(), max_change_.get(), int(plane), s));
+      MCFLOW_CUDA_CHECK_CUB(cub::DeviceReduce::Max(temp_.get(), bytes, change_.get(), max_change_.get(), int(plane), s));
       MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->max_change, max_change_.get(), sizeof(float),
                                         cudaMemcpyDeviceToHost, s));
       MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
@@ -260,7 +260,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
                                                      n, tv, problem.lambda, pixel_energy_.get());
     MCFLOW_CUDA_CHECK_LAUNCH("pixelEnergy");
     std::size_t bytes = temp_bytes_;
-    MCFLOW_CUDA_CHECK(cub::DeviceReduce::Sum(temp_.get(), bytes, pixel_energy_.get(), energy_.get(), int(plane), s));
+    MCFLOW_CUDA_CHECK_CUB(cub::DeviceReduce::Sum(temp_.get(), bytes, pixel_energy_.get(), energy_.get(), int(plane), s));
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->energy, energy_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
     stats.energy = scalars_->energy;

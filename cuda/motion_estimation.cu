@@ -624,7 +624,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
     if (pairs > 0) {
       std::size_t temp_bytes = select_temp_bytes_;
-      MCFLOW_CUDA_CHECK(cub::DeviceSelect::Flagged(select_temp_.get(), temp_bytes, pixel_indices_.get(), blended_.get(),
+      MCFLOW_CUDA_CHECK_CUB(cub::DeviceSelect::Flagged(select_temp_.get(), temp_bytes, pixel_indices_.get(), blended_.get(),
                                                    blended_list_.get(), blended_count_.get(), int(plane), s));
       accumulatePairs<<<unsigned(pairs), kThreads, 0, s>>>(p, sums_.get() + block_values);
       MCFLOW_CUDA_CHECK_LAUNCH("accumulatePairs");

@@ -572,6 +572,25 @@ class CudaSolveBackend final : public SolveBackend {
 
 }  // namespace
 
+CudaCounters cudaCounters() {
+  CudaCounters c;
+  c.kernel_launches = cuda_detail::kernel_launches.load();
+  c.device_allocations = cuda_detail::device_allocations.load();
+  c.pinned_allocations = cuda_detail::pinned_allocations.load();
+  return c;
+}
+
+bool cudaDeviceMemory(std::size_t* used, std::size_t* total) {
+  std::size_t free_bytes = 0, total_bytes = 0;
+  if (!cudaBackendAvailable(nullptr) || cudaMemGetInfo(&free_bytes, &total_bytes) != cudaSuccess) {
+    cudaGetLastError();
+    return false;
+  }
+  if (used) *used = total_bytes - free_bytes;
+  if (total) *total = total_bytes;
+  return true;
+}
+
 std::unique_ptr<SolveBackend> makeCudaSolveBackend() {
   std::string why;
   if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);

@@ -223,6 +223,9 @@ class CpuSolveBackend final : public SolveBackend {
 std::unique_ptr<SolveBackend> makeCpuSolveBackend() { return std::make_unique<CpuSolveBackend>(); }
 
 #ifndef MCFLOW_HAVE_CUDA
+CudaCounters cudaCounters() { return CudaCounters(); }
+bool cudaDeviceMemory(std::size_t*, std::size_t*) { return false; }
+
 std::unique_ptr<SolveBackend> makeCudaSolveBackend() {
   throw BackendError("CUDA backend requested but this build has no CUDA (built without nvcc or MCFLOW_WITH_CUDA=OFF)");
 }

@@ -309,6 +309,32 @@ TEST(CudaSolveBackend, WorkspaceReuseGivesTheFreshResult) {
     EXPECT_EQ((first.segments[i].twist - again.segments[i].twist).norm(), 0.0) << "segment " << i;
 }
 
+// Grow-only buffers: once a solver has seen pairs of a size and label count (cold and warm), solving them again
+// allocates no device or page-locked memory.
+TEST(CudaSolveBackend, NoAllocationAfterTheFirstPairsOfASize) {
+  SKIP_WITHOUT_GPU();
+  Config config;
+  config.backend = Backend::Cuda;
+  SyntheticSceneOptions a_options, b_options;
+  a_options.variant = 1;
+  b_options.variant = 2;
+  const SyntheticPair a = renderSyntheticPair(a_options), b = renderSyntheticPair(b_options);
+  Solver solver(config);
+  auto solveAll = [&] {
+    const Result first = solver.solve(a.frame1, a.frame2, a.intrinsics);
+    solver.solve(b.frame1, b.frame2, b.intrinsics);
+    solver.solve(a.frame1, a.frame2, a.intrinsics, first);  // the warm path
+  };
+  solveAll();
+  const CudaCounters before = cudaCounters();
+  solveAll();
+  const CudaCounters after = cudaCounters();
+  EXPECT_EQ(after.device_allocations, before.device_allocations);
+  EXPECT_EQ(after.pinned_allocations, before.pinned_allocations);
+  EXPECT_GT(after.kernel_launches, before.kernel_launches);
+  std::printf("kernel launches per solve: %.0f\n", double(after.kernel_launches - before.kernel_launches) / 3.0);
+}
+
 // Whole solves on both backends: the same number of segments and EPE within 0.01 px on the synthetic scenes.
 TEST(CudaSolveBackend, SolverMatchesCpuOnSyntheticScenes) {
   SKIP_WITHOUT_GPU();

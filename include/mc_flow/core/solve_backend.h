@@ -13,6 +13,8 @@
  */
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -93,6 +95,19 @@ class SolveBackend : public LabelStore {
   /// per motion label with its support and centroid (id, twist and transform are the caller's).
   virtual void outputs(const std::vector<Vector6d>& twists, const Config& config, Result& result) = 0;
 };
+
+/// @brief What this process's CUDA backends have done so far (all solvers together; zeros in a build without
+/// CUDA): for benchmarks, and for the test that a solve of a size seen before allocates nothing.
+struct CudaCounters {
+  std::uint64_t kernel_launches = 0;     ///< kernels launched; a CUB algorithm call counts as one
+  std::uint64_t device_allocations = 0;  ///< cudaMalloc calls of the grow-only device buffers
+  std::uint64_t pinned_allocations = 0;  ///< cudaMallocHost calls of the page-locked staging buffers
+};
+CudaCounters cudaCounters();
+
+/// @brief Device memory in use on the current CUDA device (by all processes) and its size [bytes]; false
+/// where no usable GPU (or no CUDA in the build).
+bool cudaDeviceMemory(std::size_t* used, std::size_t* total);
 
 /// @brief Checks initial hard labels (size, values in [-1, motion_labels), motion_labels >= 1); throws
 /// InputError naming the value.
