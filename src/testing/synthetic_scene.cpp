@@ -271,6 +271,36 @@ VariantSpec variantSpec(int variant, bool stream_events = false) {
   return spec;
 }
 
+/// Camera-only scenes: the room, every box and the arm (both links) take one motion, the static scene's apparent
+/// motion, at constant velocity from frame 0.
+void applyCameraOnly(const SyntheticSceneOptions& options, VariantSpec& spec) {
+  if (!options.camera_only) return;
+  const Vector3d v = options.camera_only_translation_m, rate = options.camera_only_rotation_deg, w = rate * kDeg;
+  spec.room.velocity_m = v;
+  spec.room.rotation_rate_deg = rate;
+  spec.room.period = 0;
+  // A part's twist is taken about its own pivot (twistAbout): the velocity there that gives the room's twist.
+  for (BoxSpec& b : spec.boxes) {
+    b.velocity_m = v - b.centre.cross(w);
+    b.rotation_rate_deg = rate;
+    b.period = 0;
+    b.start_frame = 0;
+  }
+  ArmSpec& arm = spec.arm;
+  const Matrix4d arm_pose = poseFrom(arm.centre, arm.rotation_deg);
+  const Vector3d shoulder = (arm_pose * Eigen::Vector4d(-arm.half_extents.x(), 0, 0, 1)).head<3>();
+  arm.velocity_m = v - shoulder.cross(w);
+  arm.rotation_rate_deg = rate;
+  arm.elbow_rate_deg = Vector3d::Zero();
+  arm.period = 0;
+}
+
+VariantSpec sceneSpec(const SyntheticSceneOptions& options) {
+  VariantSpec spec = variantSpec(options.variant, options.stream_events);
+  applyCameraOnly(options, spec);
+  return spec;
+}
+
 // ------------------------------------------------------------------------------------------- motions
 
 /// f(t) = sin(w t) / sin(w): f(0) = 0, f(1) = 1, bounded, so parts stay in view over long sequences; a
@@ -515,6 +545,12 @@ void validateOptions(const SyntheticSceneOptions& o) {
   if (!std::isfinite(o.depth_noise) || o.depth_noise < 0.0) {
     throw InputError("synthetic scene: depth_noise " + std::to_string(o.depth_noise) + " must be >= 0");
   }
+  if (!o.camera_only_translation_m.allFinite() || o.camera_only_translation_m.norm() > 1.0 ||
+      !o.camera_only_rotation_deg.allFinite() || o.camera_only_rotation_deg.norm() > 45.0) {
+    throw InputError("synthetic scene: camera-only motion (" + std::to_string(o.camera_only_translation_m.norm()) +
+                     " m, " + std::to_string(o.camera_only_rotation_deg.norm()) +
+                     " deg per frame) must be finite, at most 1 m and 45 deg");
+  }
 }
 
 Intrinsics sceneIntrinsics(int width, int height) {
@@ -595,7 +631,7 @@ void renderSyntheticFrame(const SyntheticSceneOptions& options, int t, RgbdFrame
                           Intrinsics& K) {
   validateOptions(options);
   if (t < 0) throw InputError("synthetic scene: frame index " + std::to_string(t) + " must be >= 0");
-  const VariantSpec spec = variantSpec(options.variant, options.stream_events);
+  const VariantSpec spec = sceneSpec(options);
   const SceneMotion motion = sceneMotion(spec, options.motion_scale);
   K = sceneIntrinsics(options.width, options.height);
   renderFrame(options, spec, motion, t, frame, color, nullptr);
@@ -604,13 +640,13 @@ void renderSyntheticFrame(const SyntheticSceneOptions& options, int t, RgbdFrame
 std::vector<SyntheticPart> syntheticSequenceMotions(const SyntheticSceneOptions& options, int t) {
   validateOptions(options);
   if (t < 0) throw InputError("synthetic scene: frame index " + std::to_string(t) + " must be >= 0");
-  const VariantSpec spec = variantSpec(options.variant, options.stream_events);
+  const VariantSpec spec = sceneSpec(options);
   return partsAt(spec, sceneMotion(spec, options.motion_scale), t);
 }
 
 SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options) {
   validateOptions(options);
-  const VariantSpec spec = variantSpec(options.variant, options.stream_events);
+  const VariantSpec spec = sceneSpec(options);
   const SceneMotion motion = sceneMotion(spec, options.motion_scale);
   const int W = options.width, H = options.height;
   const int t0 = options.first_frame;

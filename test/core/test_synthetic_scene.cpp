@@ -167,6 +167,39 @@ TEST(SyntheticScene, BackgroundTwist) {
   EXPECT_GT(partById(moving, 0).twist.norm(), 0.01);
 }
 
+// Camera-only scenes: every part, the arm's links included, moves with the static scene's one apparent motion,
+// and the ground-truth scene flow of every point is that motion (up to the renderer's float rounding).
+TEST(SyntheticScene, CameraOnlyScenesMoveAsOneRigidBody) {
+  for (int variant = 0; variant < syntheticVariantCount(); ++variant) {
+    SyntheticSceneOptions o = optionsFor(variant, 160, 120);
+    o.camera_only = true;
+    o.camera_only_translation_m = Eigen::Vector3d(0.05, -0.02, 0.04);
+    o.camera_only_rotation_deg = Eigen::Vector3d(2.0, -3.0, 1.0);
+    const SyntheticPair pair = renderSyntheticPair(o);
+    const Vector6d background = partById(pair, 0).twist;
+    EXPECT_GT(background.norm(), 0.05);
+    for (const SyntheticPart& part : pair.parts)
+      EXPECT_TRUE(part.twist.isApprox(background, 1e-9)) << "variant " << variant << " part " << part.name;
+    const Eigen::Matrix4d T = se3Exp(background);
+    int checked = 0;
+    for (int y = 0; y < pair.frame1.depth.height; ++y)
+      for (int x = 0; x < pair.frame1.depth.width; ++x) {
+        const float z = pair.frame1.depth(x, y);
+        if (!(z > 0.f) || std::isnan(pair.gt_scene_flow(x, y, 0))) continue;
+        const Eigen::Vector3d P((x - pair.intrinsics.cx) / pair.intrinsics.fx * z,
+                                (y - pair.intrinsics.cy) / pair.intrinsics.fy * z, z);
+        const Eigen::Vector3d flow = T.topLeftCorner<3, 3>() * P + T.topRightCorner<3, 1>() - P;
+        for (int c = 0; c < 3; ++c) ASSERT_NEAR(pair.gt_scene_flow(x, y, c), flow(c), 1e-4) << x << "," << y;
+        ++checked;
+      }
+    EXPECT_GT(checked, 10000) << "variant " << variant;
+  }
+  SyntheticSceneOptions bad = optionsFor(0);
+  bad.camera_only = true;
+  bad.camera_only_rotation_deg = Eigen::Vector3d(90.0, 0.0, 0.0);
+  EXPECT_THROW(renderSyntheticPair(bad), InputError);
+}
+
 TEST(SyntheticScene, MotionScaleScalesTwistsAndZeroFreezesTheScene) {
   SyntheticSceneOptions o = optionsFor(2);
   const SyntheticPair one = renderSyntheticPair(o);

@@ -27,6 +27,12 @@ struct SyntheticSceneOptions {
   int first_frame = 0;          ///< renderSyntheticPair renders frames (first_frame, first_frame + 1) of the sequence
   bool stream_events = false;   ///< adds a box that starts moving at frame 10 (part 10) and one that moves straight
                                 ///< out of the view (part 11), for sequences
+  /// Nothing in the scene moves, only the camera: every part takes the static scene's apparent motion per
+  /// frame, a translation of camera_only_translation_m [m] and a rotation of camera_only_rotation_deg [deg]
+  /// about the camera centre (camera frame; the inverse of the camera's own motion), at constant velocity.
+  bool camera_only = false;
+  Eigen::Vector3d camera_only_translation_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d camera_only_rotation_deg = Eigen::Vector3d::Zero();
 };
 
 struct SyntheticPart {
