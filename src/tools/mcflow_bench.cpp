@@ -38,8 +38,8 @@ int cameraOnlyBench(const Config& base, int width, int height) {
   std::printf("# mcflow_bench --camera-only: static scenes %dx%d, intensity noise 0.01, depth noise 1.5 mm at 1 m "
               "(x depth^2), regularizer %s\n",
               width, height, base.regularizer == Regularizer::Quadratic ? "quad" : "tv");
-  std::printf("%-8s %-10s %6s %8s %8s %8s %6s %10s %10s\n", "scene", "motion", "segs", "EPE", "EPE_1", "ratio", "segs_1",
-              "total_ms", "total_ms_1");
+  std::printf("%-8s %-10s %6s %8s %8s %8s %6s %10s %10s  %s\n", "scene", "motion", "segs", "EPE", "EPE_1", "ratio",
+              "segs_1", "total_ms", "total_ms_1", "motion labels over the outer iterations (K-means > after each)");
   for (int variant = 0; variant < syntheticVariantCount(); ++variant)
     for (const CameraMotion& m : motions) {
       SyntheticSceneOptions so;
@@ -59,8 +59,10 @@ int cameraOnlyBench(const Config& base, int width, int height) {
       const Result r1 = single.solve(pair.frame1, pair.frame2, pair.intrinsics);
       const double epe = opticalFlowErrors(r.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion).epe;
       const double epe1 = opticalFlowErrors(r1.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion).epe;
-      std::printf("synth-%-2d %-10s %6zu %8.4f %8.4f %8.3f %6zu %10.1f %10.1f\n", variant, m.name, r.segments.size(), epe,
-                  epe1, epe / epe1, r1.segments.size(), r.timings.total, r1.timings.total);
+      std::string counts = r.iterations.empty() ? "-" : std::to_string(r.iterations.front().labels_before);
+      for (const OuterIterationStats& it : r.iterations) counts += " > " + std::to_string(it.labels_after);
+      std::printf("synth-%-2d %-10s %6zu %8.4f %8.4f %8.3f %6zu %10.1f %10.1f  %s\n", variant, m.name, r.segments.size(),
+                  epe, epe1, epe / epe1, r1.segments.size(), r.timings.total, r1.timings.total, counts.c_str());
       std::fflush(stdout);
     }
   return 0;
