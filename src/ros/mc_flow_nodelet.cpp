@@ -456,11 +456,21 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   }
   if (step.outcome == Outcome::Started) return;
   if (step.outcome == Outcome::PairFailed) {
-    if (!step.backend_fallback.empty())
-      NODELET_WARN("%s: continuing on the CPU", step.problem.c_str());  // once: the pipeline switched backends
-    else
+    if (!step.backend_fallback.empty()) {
+      // The pipeline has switched to the CPU: this happens once per backend, so the warning is never held
+      // back (period 0; a GPU restored by new parameters may fail again and is reported again).
+      warnThrottled("backend", "pair ending at " + stampText(stamp) + " skipped: " + step.problem +
+                                   "; continuing on the CPU", 0.0);
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++backend_fallbacks_;
+      last_backend_failure_ = step.problem;
+      on_cpu_after_failure_ = true;
+      backend_ = "cpu";
+      backend_note_ = "fallback after a failure of the requested backend";
+    } else {
       // Bad input or parameters that do not fit this input: the sequence goes on with the newer frame.
       warnThrottled("solver", "pair ending at " + stampText(stamp) + " skipped: " + step.problem);
+    }
     std::lock_guard<std::mutex> lock(stats_mutex_);
     ++frames_skipped_;
     return;
@@ -486,6 +496,7 @@ void MCFlowNodelet::process(const SyncedInput& input) {
     total_solve_ms_ += solve_ms;
     backend_ = result.backend;
     backend_note_ = result.backend_note;
+    if (result.backend_kind == mc_flow::Backend::Cuda) on_cpu_after_failure_ = false;  // new parameters restored it
   }
 }
 
@@ -693,6 +704,8 @@ void MCFlowNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "idle: no listener on any output");
   } else if (silent) {
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "no synchronised input");
+  } else if (on_cpu_after_failure_) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "running on the CPU after a GPU failure");
   } else {
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "running");
   }
@@ -721,6 +734,8 @@ void MCFlowNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("stage occlusion [ms]", last_timings_.occlusion);
   status.add("stage outputs [ms]", last_timings_.outputs);
   status.add("backend", backend_.empty() ? std::string("(no pair solved yet)") : backend_ + ": " + backend_note_);
+  status.add("backend fallbacks (GPU failures)", backend_fallbacks_);
+  status.add("last backend failure", last_backend_failure_.empty() ? std::string("none") : last_backend_failure_);
   status.add("last problem", last_problem_.empty() ? std::string("none") : last_problem_);
 }
 

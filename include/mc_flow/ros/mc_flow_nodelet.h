@@ -148,6 +148,9 @@ class MCFlowNodelet : public nodelet::Nodelet {
   mc_flow::StageTimings last_timings_;
   double total_solve_ms_ = 0;
   std::string backend_, backend_note_, last_problem_;
+  long backend_fallbacks_ = 0;           // BackendErrors that moved the pipeline to the CPU
+  std::string last_backend_failure_;     // the latest one's message
+  bool on_cpu_after_failure_ = false;    // until a pair is solved on the GPU again
   struct WarningState {
     ros::WallTime last_shown;
     long held_back = 0;  // since last_shown
