@@ -86,6 +86,17 @@ __device__ __forceinline__ void transformPointDevice(const float T[12], const fl
   }
 }
 
+/// @brief Sums `values` doubles per thread (shared[thread * values + v]) over the block into the first thread's
+/// slots, in a fixed order (a tree over blockDim.x, a power of two), so repeated runs give the same bits.
+__device__ inline void blockSum(double* shared, int values) {
+  for (int stride = blockDim.x / 2; stride > 0; stride >>= 1) {
+    __syncthreads();
+    if (int(threadIdx.x) < stride)
+      for (int v = 0; v < values; ++v) shared[threadIdx.x * values + v] += shared[(threadIdx.x + stride) * values + v];
+  }
+  __syncthreads();
+}
+
 /// @brief Frame 1's point P at pixel `idx` moved by its interpolated motion (warpPoints of src/core/scene_flow.cpp),
 /// in double: the labels' mean twist by the motion-label weights of `u` (`plane` values per label), a single
 /// label's own transform where only one has mass, the largest label's where (almost) none has. `motions` holds

@@ -55,16 +55,6 @@ __global__ void outputsKernel(const DeviceImage points, float* __restrict__ u, i
   ids[idx] = best == outlier ? 0 : best + 1;
 }
 
-// Sums `values` doubles per thread over the block into the first thread's slots, in a fixed order.
-__device__ void blockSum(double* shared, int values) {
-  for (int stride = blockDim.x / 2; stride > 0; stride >>= 1) {
-    __syncthreads();
-    if (int(threadIdx.x) < stride)
-      for (int v = 0; v < values; ++v) shared[threadIdx.x * values + v] += shared[(threadIdx.x + stride) * values + v];
-  }
-  __syncthreads();
-}
-
 // One block per motion label.
 __global__ void centroidSumsKernel(const float* __restrict__ u, const DeviceImage points, double* __restrict__ out) {
   __shared__ double partial[kThreads * kCentroidValues];

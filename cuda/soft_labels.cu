@@ -26,16 +26,6 @@ dim3 gridFor(int width, int height) {
   return dim3(unsigned((width + kBlockX - 1) / kBlockX), unsigned((height + kBlockY - 1) / kBlockY));
 }
 
-// Sums `values` doubles per thread over the block into the first thread's slots, in a fixed order.
-__device__ void blockSum(double* shared, int values) {
-  for (int stride = blockDim.x / 2; stride > 0; stride >>= 1) {
-    __syncthreads();
-    if (int(threadIdx.x) < stride)
-      for (int v = 0; v < values; ++v) shared[threadIdx.x * values + v] += shared[(threadIdx.x + stride) * values + v];
-  }
-  __syncthreads();
-}
-
 __global__ void oneHotKernel(const DeviceImage points, const int* __restrict__ hard, int count,
                              float* __restrict__ u) {
   const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
