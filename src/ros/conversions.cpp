@@ -307,6 +307,10 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
                                 "vx", 1, sensor_msgs::PointField::FLOAT32, "vy", 1, sensor_msgs::PointField::FLOAT32,
                                 "vz", 1, sensor_msgs::PointField::FLOAT32, "label", 1, sensor_msgs::PointField::UINT32,
                                 "occluded", 1, sensor_msgs::PointField::UINT8);
+  // Pad each point to a multiple of 4 bytes (33 -> 36): with 33, every other point's floats would sit at
+  // unaligned addresses (undefined behaviour for the float iterators; UBSan reports it). The fields keep their
+  // offsets; readers use point_step.
+  cloud->point_step = (cloud->point_step + 3u) / 4u * 4u;
   modifier.resize(std::size_t(result.width) * std::size_t(result.height));
   // resize() flattens the cloud to one row: make it organized again (one point per pixel).
   cloud->height = std::uint32_t(result.height);

@@ -337,6 +337,11 @@ TEST(Conversions, SceneFlowCloudHasTheDocumentedFields) {
     EXPECT_EQ(cloud->fields[i].name, expected[i].first);
     EXPECT_EQ(cloud->fields[i].datatype, expected[i].second);
   }
+  // Points padded to 36 bytes, so every point's floats are 4-byte aligned (33 bytes of fields).
+  EXPECT_EQ(cloud->fields.back().offset, 32u);
+  EXPECT_EQ(cloud->point_step, 36u);
+  EXPECT_EQ(cloud->row_step, 4u * 36u);
+  EXPECT_EQ(cloud->data.size(), 12u * 36u);
   sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), vx(*cloud, "vx");
   sensor_msgs::PointCloud2ConstIterator<std::uint32_t> label(*cloud, "label");
   sensor_msgs::PointCloud2ConstIterator<std::uint8_t> occluded(*cloud, "occluded");
