@@ -104,7 +104,9 @@ class CudaSolveBackend final : public SolveBackend {
     cuda_detail::launchBuildPyramid(pyramid2, config, nullptr, stream_.stream);
     valid_counts_.assign(std::size_t(levels), 0);
     download(valid_counts_.data(), valid_counts_device_.get(), std::size_t(levels), staged_ints_);
-    host_points_.assign(std::size_t(levels), ImageF());
+    // The host copies keep their memory across pairs; they are downloaded again when asked for.
+    if (host_points_.size() < std::size_t(levels)) host_points_.resize(std::size_t(levels));
+    host_points_current_.assign(std::size_t(levels), false);
     count_ = 0;
     level_ = 0;
     weights_level_ = -1;
@@ -113,10 +115,10 @@ class CudaSolveBackend final : public SolveBackend {
   const ImageF& framePoints(int level) override {
     const DeviceLevel& L = levelAt(level);
     ImageF& points = host_points_[std::size_t(level)];
-    if (points.empty()) {
-      ImageF downloaded(L.width, L.height, 3);
-      download(downloaded.data.data(), L.points1.data, downloaded.data.size(), staged_floats_);
-      points = std::move(downloaded);
+    if (!host_points_current_[std::size_t(level)]) {
+      if (!points.sameSize(L.width, L.height) || points.channels != 3) points = ImageF(L.width, L.height, 3);
+      download(points.data.data(), L.points1.data, points.data.size(), staged_floats_);
+      host_points_current_[std::size_t(level)] = true;
     }
     return points;
   }
@@ -306,9 +308,10 @@ class CudaSolveBackend final : public SolveBackend {
       cuda_detail::launchOcclusion(L, labels(), count_, motions_.get(), config, counts_.get(), targets_.get(),
                                    warped_z_.get(), occlusion_.get(), s);
     }
-    scalar_.reserve(std::size_t(std::max(1, 5 * n)));
-    cuda_detail::launchLabelSupports(labels(), p, n, scalar_.get(), s);
-    cuda_detail::launchLabelCentroidSums(labels(), L.points1, n, scalar_.get() + n, s);
+    // Per label: the u-weighted point sums and sum u over the valid pixels, which is the support (the pixels
+    // without depth were just moved to the outlier label).
+    scalar_.reserve(std::size_t(std::max(1, 4 * n)));
+    cuda_detail::launchLabelCentroidSums(labels(), L.points1, n, scalar_.get(), s);
 
     // One transfer down: every image into one page-locked buffer per type, then a single synchronisation.
     const std::size_t label_values = p * std::size_t(count_);
@@ -319,7 +322,7 @@ class CudaSolveBackend final : public SolveBackend {
     float* const staged_moved = staged_optical + p * 2;
     int* staged_ids = staged_ints_.reserve(p);
     std::uint8_t* staged_occlusion = staged_bytes_.reserve(p);
-    double* staged_sums = staged_doubles_.reserve(std::size_t(std::max(1, 5 * n)));
+    double* staged_sums = staged_doubles_.reserve(std::size_t(std::max(1, 4 * n)));
     auto down = [&](void* to, const void* from, std::size_t bytes) {
       MCFLOW_CUDA_CHECK(cudaMemcpyAsync(to, from, bytes, cudaMemcpyDeviceToHost, s));
     };
@@ -329,7 +332,7 @@ class CudaSolveBackend final : public SolveBackend {
     down(staged_moved, moved_depth_.get(), p * sizeof(float));
     down(staged_ids, ids_.get(), p * sizeof(int));
     down(staged_occlusion, occlusion_.get(), p);
-    if (n > 0) down(staged_sums, scalar_.get(), std::size_t(5 * n) * sizeof(double));
+    if (n > 0) down(staged_sums, scalar_.get(), std::size_t(4 * n) * sizeof(double));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
 
     result.soft_labels = SoftLabels(W, H, count_);
@@ -347,8 +350,8 @@ class CudaSolveBackend final : public SolveBackend {
     result.segments.assign(std::size_t(n), Segment());
     for (int i = 0; i < n; ++i) {
       Segment& segment = result.segments[std::size_t(i)];
-      segment.support = staged_sums[i];
-      const double* c = staged_sums + n + 4 * i;
+      const double* c = staged_sums + 4 * i;
+      segment.support = c[3];
       segment.centroid = c[3] > 0 ? Eigen::Vector3d(c[0] / c[3], c[1] / c[3], c[2] / c[3]) : Eigen::Vector3d::Zero();
     }
   }
@@ -552,6 +555,7 @@ class CudaSolveBackend final : public SolveBackend {
   std::vector<int> valid_counts_;
   DeviceBuffer<int> valid_counts_device_;
   std::vector<ImageF> host_points_;  // frame 1's points per level, downloaded at the first request in a pair
+  std::vector<bool> host_points_current_;
   std::vector<std::unique_ptr<LevelBuffers>> buffers_;
   std::vector<DeviceLevel> levels_;
   DeviceBuffer<float> label_buffers_[2], level_labels_[2], before_, data_cost_, weight_x_, weight_y_, warped_z_;
