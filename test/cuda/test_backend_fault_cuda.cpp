@@ -3,6 +3,8 @@
 // poisons the CUDA context, each move the stream to the CPU once; the stream goes on there.
 #include <gtest/gtest.h>
 
+#include "skip_without_gpu.h"
+
 #include <cstdio>
 #include <cstdlib>
 #include <sstream>
@@ -22,12 +24,6 @@
 
 namespace mc_flow {
 namespace {
-
-#define SKIP_WITHOUT_GPU()                                                                               \
-  do {                                                                                                   \
-    std::string why_no_gpu;                                                                              \
-    if (!cudaBackendAvailable(&why_no_gpu)) GTEST_SKIP() << "CUDA backend unavailable: " << why_no_gpu; \
-  } while (0)
 
 constexpr int kWidth = 160, kHeight = 120, kFrames = 7;
 

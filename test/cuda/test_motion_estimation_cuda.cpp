@@ -9,6 +9,8 @@
 // are recorded as test properties.
 #include <gtest/gtest.h>
 
+#include "skip_without_gpu.h"
+
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -31,12 +33,6 @@ namespace {
 
 constexpr double kRelativeTolerance = 1e-6;
 constexpr double kTwistTolerance = 1e-5;  // end to end, after all IRLS iterations of all levels
-
-#define SKIP_WITHOUT_GPU()                                                                  \
-  do {                                                                                      \
-    std::string why_no_gpu;                                                                 \
-    if (!cudaBackendAvailable(&why_no_gpu)) GTEST_SKIP() << "CUDA backend unavailable: " << why_no_gpu; \
-  } while (0)
 
 enum class LabelKind { OneHot, Blended };
 

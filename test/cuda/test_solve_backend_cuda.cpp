@@ -8,6 +8,8 @@
 // log1p), so u after a label step agrees to 1e-3 and the energy to a relative 1e-5.
 #include <gtest/gtest.h>
 
+#include "skip_without_gpu.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -25,12 +27,6 @@
 
 namespace mc_flow {
 namespace {
-
-#define SKIP_WITHOUT_GPU()                                                                               \
-  do {                                                                                                   \
-    std::string why_no_gpu;                                                                              \
-    if (!cudaBackendAvailable(&why_no_gpu)) GTEST_SKIP() << "CUDA backend unavailable: " << why_no_gpu; \
-  } while (0)
 
 double maxAbsDifference(const SoftLabels& a, const SoftLabels& b) {
   EXPECT_EQ(a.width, b.width);
