@@ -14,6 +14,16 @@ add_dependencies(mc_flow_nodelet ${PROJECT_NAME}_generate_messages_cpp ${PROJECT
 set_target_properties(mc_flow_nodelet PROPERTIES
   LIBRARY_OUTPUT_DIRECTORY ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_LIB_DESTINATION})
 
+# Rosbags for `mcflow run-seq --bag`: the nodelet's message conversions over a bag's topics. The tool is declared
+# without ROS (CMakeLists.txt); here it gains the bag reader.
+add_library(mc_flow_bag STATIC src/ros/bag_sequence.cpp)
+target_link_libraries(mc_flow_bag PUBLIC mc_flow_nodelet)
+target_compile_options(mc_flow_bag PRIVATE -Wall -Wextra)
+if(TARGET mcflow)
+  target_link_libraries(mcflow PRIVATE mc_flow_bag)
+  target_compile_definitions(mcflow PRIVATE MCFLOW_WITH_ROSBAG=1)
+endif()
+
 # Writes the demo bag: a synthetic RGB-D sequence with moving parts (no camera needed).
 add_executable(make_synthetic_bag src/ros/make_synthetic_bag.cpp)
 target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet mc_flow_testing)
@@ -49,6 +59,18 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     mcflow_sanitizer_environment(test_ros_units)
   endif()
   add_dependencies(tests test_ros_units)
+
+  # Rosbags as sequences: the reader on bags written by the test, and `mcflow run-seq --bag` end to end.
+  add_executable(test_ros_bag test/ros/test_bag_sequence.cpp)
+  target_link_libraries(test_ros_bag PRIVATE mc_flow_bag mc_flow_testing GTest::gtest GTest::gtest_main)
+  target_include_directories(test_ros_bag PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/test)
+  target_compile_definitions(test_ros_bag PRIVATE MCFLOW_CLI_PATH="$<TARGET_FILE:mcflow>")
+  add_dependencies(test_ros_bag mcflow)
+  gtest_discover_tests(test_ros_bag DISCOVERY_MODE PRE_TEST TEST_PREFIX "ros." PROPERTIES LABELS test_ros_bag)
+  if(MCFLOW_SANITIZE)
+    mcflow_sanitizer_environment(test_ros_bag)
+  endif()
+  add_dependencies(tests test_ros_bag)
 
   # The message validation and the input conversions again, built with ASan+UBSan: a header that slips
   # past the validation is caught reading out of bounds even where it would not crash. The core library

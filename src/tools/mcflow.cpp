@@ -11,8 +11,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <map>
+#include <memory>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string>
@@ -36,6 +39,9 @@
 #include "mc_flow/io/result_io.h"
 #include "mc_flow/io/sequence_io.h"
 #include "mc_flow/io/visualization.h"
+#ifdef MCFLOW_WITH_ROSBAG
+#include "mc_flow/ros/bag_sequence.h"
+#endif
 
 namespace {
 
@@ -90,18 +96,29 @@ std::vector<Command> commands() {
   list.push_back(run);
 
   Command run_seq{"run-seq",
-                  "mcflow run-seq (--tum DIR | --frames DIR) [--intrinsics FX,FY,CX,CY | --camera-info F] [--cold] --out DIR",
+                  "mcflow run-seq (--tum DIR | --frames DIR | --bag FILE [--rgb-topic T --depth-topic T --info-topic T]) "
+                  "[--intrinsics FX,FY,CX,CY | --camera-info F] [--cold] --out DIR",
                   "Solves every consecutive pair of an RGB-D sequence as a stream: each pair warm-starts from the "
                   "previous one (unless --cold) and segments keep their ids. Writes DIR/pair_NNNN/ (the files of "
                   "`mcflow run`; labels.png and segments.json hold the persistent ids), DIR/trajectories.csv (pair, "
                   "stamp, id, vx, vy, vz, wx, wy, wz, support per segment and pair), DIR/ids_over_time.png and "
-                  "DIR/sequence.json (per pair: start kind, timings, ids, merges, resets).",
+                  "DIR/sequence.json (per pair: start kind, timings, ids, merges, resets). A rosbag (--bag, ROS build "
+                  "only) is read as the nodelet reads its topics: colour and depth paired by the nearest header stamp, "
+                  "intrinsics from the first camera_info, frames with no valid depth skipped.",
                   {{"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000/m)"},
                    {"frames", true, "directory with rgb/ and depth/ images paired in name order (depth 1000/m)"},
+                   {"bag", true, "rosbag with sensor_msgs/Image colour and depth (16UC1 mm or 32FC1 m) and CameraInfo"},
+                   {"rgb-topic", true, "colour topic of --bag (default /camera/rgb/image_rect_color)"},
+                   {"depth-topic", true, "registered depth topic of --bag (default /camera/depth_registered/image_rect)"},
+                   {"info-topic", true, "camera_info topic of --bag (default /camera/rgb/camera_info)"},
+                   {"max-stamp-difference", true, "[s] --bag: colour and depth stamps further apart are not paired "
+                                                  "(default 0.02)"},
                    {"fps", true, "frame rate of --frames [Hz] (default 30)"},
-                   {"intrinsics", true, "FX,FY,CX,CY in pixels (default: DIR/camera_info.yaml when present)"},
+                   {"intrinsics", true, "FX,FY,CX,CY in pixels (default: DIR/camera_info.yaml when present; --bag: "
+                                        "its first camera_info)"},
                    {"camera-info", true, "ROS camera_info YAML file instead of --intrinsics"},
-                   {"depth-scale", true, "16-bit depth units per metre (default 5000 with --tum, 1000 with --frames)"},
+                   {"depth-scale", true, "16-bit depth units per metre (default 5000 with --tum, 1000 with --frames; "
+                                         "not with --bag: 16UC1 is mm)"},
                    {"downsample", true, "input pixels per processing pixel: 0 = towards 320 px wide (default), or 1, 2, 4..."},
                    {"max-pair-interval", true, "[s] a longer gap between frames starts a new sequence (default 1)"},
                    {"cold", false, "solve every pair from scratch (ids are still matched by overlap)"},
@@ -369,72 +386,188 @@ int cmdRun(const Arguments& args) {
   return 0;
 }
 
-int cmdRunSeq(const Arguments& args) {
-  const std::string out = args.require("out");
-  if (args.has("tum") == args.has("frames")) throw UsageError("give one of --tum DIR or --frames DIR");
+/// One frame as run-seq reads it: the stream frame (its `extra` is the colour picture at the processing
+/// resolution, for the pictures only) and the names report.json gives its inputs.
+struct SequenceInput {
+  StreamFrame stream;
+  std::string rgb_name, depth_name;
+};
+
+/// A frame the source skips (a bag's frame with no valid depth, as the nodelet skips it); the run goes on.
+struct SkippedFrame : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+/// Where run-seq's frames come from: a folder of files or a bag.
+struct SequenceSource {
+  std::string name;   // the sequence's stream source (a change would start a new sequence)
+  std::size_t count = 0;
+  std::function<SequenceInput(std::size_t)> load;  // throws SkippedFrame, or an error that ends the run
+  int pipeline_downsample = 0;  // the pipeline's request: a bag's frames come already downsampled (1)
+  double depth_scale = 1000.0;  // report.json: units per metre of 16-bit depth
+};
+
+int maxFrames(const Arguments& args) {
+  if (!args.has("max-frames")) return -1;
+  const int max_frames = parseInteger("max-frames", args.get("max-frames"));
+  if (max_frames < 2) throw InputError("--max-frames " + std::to_string(max_frames) + ": must be >= 2");
+  return max_frames;
+}
+
+/// --tum DIR or --frames DIR: image files, downsampled by the pipeline.
+SequenceSource fileSequence(const Arguments& args, int downsample) {
   const std::string dir = args.has("tum") ? args.get("tum") : args.get("frames");
   const double fps = args.has("fps") ? parseNumber("fps", args.get("fps")) : 30.0;
-  std::vector<io::SequenceFrameFiles> frames =
-      args.has("tum") ? io::listTumSequence(dir) : io::listNumberedFrames(dir, fps);
-  if (args.has("max-frames")) {
-    const int max_frames = parseInteger("max-frames", args.get("max-frames"));
-    if (max_frames < 2) throw InputError("--max-frames " + std::to_string(max_frames) + ": must be >= 2");
-    if (int(frames.size()) > max_frames) frames.resize(std::size_t(max_frames));
-  }
-  if (frames.size() < 2) throw InputError("sequence '" + dir + "' has " + std::to_string(frames.size()) + " frame(s)");
+  auto frames = std::make_shared<std::vector<io::SequenceFrameFiles>>(
+      args.has("tum") ? io::listTumSequence(dir) : io::listNumberedFrames(dir, fps));
+  const int max_frames = maxFrames(args);
+  if (max_frames > 0 && int(frames->size()) > max_frames) frames->resize(std::size_t(max_frames));
+  if (frames->size() < 2) throw InputError("sequence '" + dir + "' has " + std::to_string(frames->size()) + " frame(s)");
   double depth_scale = args.has("tum") ? 5000.0 : 1000.0;
   if (args.has("depth-scale")) {
     depth_scale = parseNumber("depth-scale", args.get("depth-scale"));
     if (!(depth_scale > 0)) throw InputError("--depth-scale '" + args.get("depth-scale") + "': must be > 0");
   }
-  Arguments intrinsics_args = args;
+  auto intrinsics_args = std::make_shared<Arguments>(args);
   const std::string default_info = (std::filesystem::path(dir) / "camera_info.yaml").string();
   if (!args.has("intrinsics") && !args.has("camera-info")) {
     if (!io::fileExists(default_info))
       throw UsageError("missing --intrinsics FX,FY,CX,CY or --camera-info FILE (and no " + default_info + ")");
-    intrinsics_args.values["camera-info"] = default_info;
+    intrinsics_args->values["camera-info"] = default_info;
   }
+  auto K = std::make_shared<std::optional<Intrinsics>>();
+  SequenceSource source;
+  source.name = dir;
+  source.count = frames->size();
+  source.pipeline_downsample = downsample;
+  source.depth_scale = depth_scale;
+  source.load = [=](std::size_t i) {
+    const io::SequenceFrameFiles& f = (*frames)[i];
+    SequenceInput in;
+    ImageU8 colour;
+    in.stream.frame = io::loadRgbdFrame(f.rgb, f.depth, depth_scale, &colour);
+    if (!*K) *K = inputIntrinsics(*intrinsics_args, in.stream.frame.width(), in.stream.frame.height());
+    in.stream.K = **K;
+    in.stream.stamp = f.stamp;
+    in.stream.source = dir;
+    // The colour at the processing resolution, for the pictures only.
+    const int factor = chooseDownsample(downsample, in.stream.frame.width());
+    if (factor > 1) {
+      cv::Mat small;
+      cv::resize(io::toMat(colour), small, cv::Size(in.stream.frame.width() / factor, in.stream.frame.height() / factor),
+                 0, 0, cv::INTER_AREA);
+      colour.width = small.cols;
+      colour.height = small.rows;
+      colour.data.assign(small.data, small.data + small.total() * 3);
+    }
+    in.stream.extra = std::move(colour);
+    in.rgb_name = f.rgb;
+    in.depth_name = f.depth;
+    return in;
+  };
+  return source;
+}
+
+/// --bag FILE: the nodelet's message conversion (it downsamples, so the pipeline does not).
+SequenceSource bagSequence(const Arguments& args, const Config& config, int downsample) {
+#ifdef MCFLOW_WITH_ROSBAG
+  if (args.has("depth-scale"))
+    throw UsageError("--depth-scale is for --tum/--frames: a bag's depth is 16UC1 in millimetres or 32FC1 in metres "
+                     "(REP 118), read as the nodelet reads it");
+  if (args.has("fps")) throw UsageError("--fps is for --frames: a bag's frames carry their stamps");
+  mc_flow_ros::BagReadOptions options;
+  if (args.has("rgb-topic")) options.topics.rgb = args.get("rgb-topic");
+  if (args.has("depth-topic")) options.topics.depth = args.get("depth-topic");
+  if (args.has("info-topic")) options.topics.info = args.get("info-topic");
+  if (args.has("max-stamp-difference")) {
+    options.max_stamp_difference = parseNumber("max-stamp-difference", args.get("max-stamp-difference"));
+    if (!(options.max_stamp_difference >= 0))
+      throw InputError("--max-stamp-difference '" + args.get("max-stamp-difference") + "': must be >= 0");
+  }
+  // --intrinsics / --camera-info are for the bag's images as they are (0x0: inputIntrinsics checks no size).
+  if (args.has("intrinsics") || args.has("camera-info")) options.intrinsics = inputIntrinsics(args, 0, 0);
+  options.downsample = downsample;
+  options.depth_range = config.depth_downsample_range;
+  const std::string path = args.get("bag");
+  auto bag = std::make_shared<mc_flow_ros::BagSequence>(path, options);
+  progress(bag->summary());
+  SequenceSource source;
+  source.name = path;
+  source.count = bag->size();
+  const int max_frames = maxFrames(args);
+  if (max_frames > 0 && int(source.count) > max_frames) source.count = std::size_t(max_frames);
+  if (source.count < 2) throw InputError("bag '" + path + "' has " + std::to_string(source.count) + " paired frame(s)");
+  source.pipeline_downsample = 1;
+  source.depth_scale = 1000.0;  // 16UC1: millimetres
+  source.load = [bag](std::size_t i) {
+    mc_flow_ros::BagFrame f;
+    try {
+      f = bag->frame(i);
+    } catch (const mc_flow_ros::FrameInputError& e) {
+      // A camera's first frames often have no depth yet: skipped, as the nodelet skips them. Anything else
+      // (encoding, layout, sizes) is the stream's and would fail every frame: the run stops naming it.
+      if (e.problem == mc_flow_ros::InputProblem::Depth) throw SkippedFrame(e.what());
+      throw;
+    }
+    SequenceInput in;
+    in.stream = std::move(f.frame);
+    in.stream.extra = std::move(f.colour);
+    in.rgb_name = f.rgb_name;
+    in.depth_name = f.depth_name;
+    return in;
+  };
+  return source;
+#else
+  (void)args;
+  (void)config;
+  (void)downsample;
+  throw UsageError("--bag needs the ROS build: this mcflow was built without ROS (MCFLOW_WITH_ROS=OFF or catkin not "
+                   "found), so it cannot read rosbags; rebuild with ROS (scripts/build.sh) or export the bag's frames "
+                   "to a folder and use --tum/--frames");
+#endif
+}
+
+int cmdRunSeq(const Arguments& args) {
+  const std::string out = args.require("out");
+  if (int(args.has("tum")) + int(args.has("frames")) + int(args.has("bag")) != 1)
+    throw UsageError("give one of --tum DIR, --frames DIR or --bag FILE");
+  if (!args.has("bag"))
+    for (const char* option : {"rgb-topic", "depth-topic", "info-topic", "max-stamp-difference"})
+      if (args.has(option)) throw UsageError(std::string("--") + option + " is for --bag");
   Config config = buildConfig(args);
   if (args.has("cold")) config.warm_start = false;
   const int downsample = args.has("downsample") ? parseInteger("downsample", args.get("downsample")) : 0;
   const double max_interval = args.has("max-pair-interval") ? parseNumber("max-pair-interval", args.get("max-pair-interval")) : 1.0;
+  const SequenceSource source = args.has("bag") ? bagSequence(args, config, downsample) : fileSequence(args, downsample);
   io::createOutputDirectory(out);
-  SequencePipeline pipeline(config, downsample, max_interval);
+  SequencePipeline pipeline(config, source.pipeline_downsample, max_interval);
 
   std::string csv = io::trajectoryCsvHeader();
   std::vector<std::vector<std::pair<int, double>>> ids_per_pair;
   std::ostringstream log;
   log << "[\n";
-  int solved = 0, warm = 0, fallbacks = 0, failed = 0;
+  int solved = 0, warm = 0, fallbacks = 0, failed = 0, skipped = 0;
   double total_ms = 0;
-  Intrinsics K;
-  bool have_K = false;
+  std::string previous_rgb, previous_depth;  // the names of the pipeline's last frame
   const auto start = std::chrono::steady_clock::now();
-  for (std::size_t i = 0; i < frames.size(); ++i) {
-    const io::SequenceFrameFiles& f = frames[i];
-    StreamFrame sf;
-    ImageU8 colour;
-    sf.frame = io::loadRgbdFrame(f.rgb, f.depth, depth_scale, &colour);
-    if (!have_K) {
-      K = inputIntrinsics(intrinsics_args, sf.frame.width(), sf.frame.height());
-      have_K = true;
+  for (std::size_t i = 0; i < source.count; ++i) {
+    SequenceInput in;
+    try {
+      in = source.load(i);
+    } catch (const SkippedFrame& e) {
+      ++skipped;
+      progress(std::string("skipped: ") + e.what());
+      continue;
     }
-    sf.K = K;
-    sf.stamp = f.stamp;
-    sf.source = dir;
-    // The colour at the processing resolution, for the pictures only.
-    const int factor = chooseDownsample(downsample, sf.frame.width());
-    if (factor > 1) {
-      cv::Mat small;
-      cv::resize(io::toMat(colour), small, cv::Size(sf.frame.width() / factor, sf.frame.height() / factor), 0, 0,
-                 cv::INTER_AREA);
-      colour.width = small.cols;
-      colour.height = small.rows;
-      colour.data.assign(small.data, small.data + small.total() * 3);
+    const SequenceStep step = pipeline.push(std::move(in.stream));
+    const std::string first_rgb = previous_rgb, first_depth = previous_depth;
+    if (step.outcome != SequenceStep::Outcome::RepeatedStamp) {
+      previous_rgb = in.rgb_name;
+      previous_depth = in.depth_name;
     }
-    sf.extra = std::move(colour);
-    const SequenceStep step = pipeline.push(std::move(sf));
     if (!step.reset_key.empty()) progress("frame " + std::to_string(i) + ": new sequence: " + step.reset_reason);
+    if (step.outcome == SequenceStep::Outcome::RepeatedStamp)
+      progress("frame " + std::to_string(i) + ": dropped: its stamp repeats the previous frame's");
     if (step.outcome == SequenceStep::Outcome::PairFailed) {
       ++failed;
       progress("frame " + std::to_string(i) + ": pair skipped: " + step.problem);
@@ -449,7 +582,7 @@ int cmdRunSeq(const Arguments& args) {
     std::snprintf(name, sizeof(name), "pair_%04ld", step.pair_index);
     io::LoadedPair loaded{step.first->frame, step.second->frame, std::any_cast<const ImageU8&>(step.first->extra),
                           std::any_cast<const ImageU8&>(step.second->extra)};
-    io::RunInfo info{frames[i - 1].rgb, frames[i - 1].depth, f.rgb, f.depth, depth_scale, 0, 0};
+    io::RunInfo info{first_rgb, first_depth, in.rgb_name, in.depth_name, source.depth_scale, 0, 0};
     io::writeResultDirectory((std::filesystem::path(out) / name).string(), r, config, loaded, info);
     csv += io::trajectoryCsvRows(step.pair_index, step.second->stamp, r);
     std::vector<std::pair<int, double>> ids;
@@ -465,9 +598,9 @@ int cmdRunSeq(const Arguments& args) {
     for (std::size_t k = 0; k < r.ended_ids.size(); ++k) log << (k ? ", " : "") << r.ended_ids[k];
     log << "]}";
     // Progress bar: pairs done of the frames' pairs, mean time per pair.
-    const int width = 30, done = int((i * width) / (frames.size() - 1));
+    const int width = 30, done = int((i * width) / (source.count - 1));
     std::fprintf(stderr, "\rmcflow: [%s%s] %d/%zu pairs, %.0f ms/pair (%s)   ", std::string(std::size_t(done), '#').c_str(),
-                 std::string(std::size_t(width - done), ' ').c_str(), solved, frames.size() - 1, total_ms / solved,
+                 std::string(std::size_t(width - done), ' ').c_str(), solved, source.count - 1, total_ms / solved,
                  toString(r.start).c_str());
   }
   std::fprintf(stderr, "\n");
@@ -476,9 +609,10 @@ int cmdRunSeq(const Arguments& args) {
   io::writeTextFile((std::filesystem::path(out) / "sequence.json").string(), log.str());
   if (!ids_per_pair.empty())
     io::writeImage((std::filesystem::path(out) / "ids_over_time.png").string(), io::idsOverTimeImage(ids_per_pair));
-  std::printf("%d pair(s) solved (%d warm, %d cold fallbacks, %d failed, %ld new sequence(s)), %.1f ms/pair solving, "
+  const std::string skipped_text = skipped ? ", " + std::to_string(skipped) + " frame(s) skipped" : "";
+  std::printf("%d pair(s) solved (%d warm, %d cold fallbacks, %d failed, %ld new sequence(s)%s), %.1f ms/pair solving, "
               "%.1f s in all; wrote %s\n",
-              solved, warm, fallbacks, failed, pipeline.resets(), solved ? total_ms / solved : 0.0,
+              solved, warm, fallbacks, failed, pipeline.resets(), skipped_text.c_str(), solved ? total_ms / solved : 0.0,
               elapsedMs(start) / 1000.0, out.c_str());
   return solved > 0 ? 0 : 1;
 }

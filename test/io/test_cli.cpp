@@ -456,9 +456,24 @@ TEST(Cli, SynthSequenceThenRunSeqKeepsIdsAndWritesTheSequenceFiles) {
   EXPECT_NE(cold.out.find("1 pair(s) solved (0 warm"), std::string::npos) << cold.out;
   const CliRun both = runCli("run-seq --tum a --frames b --out " + quote((workDir() / "x").string()));
   EXPECT_EQ(both.code, 2);
-  EXPECT_NE(both.err.find("one of --tum DIR or --frames DIR"), std::string::npos) << both.err;
+  EXPECT_NE(both.err.find("one of --tum DIR, --frames DIR or --bag FILE"), std::string::npos) << both.err;
   const CliRun missing = runCli("run-seq --tum " + quote((workDir() / "nothing").string()) + " --out " +
                                 quote((workDir() / "y").string()));
   EXPECT_EQ(missing.code, 1);
   EXPECT_NE(missing.err.find("not a directory"), std::string::npos) << missing.err;
+}
+
+// --bag reads rosbags only where the tool was built with ROS (test/ros/test_bag_sequence.cpp runs it); elsewhere
+// the option is known and refused, naming the missing build.
+TEST(CliErrors, RunSeqBagNamesTheRosBuildOrTheMissingFile) {
+  const CliRun run = runCli("run-seq --bag " + quote((workDir() / "absent.bag").string()) + " --out " +
+                            quote((workDir() / "bag_out").string()));
+#ifdef MCFLOW_CLI_HAS_BAG
+  EXPECT_EQ(run.code, 1) << run.err;
+  EXPECT_NE(run.err.find("absent.bag': does not exist"), std::string::npos) << run.err;
+#else
+  EXPECT_EQ(run.code, 2) << run.err;
+  EXPECT_NE(run.err.find("--bag needs the ROS build"), std::string::npos) << run.err;
+#endif
+  EXPECT_FALSE(fs::exists(workDir() / "bag_out"));
 }
