@@ -216,6 +216,8 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
   msg.height = std::uint32_t(result.height);
   msg.backend = result.backend;
   msg.solve_time_ms = pair.solve_time_ms;
+  msg.start = mc_flow::toString(result.start);
+  msg.start_note = result.start_note;
   const double dt = pair.interval();
   for (std::size_t i = 0; i < result.segments.size(); ++i) {
     const mc_flow::Segment& s = result.segments[i];

@@ -492,6 +492,9 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     ++pairs_solved_;
+    warm_starts_ += result.start == mc_flow::StartKind::Warm ? 1 : 0;
+    cold_fallbacks_ += result.start == mc_flow::StartKind::ColdFallback ? 1 : 0;
+    last_start_ = mc_flow::toString(result.start) + (result.start_note.empty() ? "" : ": " + result.start_note);
     last_timings_ = result.timings;
     total_solve_ms_ += solve_ms;
     backend_ = result.backend;
@@ -715,6 +718,9 @@ void MCFlowNodelet::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status
   status.add("frames dropped (arrived while solving)", frames_dropped_);
   status.add("frames skipped (bad input)", frames_skipped_);
   status.add("sequence resets", sequence_resets_);
+  status.add("pairs started warm", warm_starts_);
+  status.add("pairs started cold after a refused warm start", cold_fallbacks_);
+  status.add("last start", last_start_.empty() ? std::string("(no pair solved yet)") : last_start_);
   status.add("received rgb / depth / camera_info", std::to_string(rgb_count_) + " / " + std::to_string(depth_count_) +
                                                       " / " + std::to_string(info_count_));
   status.add("lost before the callbacks rgb / depth / camera_info (header.seq gaps)",

@@ -283,6 +283,19 @@ TEST(Conversions, SegmentArrayCarriesRatesTransformsIdsAndStamps) {
   EXPECT_EQ(msg.width, 4u);
   EXPECT_DOUBLE_EQ(msg.outlier_support, 1.0);
   EXPECT_DOUBLE_EQ(msg.solve_time_ms, 12.5);
+  EXPECT_EQ(msg.start, "cold");  // the fixture's Result: the default start
+  EXPECT_EQ(msg.start_note, "");
+}
+
+TEST(Conversions, SegmentArrayCarriesTheStartKind) {
+  Fixture f = makeFixture();
+  f.result.start = mc_flow::StartKind::Warm;
+  EXPECT_EQ(mc_flow_ros::makeSegmentArray(f.result, f.pair).start, "warm");
+  f.result.start = mc_flow::StartKind::ColdFallback;
+  f.result.start_note = "the carried segments cover 12 % of the valid pixels";
+  const mc_flow::SegmentArray msg = mc_flow_ros::makeSegmentArray(f.result, f.pair);
+  EXPECT_EQ(msg.start, "cold_fallback");
+  EXPECT_EQ(msg.start_note, f.result.start_note);
 }
 
 TEST(Conversions, SoftLabelsImageIsLossless) {

@@ -136,6 +136,8 @@ class MCFlowNodelet : public nodelet::Nodelet {
   std::deque<ros::WallTime> sync_times_;   // arrivals of synchronised frames (last 10 s)
   ros::WallTime last_sync_time_, subscribed_since_;
   long frames_synced_ = 0, frames_dropped_ = 0, frames_skipped_ = 0, pairs_solved_ = 0, sequence_resets_ = 0;
+  long warm_starts_ = 0, cold_fallbacks_ = 0;  // pairs by Result::start (the rest started cold)
+  std::string last_start_;                      // the last pair's start kind and, for a fallback, why
   long rgb_count_ = 0, depth_count_ = 0, info_count_ = 0;
   ros::Time last_input_stamp_[3];   // last stamp admitted per topic (zero after a restart)
   std::uint32_t last_input_seq_[3] = {0, 0, 0};
