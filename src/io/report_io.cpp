@@ -130,6 +130,9 @@ std::string evalJson(const EvalMetrics& m) {
   // Metrics whose source is missing are null rather than a misleading 0.
   auto ifGt = [&](double v) { return gt ? number(v) : Json(nullptr); };
   auto ifInputs = [&](double v) { return in ? number(v) : Json(nullptr); };
+  Json part_ids = gt ? Json::array() : Json(nullptr);
+  for (const EvalMetrics::PartId& p : m.part_ids)
+    part_ids.push_back({{"part", p.part}, {"pixels", p.pixels}, {"majority_id", p.majority_id}, {"share", number(p.share)}});
   return dump({{"has_ground_truth", gt},
                {"has_inputs", in},
                {"segments", m.segments},
@@ -149,7 +152,8 @@ std::string evalJson(const EvalMetrics& m) {
                {"rmse_geometric_m", ifInputs(m.rmse_geometric)},
                {"rmse_photometric_zero_flow", ifInputs(m.rmse_photometric_zero_flow)},
                {"rmse_geometric_zero_flow_m", ifInputs(m.rmse_geometric_zero_flow)},
-               {"residual_pixels", m.residual_pixels}});
+               {"residual_pixels", m.residual_pixels},
+               {"part_ids", part_ids}});
 }
 
 std::string evalTable(const EvalMetrics& m) {

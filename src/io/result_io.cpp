@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <set>
 #include <sstream>
 
@@ -213,6 +214,25 @@ EvalMetrics evaluateResult(const ResultFiles& result, const GroundTruthFiles* tr
       valid.data[p] = both ? 255 : 0;
     }
     m.segmentation_agreement = segmentationAgreement(labels, truth->parts);
+    // Each true part's majority id, over all its pixels (as mcflow_bench_stream judges id consistency).
+    std::map<int, std::map<int, std::size_t>> votes;
+    std::map<int, std::size_t> part_pixels;
+    for (std::size_t p = 0; p < truth->parts.pixelCount(); ++p) {
+      const int part = truth->parts.data[p];
+      if (part < 0) continue;
+      ++part_pixels[part];
+      if (result.labels.data[p] > 0) ++votes[part][result.labels.data[p]];
+    }
+    for (const auto& [part, pixels] : part_pixels) {
+      EvalMetrics::PartId entry;
+      entry.part = part;
+      entry.pixels = pixels;
+      std::size_t best = 0;
+      for (const auto& [id, n] : votes[part])
+        if (n > best) best = n, entry.majority_id = id;
+      entry.share = double(best) / double(pixels);
+      m.part_ids.push_back(entry);
+    }
     m.occlusion_agreement = maskAgreement(result.occlusion, truth->occlusion, &valid);
   }
 

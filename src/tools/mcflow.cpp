@@ -145,6 +145,8 @@ std::vector<Command> commands() {
                    {"frames", true, "N >= 2: a sequence of N frames in the TUM RGB-D layout (rgb/, depth/ at 5000 units "
                                     "per metre, rgb.txt, depth.txt, camera_info.yaml) with ground truth per pair in "
                                     "gt/pair_NNNN/; parts move smoothly, one starts moving at frame 10, one leaves the view"},
+                   {"no-events", false, "with --frames: without the box that starts late and the one that leaves the "
+                                        "view: the scene of the demo bag (make_synthetic_bag), for its ground truth"},
                    {"help", false, "this help"}}});
 
   Command eval{"eval", "mcflow eval --result DIR [--gt DIR] [input options]",
@@ -620,7 +622,7 @@ int cmdRunSeq(const Arguments& args) {
 int cmdSynthSequence(const Arguments& args, SyntheticSceneOptions options, int frame_count) {
   const std::string out = args.require("out");
   if (frame_count < 2) throw InputError("--frames " + std::to_string(frame_count) + ": a sequence needs at least 2");
-  options.stream_events = true;
+  options.stream_events = !args.has("no-events");
   const double tum_scale = 5000.0, fps = 30.0;
   io::createOutputDirectory(out);
   std::filesystem::create_directories(std::filesystem::path(out) / "rgb");
@@ -673,6 +675,7 @@ int cmdSynth(const Arguments& args) {
     throw InputError("--width/--height " + std::to_string(options.width) + "x" + std::to_string(options.height) +
                      ": too small (at least 16x12)");
   if (args.has("frames")) return cmdSynthSequence(args, options, parseInteger("frames", args.get("frames")));
+  if (args.has("no-events")) throw UsageError("--no-events is for sequences (--frames N)");
   progress("rendering variant " + std::to_string(options.variant) + " at " + std::to_string(options.width) + "x" +
            std::to_string(options.height) + "...");
   const SyntheticPair pair = renderSyntheticPair(options);

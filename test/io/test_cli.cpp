@@ -14,6 +14,7 @@
 #include <map>
 #include <set>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "mc_flow/io/camera_info.h"
@@ -239,6 +240,16 @@ TEST(Cli, EvalOfExactDepthRunRecoversMotion) {
   // Float PFM depth and the camera_info YAML: the exact synthetic depth.
   expectRecoversMotion(runAndEvaluate(
       "run_pfm", inputArgs(".pfm") + " --camera-info " + quote((synthDir() / "camera_info.yaml").string())));
+  // Every true part has its majority id; the static background (part 0) is mostly one segment.
+  const nlohmann::json eval = io::readJsonFile((workDir() / "run_pfm" / "eval.json").string());
+  std::set<int> parts;
+  for (int part : io::loadLabels((synthDir() / "gt_parts.png").string()).data)
+    if (part >= 0) parts.insert(part);
+  ASSERT_EQ(eval.at("part_ids").size(), parts.size()) << eval.at("part_ids").dump();
+  const nlohmann::json& background = eval.at("part_ids")[0];
+  EXPECT_EQ(background.at("part").get<int>(), 0);
+  EXPECT_GT(background.at("majority_id").get<int>(), 0);
+  EXPECT_GT(background.at("share").get<double>(), 0.5) << background.dump();
 }
 
 TEST(Cli, EvalOfMillimetreDepthRunRecoversMotion) {
@@ -461,6 +472,24 @@ TEST(Cli, SynthSequenceThenRunSeqKeepsIdsAndWritesTheSequenceFiles) {
                                 quote((workDir() / "y").string()));
   EXPECT_EQ(missing.code, 1);
   EXPECT_NE(missing.err.find("not a directory"), std::string::npos) << missing.err;
+}
+
+// --no-events leaves out the sequence's two extra boxes (parts 10 and 11): the demo bag's scene.
+TEST(Cli, SynthSequenceWithoutEventsHasOnlyTheSceneParts) {
+  auto partsOf = [](const fs::path& dir) {
+    std::set<int> parts;
+    for (int part : io::loadLabels((dir / "gt/pair_0000/gt_parts.png").string()).data) parts.insert(part);
+    return parts;
+  };
+  const fs::path with = workDir() / "events", without = workDir() / "no_events";
+  ASSERT_EQ(runCli("synth --out " + quote(with.string()) + " --frames 2 --width 96 --height 72").code, 0);
+  const CliRun run = runCli("synth --out " + quote(without.string()) + " --frames 2 --width 96 --height 72 --no-events");
+  ASSERT_EQ(run.code, 0) << run.err;
+  EXPECT_TRUE(partsOf(with).count(10)) << "the late box is in view at frame 0";
+  const std::set<int> parts = partsOf(without);
+  EXPECT_FALSE(parts.count(10) || parts.count(11));
+  EXPECT_GE(parts.size(), 3u);
+  EXPECT_EQ(runCli("synth --out " + quote((workDir() / "pair_events").string()) + " --no-events").code, 2);
 }
 
 // --bag reads rosbags only where the tool was built with ROS (test/ros/test_bag_sequence.cpp runs it); elsewhere

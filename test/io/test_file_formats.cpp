@@ -719,11 +719,18 @@ TEST(Json, EvalWritesNullForMetricsWithoutSource) {
   for (const char* key : {"optical_flow_aae_deg", "optical_flow_epe_moving_px", "segmentation_agreement",
                           "occlusion_agreement", "rmse_geometric_zero_flow_m", "moving_pixels"})
     EXPECT_TRUE(j.contains(key)) << key;
+  EXPECT_TRUE(j.at("part_ids").is_null());
   m.has_ground_truth = true;
   m.flow_epe = std::nan("");  // e.g. no pixel could be scored
+  m.part_ids = {{0, 1200, 3, 0.75}, {4, 90, 0, 0.0}};
   const nlohmann::json g = nlohmann::json::parse(io::evalJson(m));
   EXPECT_TRUE(g.at("optical_flow_epe_px").is_null());
   EXPECT_EQ(g.at("segmentation_agreement").get<double>(), 0.0);
+  ASSERT_EQ(g.at("part_ids").size(), 2u);
+  EXPECT_EQ(g.at("part_ids")[0].at("majority_id").get<int>(), 3);
+  EXPECT_EQ(g.at("part_ids")[0].at("pixels").get<std::size_t>(), 1200u);
+  EXPECT_EQ(g.at("part_ids")[0].at("share").get<double>(), 0.75);
+  EXPECT_EQ(g.at("part_ids")[1].at("part").get<int>(), 4);
 }
 
 TEST(Json, GroundTruthSegmentsParseBack) {

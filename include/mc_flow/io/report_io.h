@@ -52,6 +52,15 @@ struct EvalMetrics {
   double rmse_photometric_zero_flow = 0, rmse_geometric_zero_flow = 0;
   std::size_t residual_pixels = 0;
   int segments = 0;  ///< distinct non-zero ids in labels.png
+  /// With ground truth: per true part (gt_parts), its pixels and the id most of them carry in labels.png (0 when
+  /// none has an id); comparing these over a sequence's pairs shows whether a part keeps its id.
+  struct PartId {
+    int part = 0;
+    std::size_t pixels = 0;
+    int majority_id = 0;
+    double share = 0;  ///< fraction of the part's pixels that carry majority_id
+  };
+  std::vector<PartId> part_ids;
 };
 std::string evalJson(const EvalMetrics& metrics);
 /// @brief Human-readable table of the metrics (what `mcflow eval` prints).
