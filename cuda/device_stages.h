@@ -6,10 +6,12 @@
 
 #include <cuda_runtime.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <vector>
 
+#include "cuda_check.h"
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/image.h"
 #include "mc_flow/core/label_adaptation.h"
@@ -97,6 +99,90 @@ __device__ inline void blockSum(double* shared, int values) {
   __syncthreads();
 }
 
+// ---------------------------------------------------------------- per-label sums over many blocks
+// A per-label sum over the pixels of a level used to run in one block per label (or one block in all), whose
+// strided loop was latency-bound: 35-850 us per call on an H100 (ncu, 320x240). Now the pixels are cut into
+// chunks, block (chunk, label) sums its chunk with a fixed tree and addChunksKernel adds the chunks in
+// order: the same bits on every run, a few us per call.
+constexpr int kChunkThreads = 256;
+// Pixels per block: 4 per thread. The loop is latency-bound (each pixel's loads wait for the previous one's), so
+// short chunks and many blocks: 16 per thread took ~10 us for one value per pixel (ncu, H100), 4 per thread a few.
+constexpr std::size_t kChunkPixels = 4 * kChunkThreads;
+constexpr std::size_t kMaxChunks = 1024;
+
+inline std::size_t chunkCount(std::size_t pixels) {
+  return std::max<std::size_t>(1, std::min(kMaxChunks, (pixels + kChunkPixels - 1) / kChunkPixels));
+}
+/// @brief Doubles of scratch the chunked sums need for `labels` labels of `values` values each.
+inline std::size_t chunkScratchSize(std::size_t pixels, int labels, int values) {
+  return chunkCount(pixels) * std::size_t(std::max(labels, 1)) * std::size_t(values);
+}
+
+/// @brief Block (chunk, label): `pixel(label, k, sums)` adds pixel k's V values into `sums` for every k of the
+/// chunk; the block's sums go to partials[(label * chunks + chunk) * V + v].
+template <int V, class Pixel>
+__global__ void __launch_bounds__(kChunkThreads) chunkSumsKernel(Pixel pixel, std::size_t pixels,
+                                                                 std::size_t chunk_pixels, double* partials) {
+  constexpr int kWarps = kChunkThreads / 32;
+  __shared__ double warp_sums[kWarps * V];
+  const int label = int(blockIdx.y);
+  const std::size_t begin = std::size_t(blockIdx.x) * chunk_pixels;
+  const std::size_t end = begin + chunk_pixels < pixels ? begin + chunk_pixels : pixels;
+  double sums[V];
+#pragma unroll
+  for (int v = 0; v < V; ++v) sums[v] = 0.0;
+  for (std::size_t k = begin + threadIdx.x; k < end; k += blockDim.x) pixel(label, k, sums);
+  // A shuffle tree per warp, then the warps in order: fixed, so the same bits on every run.
+  const int lane = threadIdx.x & 31, warp = threadIdx.x >> 5;
+#pragma unroll
+  for (int v = 0; v < V; ++v) {
+    double s = sums[v];
+#pragma unroll
+    for (int offset = 16; offset > 0; offset >>= 1) s += __shfl_down_sync(0xffffffffu, s, offset);
+    if (lane == 0) warp_sums[warp * V + v] = s;
+  }
+  __syncthreads();
+  for (int v = threadIdx.x; v < V; v += blockDim.x) {
+    double s = 0.0;
+    for (int w = 0; w < kWarps; ++w) s += warp_sums[w * V + v];
+    partials[(std::size_t(label) * gridDim.x + blockIdx.x) * V + v] = s;
+  }
+}
+
+/// @brief out[j] = sum over chunks c in order of partials[(j / V * chunks + c) * V + j % V], j < labels * V:
+/// one warp per value, lane l adds chunks l, l + 32, ..., then a fixed shuffle tree.
+template <int V>
+__global__ void addChunksKernel(const double* __restrict__ partials, int chunks, int labels, double* __restrict__ out) {
+  const int value = int((std::size_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5);
+  const int lane = threadIdx.x & 31;
+  if (value >= labels * V) return;  // whole warps leave together
+  const int label = value / V, v = value % V;
+  double s = 0.0;
+  for (int c = lane; c < chunks; c += 32) s += partials[(std::size_t(label) * chunks + c) * V + v];
+#pragma unroll
+  for (int offset = 16; offset > 0; offset >>= 1) s += __shfl_down_sync(0xffffffffu, s, offset);
+  if (lane == 0) out[value] = s;
+}
+
+/// @brief Per label (labels of them), V sums over `pixels` pixels into out[label * V + v]; `partials` holds
+/// chunkScratchSize(pixels, labels, V) doubles. For the .cu files' launchers.
+template <int V, class Pixel>
+void launchChunkSums(Pixel pixel, std::size_t pixels, int labels, double* partials, double* out, cudaStream_t stream,
+                     const char* what) {
+  if (labels <= 0 || pixels == 0) return;
+  const std::size_t chunks = chunkCount(pixels);
+  const std::size_t chunk_pixels = (pixels + chunks - 1) / chunks;
+  chunkSumsKernel<V><<<dim3(unsigned(chunks), unsigned(labels)), kChunkThreads, 0, stream>>>(pixel, pixels,
+                                                                                           chunk_pixels, partials);
+  kernel_launches.fetch_add(1, std::memory_order_relaxed);
+  check(cudaGetLastError(), what, __FILE__, __LINE__);
+  const unsigned warps_per_block = kChunkThreads / 32;
+  const unsigned blocks = unsigned((std::size_t(labels) * V + warps_per_block - 1) / warps_per_block);
+  addChunksKernel<V><<<blocks, kChunkThreads, 0, stream>>>(partials, int(chunks), labels, out);
+  kernel_launches.fetch_add(1, std::memory_order_relaxed);
+  check(cudaGetLastError(), what, __FILE__, __LINE__);
+}
+
 /// @brief Frame 1's point P at pixel `idx` moved by its interpolated motion (warpPoints of src/core/scene_flow.cpp),
 /// in double: the labels' mean twist by the motion-label weights of `u` (`plane` values per label), a single
 /// label's own transform where only one has mass, the largest label's where (almost) none has. `motions` holds
@@ -167,9 +253,9 @@ void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, cons
                             const Intrinsics& K, float* scene_flow, float* optical_flow, float* moved_depth,
                             int* ids, cudaStream_t stream);
 /// @brief labelCentroids: per motion label the u-weighted sums of the valid points and of u (4 doubles:
-/// x, y, z, weight), in a fixed order.
-void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels, double* out,
-                             cudaStream_t stream);
+/// x, y, z, weight), in a fixed order; `partials`: chunkScratchSize(plane, motion_labels, 4) doubles.
+void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels, double* partials,
+                             double* out, cudaStream_t stream);
 
 // ---------------------------------------------------------------- motion step (motion_estimation.cu)
 /// @brief The motion step's accumulator on device-resident data (no uploads but the twists).
@@ -228,17 +314,22 @@ void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint
 /// @brief out plane j = sum of the in planes i with target[i] == j, in ascending i (target on the device).
 void launchRemapLabels(const float* in, std::size_t plane, int count, const int* target, int new_count, float* out,
                        cudaStream_t stream);
-/// @brief Per motion label of `u` (count planes): sum of u (double), in a fixed order.
-void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, double* out, cudaStream_t stream);
-/// @brief Per motion label: owned-pixel moments, 10 doubles (count, sum xyz, sum xx xy xz yy yz zz).
-void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, double* out,
+/// @brief Per motion label of `u` (count planes): sum of u (double), in a fixed order; `partials`: scratch of
+/// chunkScratchSize(plane, motion_labels, 1) doubles.
+void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, double* partials, double* out,
+                         cudaStream_t stream);
+/// @brief Per motion label: owned-pixel moments, 10 doubles (count, sum xyz, sum xx xy xz yy yz zz); `partials`:
+/// chunkScratchSize(plane, motion_labels, 10) doubles.
+void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, double* partials, double* out,
                         cudaStream_t stream);
 /// @brief Cuts (parent, centre xyz, axis xyz as doubles; 7 values each) appended as planes
 /// [motion_labels, motion_labels + cuts) of `out` (count + cuts planes); counts the moved pixels per cut.
 void launchCutLabels(const float* in, const DeviceImage& points, int count, const double* cuts, int cut_count,
                      float* out, unsigned long long* moved, cudaStream_t stream);
-/// @brief Sum over planes of |a - b| per pixel, added into one double (fixed order).
-void launchAbsoluteChange(const float* a, const float* b, std::size_t values, double* out, cudaStream_t stream);
+/// @brief Sum over planes of |a - b| per pixel, added into one double (fixed order); `partials`:
+/// chunkScratchSize(values, 1, 1) doubles.
+void launchAbsoluteChange(const float* a, const float* b, std::size_t values, double* partials, double* out,
+                          cudaStream_t stream);
 
 // ---------------------------------------------------------------- occlusion (occlusion.cu)
 /// @brief detectOcclusions(warpPoints(points, u, twists), depth2, K) at one level into `occluded`.

@@ -535,7 +535,7 @@ __global__ void dataCostsKernel(const DataCostParams q, float* __restrict__ data
 
 }  // namespace
 
-bool cudaBackendAvailable(std::string* why) {
+bool cudaBackendAvailable(std::string* why, int requested_device) {
   int count = 0;
   const cudaError_t status = cudaGetDeviceCount(&count);
   if (status != cudaSuccess) {
@@ -549,9 +549,16 @@ bool cudaBackendAvailable(std::string* why) {
     if (why) *why = "cudaGetDeviceCount found " + std::to_string(count) + " CUDA devices";
     return false;
   }
-  int device = 0;
+  if (requested_device < 0 || requested_device >= count) {
+    if (why)
+      *why = "CUDA device " + std::to_string(requested_device) + " requested (cuda_device), but " +
+             std::to_string(count) + " CUDA device" + (count == 1 ? " is" : "s are") + " present (0.." +
+             std::to_string(count - 1) + ")";
+    return false;
+  }
+  const int device = requested_device;
   cudaDeviceProp properties{};
-  if (cudaGetDevice(&device) != cudaSuccess || cudaGetDeviceProperties(&properties, device) != cudaSuccess) {
+  if (cudaSetDevice(device) != cudaSuccess || cudaGetDeviceProperties(&properties, device) != cudaSuccess) {
     const cudaError_t error = cudaGetLastError();
     if (why) *why = std::string("cannot query the current CUDA device: ") + cudaGetErrorString(error);
     return false;

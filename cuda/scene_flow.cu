@@ -55,25 +55,21 @@ __global__ void outputsKernel(const DeviceImage points, float* __restrict__ u, i
   ids[idx] = best == outlier ? 0 : best + 1;
 }
 
-// One block per motion label.
-__global__ void centroidSumsKernel(const float* __restrict__ u, const DeviceImage points, double* __restrict__ out) {
-  __shared__ double partial[kThreads * kCentroidValues];
-  const std::size_t plane = std::size_t(points.width) * points.height;
-  const float* ui = u + blockIdx.x * plane;
-  double m[kCentroidValues] = {0, 0, 0, 0};
-  for (std::size_t k = threadIdx.x; k < plane; k += blockDim.x) {
+// Pixel k's share of a motion label's centroid sums: u-weighted x, y, z of the valid points, and u.
+struct CentroidPixel {
+  const float* u;
+  DeviceImage points;
+  std::size_t plane;
+  __device__ void operator()(int label, std::size_t k, double* m) const {
     const float z = points.data[k * 3 + 2];
-    const double w = ui[k];
-    if (w <= 0 || !isfinite(z)) continue;
+    const double w = u[label * plane + k];
+    if (w <= 0 || !isfinite(z)) return;
     m[0] += w * points.data[k * 3];
     m[1] += w * points.data[k * 3 + 1];
     m[2] += w * z;
     m[3] += w;
   }
-  for (int v = 0; v < kCentroidValues; ++v) partial[threadIdx.x * kCentroidValues + v] = m[v];
-  blockSum(partial, kCentroidValues);
-  if (threadIdx.x < kCentroidValues) out[blockIdx.x * kCentroidValues + threadIdx.x] = partial[threadIdx.x];
-}
+};
 
 }  // namespace
 
@@ -95,11 +91,11 @@ void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, cons
   MCFLOW_CUDA_CHECK_LAUNCH("outputsKernel");
 }
 
-void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels, double* out,
-                             cudaStream_t stream) {
-  if (motion_labels <= 0) return;
-  centroidSumsKernel<<<unsigned(motion_labels), kThreads, 0, stream>>>(u, points, out);
-  MCFLOW_CUDA_CHECK_LAUNCH("centroidSumsKernel");
+void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels, double* partials,
+                             double* out, cudaStream_t stream) {
+  const std::size_t plane = std::size_t(points.width) * points.height;
+  launchChunkSums<kCentroidValues>(CentroidPixel{u, points, plane}, plane, motion_labels, partials, out, stream,
+                                   "label centroid sums");
 }
 
 }  // namespace cuda_detail

@@ -18,7 +18,6 @@ namespace cuda_detail {
 namespace {
 
 constexpr int kBlockX = 32, kBlockY = 8;
-constexpr int kReduceThreads = 256;
 constexpr int kMaxRemapPlanes = 512;
 constexpr int kMomentValues = 10;
 
@@ -119,25 +118,21 @@ __global__ void remapKernel(const float* __restrict__ in, std::size_t plane, int
 }
 
 // One block per motion label.
-__global__ void supportsKernel(const float* __restrict__ u, std::size_t plane, double* __restrict__ out) {
-  __shared__ double partial[kReduceThreads];
-  const float* ui = u + blockIdx.x * plane;
-  double s = 0;
-  for (std::size_t k = threadIdx.x; k < plane; k += blockDim.x) s += ui[k];
-  partial[threadIdx.x] = s;
-  blockSum(partial, 1);
-  if (threadIdx.x == 0) out[blockIdx.x] = partial[0];
-}
+// Pixel k's share of label `label`'s support: sum of u.
+struct SupportPixel {
+  const float* u;
+  std::size_t plane;
+  __device__ void operator()(int label, std::size_t k, double* sums) const { sums[0] += u[label * plane + k]; }
+};
 
-// One block per motion label: count, sum P, sum P P^T (xx xy xz yy yz zz) of its owned pixels.
-__global__ void momentsKernel(const float* __restrict__ u, const DeviceImage points, double* __restrict__ out) {
-  __shared__ double partial[kReduceThreads * kMomentValues];
-  const std::size_t plane = std::size_t(points.width) * points.height;
-  const float* ui = u + blockIdx.x * plane;
-  double m[kMomentValues] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
-  for (std::size_t k = threadIdx.x; k < plane; k += blockDim.x) {
+// Per motion label: count, sum P, sum P P^T (xx xy xz yy yz zz) of its owned pixels (u >= 0.5).
+struct MomentPixel {
+  const float* u;
+  DeviceImage points;
+  std::size_t plane;
+  __device__ void operator()(int label, std::size_t k, double* m) const {
     const float z = points.data[k * 3 + 2];
-    if (ui[k] < 0.5f || !isfinite(z)) continue;
+    if (u[label * plane + k] < 0.5f || !isfinite(z)) return;
     const double P[3] = {points.data[k * 3], points.data[k * 3 + 1], z};
     m[0] += 1;
     m[1] += P[0];
@@ -150,10 +145,7 @@ __global__ void momentsKernel(const float* __restrict__ u, const DeviceImage poi
     m[8] += P[1] * P[2];
     m[9] += P[2] * P[2];
   }
-  for (int v = 0; v < kMomentValues; ++v) partial[threadIdx.x * kMomentValues + v] = m[v];
-  blockSum(partial, kMomentValues);
-  if (threadIdx.x < kMomentValues) out[blockIdx.x * kMomentValues + threadIdx.x] = partial[threadIdx.x];
-}
+};
 
 __global__ void cutKernel(const float* __restrict__ in, const DeviceImage points, int count,
                           const double* __restrict__ cuts, int cut_count, float* __restrict__ out,
@@ -181,15 +173,11 @@ __global__ void cutKernel(const float* __restrict__ in, const DeviceImage points
   }
 }
 
-__global__ void absoluteChangeKernel(const float* __restrict__ a, const float* __restrict__ b, std::size_t values,
-                                     double* __restrict__ out) {
-  __shared__ double partial[kReduceThreads];
-  double s = 0;
-  for (std::size_t k = threadIdx.x; k < values; k += blockDim.x) s += fabs(double(a[k]) - double(b[k]));
-  partial[threadIdx.x] = s;
-  blockSum(partial, 1);
-  if (threadIdx.x == 0) *out = partial[0];
-}
+struct AbsoluteChangePixel {
+  const float* a;
+  const float* b;
+  __device__ void operator()(int, std::size_t k, double* sums) const { sums[0] += fabs(double(a[k]) - double(b[k])); }
+};
 
 // Source pixels per target pixel between two pyramid levels: a power of two (integer halving drops an odd
 // last column/row, so the size ratio is not exact).
@@ -240,17 +228,16 @@ void launchRemapLabels(const float* in, std::size_t plane, int count, const int*
   MCFLOW_CUDA_CHECK_LAUNCH("remapKernel");
 }
 
-void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, double* out, cudaStream_t stream) {
-  if (motion_labels <= 0) return;
-  supportsKernel<<<unsigned(motion_labels), kReduceThreads, 0, stream>>>(u, plane, out);
-  MCFLOW_CUDA_CHECK_LAUNCH("supportsKernel");
+void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, double* partials, double* out,
+                         cudaStream_t stream) {
+  launchChunkSums<1>(SupportPixel{u, plane}, plane, motion_labels, partials, out, stream, "label supports");
 }
 
-void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, double* out,
+void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, double* partials, double* out,
                         cudaStream_t stream) {
-  if (motion_labels <= 0) return;
-  momentsKernel<<<unsigned(motion_labels), kReduceThreads, 0, stream>>>(u, points, out);
-  MCFLOW_CUDA_CHECK_LAUNCH("momentsKernel");
+  const std::size_t plane = std::size_t(points.width) * points.height;
+  launchChunkSums<kMomentValues>(MomentPixel{u, points, plane}, plane, motion_labels, partials, out, stream,
+                                 "owned moments");
 }
 
 void launchCutLabels(const float* in, const DeviceImage& points, int count, const double* cuts, int cut_count,
@@ -262,9 +249,9 @@ void launchCutLabels(const float* in, const DeviceImage& points, int count, cons
   MCFLOW_CUDA_CHECK_LAUNCH("cutKernel");
 }
 
-void launchAbsoluteChange(const float* a, const float* b, std::size_t values, double* out, cudaStream_t stream) {
-  absoluteChangeKernel<<<1, kReduceThreads, 0, stream>>>(a, b, values, out);
-  MCFLOW_CUDA_CHECK_LAUNCH("absoluteChangeKernel");
+void launchAbsoluteChange(const float* a, const float* b, std::size_t values, double* partials, double* out,
+                          cudaStream_t stream) {
+  launchChunkSums<1>(AbsoluteChangePixel{a, b}, values, 1, partials, out, stream, "absolute label change");
 }
 
 }  // namespace cuda_detail

@@ -42,11 +42,13 @@ struct LevelBuffers {
 
 class CudaSolveBackend final : public SolveBackend {
  public:
-  CudaSolveBackend()
-      : accumulator_(cuda_detail::makeDeviceMotionAccumulator(stream_.stream)),
+  explicit CudaSolveBackend(int device)
+      : device_(device),
+        accumulator_(cuda_detail::makeDeviceMotionAccumulator(stream_.stream)),
         primal_dual_(cuda_detail::makeDevicePrimalDual(stream_.stream)) {}
 
   Backend kind() const override { return Backend::Cuda; }
+  void activate() override { MCFLOW_CUDA_CHECK(cudaSetDevice(device_)); }
 
   void buildPyramids(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, int levels,
                      const Config& config) override {
@@ -275,7 +277,8 @@ class CudaSolveBackend final : public SolveBackend {
     const LabelStats ls = primal_dual_->run(problem, labels(), dual_.get(), iterations, tolerance);
 
     scalar_.reserve(1);
-    cuda_detail::launchAbsoluteChange(labels(), before_.get(), values, scalar_.get(), s);
+    partials_.reserve(cuda_detail::chunkScratchSize(values, 1, 1));
+    cuda_detail::launchAbsoluteChange(labels(), before_.get(), values, partials_.get(), scalar_.get(), s);
     double* change = staged_doubles_.reserve(1);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(change, scalar_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
@@ -311,7 +314,8 @@ class CudaSolveBackend final : public SolveBackend {
     // Per label: the u-weighted point sums and sum u over the valid pixels, which is the support (the pixels
     // without depth were just moved to the outlier label).
     scalar_.reserve(std::size_t(std::max(1, 4 * n)));
-    cuda_detail::launchLabelCentroidSums(labels(), L.points1, n, scalar_.get(), s);
+    partials_.reserve(cuda_detail::chunkScratchSize(p, n, 4));
+    cuda_detail::launchLabelCentroidSums(labels(), L.points1, n, partials_.get(), scalar_.get(), s);
 
     // One transfer down: every image into one page-locked buffer per type, then a single synchronisation.
     const std::size_t label_values = p * std::size_t(count_);
@@ -335,18 +339,17 @@ class CudaSolveBackend final : public SolveBackend {
     if (n > 0) down(staged_sums, scalar_.get(), std::size_t(4 * n) * sizeof(double));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
 
-    result.soft_labels = SoftLabels(W, H, count_);
-    std::copy_n(staged_labels, label_values, result.soft_labels.data.data());
-    result.scene_flow = ImageF(W, H, 3);
-    std::copy_n(staged_scene, p * 3, result.scene_flow.data.data());
-    result.optical_flow = ImageF(W, H, 2);
-    std::copy_n(staged_optical, p * 2, result.optical_flow.data.data());
-    result.moved_depth = ImageF(W, H, 1);
-    std::copy_n(staged_moved, p, result.moved_depth.data.data());
-    result.labels = ImageI32(W, H, 1);
-    std::copy_n(staged_ids, p, result.labels.data.data());
-    result.occlusion = ImageU8(W, H, 1);
-    std::copy_n(staged_occlusion, p, result.occlusion.data.data());
+    StagedOutputs staged;
+    staged.width = W;
+    staged.height = H;
+    staged.label_count = count_;
+    staged.soft_labels = staged_labels;
+    staged.scene_flow = staged_scene;
+    staged.optical_flow = staged_optical;
+    staged.moved_depth = staged_moved;
+    staged.labels = staged_ids;
+    staged.occlusion = staged_occlusion;
+    fillOutputImages(staged, result);
     result.segments.assign(std::size_t(n), Segment());
     for (int i = 0; i < n; ++i) {
       Segment& segment = result.segments[std::size_t(i)];
@@ -373,7 +376,8 @@ class CudaSolveBackend final : public SolveBackend {
     std::vector<double> out(std::size_t(std::max(0, n)));
     if (n <= 0) return out;
     scalar_.reserve(std::size_t(n));
-    cuda_detail::launchLabelSupports(labels(), plane(), n, scalar_.get(), stream_.stream);
+    partials_.reserve(cuda_detail::chunkScratchSize(plane(), n, 1));
+    cuda_detail::launchLabelSupports(labels(), plane(), n, partials_.get(), scalar_.get(), stream_.stream);
     download(out.data(), scalar_.get(), std::size_t(n), staged_doubles_);
     return out;
   }
@@ -394,7 +398,9 @@ class CudaSolveBackend final : public SolveBackend {
     if (n <= 0) return out;
     std::vector<double> values(std::size_t(n) * 10);
     scalar_.reserve(values.size());
-    cuda_detail::launchOwnedMoments(labels(), levels_[std::size_t(level_)].points1, n, scalar_.get(), stream_.stream);
+    partials_.reserve(cuda_detail::chunkScratchSize(plane(), n, 10));
+    cuda_detail::launchOwnedMoments(labels(), levels_[std::size_t(level_)].points1, n, partials_.get(), scalar_.get(),
+                                    stream_.stream);
     download(values.data(), scalar_.get(), values.size(), staged_doubles_);
     for (int i = 0; i < n; ++i) {
       const double* v = values.data() + 10 * i;
@@ -541,6 +547,7 @@ class CudaSolveBackend final : public SolveBackend {
     std::copy_n(staged, count, host);
   }
 
+  int device_ = 0;  // CUDA device of the stream and every buffer below
   cuda_detail::StreamHolder stream_;
   // Page-locked staging of the small transfers (each is synchronised before its buffer is used again).
   PinnedBuffer<float> staged_floats_;
@@ -563,7 +570,7 @@ class CudaSolveBackend final : public SolveBackend {
   DeviceBuffer<int> ids_;
   DeviceBuffer<std::uint8_t> occlusion_, level_occlusion_, outlier_only_;
   DeviceBuffer<float> dual_;
-  DeviceBuffer<double> scalar_, motions_, cuts_;
+  DeviceBuffer<double> scalar_, partials_, motions_, cuts_;  // partials_: chunked sums' scratch
   DeviceBuffer<cuda_detail::DeviceTransform> transforms_;
   DeviceBuffer<int> counts_, hard_labels_;
   DeviceBuffer<long long> targets_;
@@ -595,10 +602,10 @@ bool cudaDeviceMemory(std::size_t* used, std::size_t* total) {
   return true;
 }
 
-std::unique_ptr<SolveBackend> makeCudaSolveBackend() {
+std::unique_ptr<SolveBackend> makeCudaSolveBackend(int cuda_device) {
   std::string why;
-  if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);
-  return std::make_unique<CudaSolveBackend>();
+  if (!cudaBackendAvailable(&why, cuda_device)) throw BackendError("CUDA backend requested but unavailable: " + why);
+  return std::make_unique<CudaSolveBackend>(cuda_device);  // the device is current: the stream and buffers go there
 }
 
 }  // namespace mc_flow

@@ -20,6 +20,7 @@ class FaultInjectingBackend final : public SolveBackend {
       : inner_(std::move(inner)), fault_(std::move(fault)) {}
 
   Backend kind() const override { return inner_->kind(); }
+  void activate() override { inner_->activate(); }
 
   void buildPyramids(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, int levels,
                      const Config& config) override {

@@ -299,7 +299,7 @@ class CpuLabelOptimizer final : public LabelOptimizer {
 std::unique_ptr<LabelOptimizer> makeCpuLabelOptimizer() { return std::make_unique<CpuLabelOptimizer>(); }
 
 #ifndef MCFLOW_HAVE_CUDA
-bool cudaBackendAvailable(std::string* why) {
+bool cudaBackendAvailable(std::string* why, int) {
   if (why) *why = "this build of mc_flow has no CUDA backend (nvcc was not found when it was configured)";
   return false;
 }
@@ -310,20 +310,20 @@ std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer() {
 }
 #endif
 
-Backend resolveBackend(Backend requested, std::string* note) {
+Backend resolveBackend(Backend requested, std::string* note, int cuda_device) {
   std::string why;
   switch (requested) {
     case Backend::Cpu:
       if (note) *note = "cpu (requested)";
       return Backend::Cpu;
     case Backend::Cuda:
-      if (!cudaBackendAvailable(&why)) throw BackendError("CUDA backend requested but unavailable: " + why);
-      if (note) *note = "cuda (requested)";
+      if (!cudaBackendAvailable(&why, cuda_device)) throw BackendError("CUDA backend requested but unavailable: " + why);
+      if (note) *note = "cuda (requested, device " + std::to_string(cuda_device) + ")";
       return Backend::Cuda;
     case Backend::Auto:
     default:
-      if (cudaBackendAvailable(&why)) {
-        if (note) *note = "cuda (auto: GPU available)";
+      if (cudaBackendAvailable(&why, cuda_device)) {
+        if (note) *note = "cuda (auto: GPU available, device " + std::to_string(cuda_device) + ")";
         return Backend::Cuda;
       }
       if (note) *note = "cpu (auto: " + why + ")";

@@ -67,7 +67,7 @@ std::unique_ptr<Solver> SequencePipeline::makeSolver(const Config& config, const
   config.validate();  // before a backend is made, as Solver(config) does
   std::string note;
   std::unique_ptr<SolveBackend> backend =
-      make_backend_ ? make_backend_(config.backend, &note) : makeSolveBackend(config.backend, &note);
+      make_backend_ ? make_backend_(config.backend, &note) : makeSolveBackend(config.backend, &note, config.cuda_device);
   if (!why.empty()) note = why;
   if (injected_fault_) {
     backend = withBackendFault(std::move(backend), *injected_fault_);

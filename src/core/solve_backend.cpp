@@ -220,19 +220,57 @@ class CpuSolveBackend final : public SolveBackend {
 
 }  // namespace
 
+void fillOutputImages(const StagedOutputs& s, Result& result) {
+  const int W = s.width, H = s.height;
+  const std::size_t p = std::size_t(W) * H;
+  auto fill = [&](int task) {
+    switch (task) {
+      case 0:
+        result.soft_labels.width = W, result.soft_labels.height = H, result.soft_labels.count = s.label_count;
+        result.soft_labels.data.assign(s.soft_labels, s.soft_labels + p * std::size_t(s.label_count));
+        break;
+      case 1:
+        result.scene_flow.width = W, result.scene_flow.height = H, result.scene_flow.channels = 3;
+        result.scene_flow.data.assign(s.scene_flow, s.scene_flow + 3 * p);
+        break;
+      case 2:
+        result.optical_flow.width = W, result.optical_flow.height = H, result.optical_flow.channels = 2;
+        result.optical_flow.data.assign(s.optical_flow, s.optical_flow + 2 * p);
+        break;
+      case 3:
+        result.moved_depth.width = W, result.moved_depth.height = H, result.moved_depth.channels = 1;
+        result.moved_depth.data.assign(s.moved_depth, s.moved_depth + p);
+        break;
+      case 4:
+        result.labels.width = W, result.labels.height = H, result.labels.channels = 1;
+        result.labels.data.assign(s.labels, s.labels + p);
+        break;
+      default:
+        result.occlusion.width = W, result.occlusion.height = H, result.occlusion.channels = 1;
+        result.occlusion.data.assign(s.occlusion, s.occlusion + p);
+        break;
+    }
+  };
+  // Threads pay off only where page faults and copies outweigh waking them (640x480 and above).
+  const bool parallel = p >= std::size_t(640) * 480;
+#pragma omp parallel for schedule(dynamic, 1) if (parallel)
+  for (int task = 0; task < 6; ++task) fill(task);
+}
+
 std::unique_ptr<SolveBackend> makeCpuSolveBackend() { return std::make_unique<CpuSolveBackend>(); }
 
 #ifndef MCFLOW_HAVE_CUDA
 CudaCounters cudaCounters() { return CudaCounters(); }
 bool cudaDeviceMemory(std::size_t*, std::size_t*) { return false; }
 
-std::unique_ptr<SolveBackend> makeCudaSolveBackend() {
+std::unique_ptr<SolveBackend> makeCudaSolveBackend(int) {
   throw BackendError("CUDA backend requested but this build has no CUDA (built without nvcc or MCFLOW_WITH_CUDA=OFF)");
 }
 #endif
 
-std::unique_ptr<SolveBackend> makeSolveBackend(Backend requested, std::string* note) {
-  return resolveBackend(requested, note) == Backend::Cuda ? makeCudaSolveBackend() : makeCpuSolveBackend();
+std::unique_ptr<SolveBackend> makeSolveBackend(Backend requested, std::string* note, int cuda_device) {
+  return resolveBackend(requested, note, cuda_device) == Backend::Cuda ? makeCudaSolveBackend(cuda_device)
+                                                                       : makeCpuSolveBackend();
 }
 
 }  // namespace mc_flow

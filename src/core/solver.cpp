@@ -114,7 +114,7 @@ struct Solver::Impl {
 Solver::Solver(const Config& config) : impl_(std::make_unique<Impl>()) {
   config.validate();
   impl_->config = config;
-  impl_->backend = makeSolveBackend(config.backend, &impl_->backend_note);
+  impl_->backend = makeSolveBackend(config.backend, &impl_->backend_note, config.cuda_device);
 }
 
 Solver::Solver(const Config& config, std::unique_ptr<SolveBackend> backend, std::string backend_note)
@@ -186,6 +186,7 @@ Result Solver::Impl::emptyResult(const Prepared& p, const Intrinsics& K) const {
 Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous) {
   const auto start_time = Clock::now();
   const ThreadCountScope thread_scope(config.threads);
+  backend->activate();  // this thread may not have used the backend's device before
   auto t = Clock::now();
   const Prepared p = prepare(frame1, frame2, K);
   Result result = emptyResult(p, K);

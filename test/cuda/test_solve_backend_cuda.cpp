@@ -14,6 +14,8 @@
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <thread>
+#include <utility>
 #include <vector>
 
 #include "mc_flow/core/error.h"
@@ -303,6 +305,77 @@ TEST(CudaSolveBackend, WorkspaceReuseGivesTheFreshResult) {
   EXPECT_EQ(maxAbsDifference(first.soft_labels, again.soft_labels), 0.0);
   for (std::size_t i = 0; i < first.segments.size(); ++i)
     EXPECT_EQ((first.segments[i].twist - again.segments[i].twist).norm(), 0.0) << "segment " << i;
+}
+
+// Config::cuda_device: a device that does not exist is named in the error (cuda), or sends auto to the CPU with
+// the reason in the note; device 0 is used when asked for.
+TEST(CudaSolveBackend, CudaDeviceSelection) {
+  SKIP_WITHOUT_GPU();
+  const int missing = 63;  // Config's largest; no test machine has 64 GPUs
+  std::string why;
+  EXPECT_FALSE(cudaBackendAvailable(&why, missing));
+  EXPECT_NE(why.find("CUDA device 63 requested"), std::string::npos) << why;
+  try {
+    makeSolveBackend(Backend::Cuda, nullptr, missing);
+    ADD_FAILURE() << "a missing CUDA device was accepted";
+  } catch (const BackendError& e) {
+    EXPECT_NE(std::string(e.what()).find("CUDA device 63"), std::string::npos) << e.what();
+  }
+  std::string note;
+  EXPECT_EQ(makeSolveBackend(Backend::Auto, &note, missing)->kind(), Backend::Cpu);
+  EXPECT_NE(note.find("CUDA device 63"), std::string::npos) << note;
+  Config config;
+  config.backend = Backend::Cuda;
+  config.cuda_device = 0;
+  SyntheticSceneOptions options;
+  options.width = 160;
+  options.height = 120;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  const Result r = Solver(config).solve(pair.frame1, pair.frame2, pair.intrinsics);
+  EXPECT_EQ(r.backend_kind, Backend::Cuda);
+  EXPECT_NE(r.backend_note.find("device 0"), std::string::npos) << r.backend_note;
+}
+
+// Two cameras, one GPU: two Solvers, each with its own stream, solving in two threads at once give what each gives
+// alone, bit for bit (nothing shared between solvers; the sums run in a fixed order).
+TEST(CudaSolveBackend, TwoSolversInTwoThreadsMatchTheirSolosBitForBit) {
+  SKIP_WITHOUT_GPU();
+  Config config;
+  config.backend = Backend::Cuda;
+  SyntheticSceneOptions a_options, b_options;
+  a_options.variant = 0;
+  b_options.variant = 2;
+  b_options.width = 160;
+  b_options.height = 120;
+  const SyntheticPair a = renderSyntheticPair(a_options), b = renderSyntheticPair(b_options);
+  const Result solo_a = Solver(config).solve(a.frame1, a.frame2, a.intrinsics);
+  const Result solo_b = Solver(config).solve(b.frame1, b.frame2, b.intrinsics);
+  Solver solver_a(config), solver_b(config);
+  constexpr int kRounds = 4;
+  std::vector<Result> results_a(kRounds), results_b(kRounds);
+  std::string error_a, error_b;
+  auto run = [](Solver& solver, const SyntheticPair& pair, std::vector<Result>& out, std::string& error) {
+    try {
+      for (Result& r : out) r = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+  };
+  std::thread thread_a(run, std::ref(solver_a), std::cref(a), std::ref(results_a), std::ref(error_a));
+  std::thread thread_b(run, std::ref(solver_b), std::cref(b), std::ref(results_b), std::ref(error_b));
+  thread_a.join();
+  thread_b.join();
+  ASSERT_TRUE(error_a.empty()) << error_a;
+  ASSERT_TRUE(error_b.empty()) << error_b;
+  for (int k = 0; k < kRounds; ++k) {
+    for (const auto& [solo, concurrent] : {std::pair<const Result*, const Result*>{&solo_a, &results_a[k]},
+                                           std::pair<const Result*, const Result*>{&solo_b, &results_b[k]}}) {
+      ASSERT_EQ(solo->segments.size(), concurrent->segments.size()) << "round " << k;
+      EXPECT_EQ(maxAbsDifference(solo->soft_labels, concurrent->soft_labels), 0.0) << "round " << k;
+      for (std::size_t i = 0; i < solo->segments.size(); ++i)
+        EXPECT_EQ((solo->segments[i].twist - concurrent->segments[i].twist).norm(), 0.0) << "round " << k;
+    }
+  }
 }
 
 // Grow-only buffers: once a solver has seen pairs of a size and label count (cold and warm), solving them again

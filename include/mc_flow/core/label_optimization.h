@@ -71,13 +71,14 @@ class LabelOptimizer {
 
 /// @brief The CPU implementation (OpenMP).
 std::unique_ptr<LabelOptimizer> makeCpuLabelOptimizer();
-/// @brief True when the CUDA backend is compiled in and a GPU is usable; otherwise `why` says why not.
-bool cudaBackendAvailable(std::string* why);
+/// @brief True when the CUDA backend is compiled in and CUDA device `device` exists and is usable (it becomes the
+/// calling thread's current device); otherwise `why` says why not.
+bool cudaBackendAvailable(std::string* why, int device = 0);
 /// @brief The CUDA implementation; throws BackendError when unavailable.
 std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer();
 /// @brief Resolves Config::backend to Cpu or Cuda: Auto = CUDA when available else CPU; Cuda throws BackendError
 /// if unavailable. `note` says what was chosen and why.
-Backend resolveBackend(Backend requested, std::string* note = nullptr);
+Backend resolveBackend(Backend requested, std::string* note = nullptr, int cuda_device = 0);
 /// @brief The label optimizer of resolveBackend(backend, note).
 std::unique_ptr<LabelOptimizer> makeLabelOptimizer(Backend backend, std::string* note = nullptr);
 

@@ -49,6 +49,9 @@ class SolveBackend : public LabelStore {
  public:
   ~SolveBackend() override = default;
   virtual Backend kind() const = 0;
+  /// @brief Makes the calling thread use this backend's device (CUDA: cudaSetDevice; the CPU: nothing). Solver
+  /// calls it at the start of every solve, so a Solver may be used from any thread, one thread at a time.
+  virtual void activate() {}
 
   /// @brief Builds both frames' pyramids (`levels` levels, the rules of pyramid.h) where the backend computes:
   /// the CPU backend in host images, the CUDA backend on the device from one upload of each frame. Resets the
@@ -109,16 +112,32 @@ CudaCounters cudaCounters();
 /// where no usable GPU (or no CUDA in the build).
 bool cudaDeviceMemory(std::size_t* used, std::size_t* total);
 
+/// @brief The output images of a solve, contiguous in host memory (the CUDA backend's one download).
+struct StagedOutputs {
+  int width = 0, height = 0, label_count = 0;
+  const float* soft_labels = nullptr;   ///< label_count planes
+  const float* scene_flow = nullptr;    ///< 3 channels
+  const float* optical_flow = nullptr;  ///< 2 channels
+  const float* moved_depth = nullptr;
+  const std::int32_t* labels = nullptr;
+  const std::uint8_t* occlusion = nullptr;
+};
+/// @brief Fills result's soft_labels, scene_flow, optical_flow, moved_depth, labels and occlusion from `staged`:
+/// each image allocated and copied in one pass, large images on several OpenMP threads (at 1280x720, ~50 MB
+/// allocated, zero-filled and copied on one thread took most of the CUDA outputs stage).
+void fillOutputImages(const StagedOutputs& staged, Result& result);
+
 /// @brief Checks initial hard labels (size, values in [-1, motion_labels), motion_labels >= 1); throws
 /// InputError naming the value.
 void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int height);
 
 /// @brief The CPU backend (OpenMP): the stage functions of src/core on host images.
 std::unique_ptr<SolveBackend> makeCpuSolveBackend();
-/// @brief The CUDA backend; throws BackendError when no usable GPU is present or the build has no CUDA.
-std::unique_ptr<SolveBackend> makeCudaSolveBackend();
+/// @brief The CUDA backend on CUDA device `cuda_device`, with its own stream; throws BackendError when that device
+/// is missing or unusable or the build has no CUDA.
+std::unique_ptr<SolveBackend> makeCudaSolveBackend(int cuda_device = 0);
 /// @brief Resolves Config::backend: Auto = CUDA when available, else the CPU (`note` says why); Cuda
 /// throws BackendError when unavailable.
-std::unique_ptr<SolveBackend> makeSolveBackend(Backend requested, std::string* note = nullptr);
+std::unique_ptr<SolveBackend> makeSolveBackend(Backend requested, std::string* note = nullptr, int cuda_device = 0);
 
 }  // namespace mc_flow
