@@ -9,7 +9,6 @@
 
 #include "mc_flow/core/buffer_layout.h"
 #include "mc_flow/core/error.h"
-#include "mc_flow/io/image_io.h"
 
 namespace mc_flow {
 namespace io {

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <iostream>
 #include <map>
@@ -189,6 +190,16 @@ std::vector<Command> commands() {
                    {"mask", true, "union (default: occlusions of all three solves excluded) | mcflow (MC-Flow's only)"},
                    {"repeat", true, "solves per method and pair; times are the median (default 1)"},
                    {"verbose", false, "progress of the solver on stderr"},
+                   {"help", false, "this help"}}});
+
+  list.push_back({"export-real", "mcflow export-real --data DIR --out DIR",
+                  "Writes the real pairs as the solver sees them (grey intensity in [0, 1] and depth in metres, "
+                  "after the loader's depth cleaning) at 640x480 and halved to 320x240, as PFM files with their "
+                  "intrinsics, for `mcflow_bench --real DIR` on a machine without OpenCV (the GPU machine): "
+                  "OUT/<pair>_<W>x<H>/{intensity0,depth0,intensity1,depth1}.pfm and intrinsics.txt (fx fy cx cy).",
+                  {{"data", true, "directory of the real pairs (e.g. $MCFLOW_SHARED_DATA/real_pairs)"},
+                   {"out", true, "output directory (created)"},
+                   {"pairs", true, "comma-separated folder names (default: the four pairs of the shared set)"},
                    {"help", false, "this help"}}});
   return list;
 }
@@ -768,6 +779,31 @@ std::vector<std::string> splitList(const std::string& text) {
   return items;
 }
 
+int cmdExportReal(const Arguments& args) {
+  const std::string data = args.require("data"), out = args.require("out");
+  const std::vector<std::string> pairs = args.has("pairs") ? splitList(args.get("pairs")) : io::realPairNames();
+  if (pairs.empty()) throw UsageError("--pairs '" + args.get("pairs") + "' names no pair");
+  const Config config;  // the loader's depth cleaning and halving use the default depth range, as bench-real
+  for (const std::string& name : pairs)
+    for (int halvings = 0; halvings <= 1; ++halvings) {
+      const io::RealPair pair = io::loadRealPair(data, name, halvings, config);
+      const std::string dir =
+          out + "/" + name + "_" + std::to_string(pair.frame1.width()) + "x" + std::to_string(pair.frame1.height());
+      std::filesystem::create_directories(dir);
+      io::writePfm(dir + "/intensity0.pfm", pair.frame1.intensity);
+      io::writePfm(dir + "/depth0.pfm", pair.frame1.depth);
+      io::writePfm(dir + "/intensity1.pfm", pair.frame2.intensity);
+      io::writePfm(dir + "/depth1.pfm", pair.frame2.depth);
+      std::ofstream intrinsics(dir + "/intrinsics.txt");
+      intrinsics.precision(17);
+      intrinsics << pair.intrinsics.fx << " " << pair.intrinsics.fy << " " << pair.intrinsics.cx << " "
+                 << pair.intrinsics.cy << "\n";
+      if (!intrinsics) throw io::FileError("cannot write " + dir + "/intrinsics.txt");
+      std::printf("%s\n", dir.c_str());
+    }
+  return 0;
+}
+
 int cmdBenchReal(const Arguments& args) {
   const std::string data = args.require("data");
   const Config config = buildConfig(args);
@@ -832,6 +868,7 @@ int main(int argc, char** argv) {
     if (name == "synth") return cmdSynth(args);
     if (name == "eval") return cmdEval(args);
     if (name == "bench-real") return cmdBenchReal(args);
+    if (name == "export-real") return cmdExportReal(args);
     return cmdDemo(args);
   } catch (const UsageError& e) {
     std::cerr << "mcflow " << name << ": " << e.what() << "\n\n";

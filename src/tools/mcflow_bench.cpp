@@ -4,9 +4,15 @@
 // kernel launches per solve (a CUB call counts as one); at the end the device memory in use.
 //
 //   mcflow_bench [--width 320] [--height 240] [--backend auto|cpu|cuda] [--repeat 3] [--noise]
-//                [--regularizer both|quad|tv] [--set name=value ...] [--camera-only]
+//                [--regularizer both|quad|tv] [--set name=value ...] [--camera-only] [--real DIR]
+//
+// --real DIR: the real pairs as `mcflow export-real` writes them (PFM, no OpenCV needed), one row per pair and size.
+#include <algorithm>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -14,6 +20,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/io/flow_io.h"
 #include "mc_flow/testing/bench.h"
 #include "mc_flow/testing/metrics.h"
 #include "mc_flow/testing/synthetic_scene.h"
@@ -68,6 +75,73 @@ int cameraOnlyBench(const Config& base, int width, int height) {
   return 0;
 }
 
+// Median wall time per stage over `repeat` solves of one pair, and the kernel launches.
+struct StageMedians {
+  double total = 0, cpu = 0, pyr = 0, init = 0, motion = 0, labels = 0, occl = 0, output = 0, launches = 0;
+};
+
+StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K,
+                             int repeat, Result& r) {
+  std::vector<double> total, cpu, pyr, init, motion, labels, occl, output, launches;
+  for (int rep = 0; rep < repeat; ++rep) {
+    const std::clock_t cpu_start = std::clock();
+    const std::uint64_t launches_before = cudaCounters().kernel_launches;
+    r = solver.solve(frame1, frame2, K);
+    cpu.push_back(1000.0 * double(std::clock() - cpu_start) / CLOCKS_PER_SEC);
+    launches.push_back(double(cudaCounters().kernel_launches - launches_before));
+    total.push_back(r.timings.total);
+    pyr.push_back(r.timings.preprocessing);
+    init.push_back(r.timings.initialisation);
+    motion.push_back(r.timings.motion);
+    labels.push_back(r.timings.labels + r.timings.adaptation);
+    occl.push_back(r.timings.occlusion);
+    output.push_back(r.timings.outputs);
+  }
+  return {median(total), median(cpu),    median(pyr),  median(init),    median(motion),
+          median(labels), median(occl), median(output), median(launches)};
+}
+
+// The real pairs on any machine: folders <pair>_<W>x<H> of PFM frames and intrinsics.txt (mcflow export-real).
+int realBench(const std::string& dir, const Config& base, int repeat) {
+  std::vector<std::filesystem::path> folders;
+  for (const auto& entry : std::filesystem::directory_iterator(dir))
+    if (entry.is_directory() && std::filesystem::exists(entry.path() / "intrinsics.txt")) folders.push_back(entry.path());
+  if (folders.empty())
+    throw InputError("--real " + dir + ": no folder with intrinsics.txt (write them with mcflow export-real)");
+  std::sort(folders.begin(), folders.end());
+  std::printf("# mcflow_bench --real %s: regularizer %s, repeat %d (median times); residuals: RMSE after warping frame 2 "
+              "back, occluded pixels excluded\n",
+              dir.c_str(), base.regularizer == Regularizer::Quadratic ? "quad" : "tv", repeat);
+  std::printf("%-28s %6s %7s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s\n", "pair", "segs", "rmseI", "rmseZ_mm",
+              "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "occl", "output", "launches");
+  std::map<std::string, std::vector<double>> totals_by_size;
+  for (const std::filesystem::path& folder : folders) {
+    auto frame = [&](const char* intensity, const char* depth) {
+      RgbdFrame f;
+      f.intensity = io::readPfm((folder / intensity).string());
+      f.depth = io::readPfm((folder / depth).string());
+      return f;
+    };
+    const RgbdFrame frame1 = frame("intensity0.pfm", "depth0.pfm"), frame2 = frame("intensity1.pfm", "depth1.pfm");
+    Intrinsics K;
+    std::ifstream in(folder / "intrinsics.txt");
+    if (!(in >> K.fx >> K.fy >> K.cx >> K.cy))
+      throw InputError((folder / "intrinsics.txt").string() + ": expected four numbers fx fy cx cy");
+    Solver solver(base);
+    Result r;
+    const StageMedians m = solveRepeatedly(solver, frame1, frame2, K, repeat, r);
+    const ResidualRmse rr = warpResidualRmse(frame1, frame2, K, &r.scene_flow, &r.occlusion);
+    std::printf("%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f\n",
+                folder.filename().string().c_str(), r.segments.size(), rr.photometric, 1000.0 * rr.geometric, m.total,
+                m.cpu, m.pyr, m.init, m.motion, m.labels, m.occl, m.output, m.launches);
+    std::fflush(stdout);
+    totals_by_size[std::to_string(frame1.width()) + "x" + std::to_string(frame1.height())].push_back(m.total);
+  }
+  for (const auto& [size, totals] : totals_by_size)
+    std::printf("# %s: median total over %zu pairs %.1f ms\n", size.c_str(), totals.size(), median(totals));
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -79,7 +153,10 @@ int main(int argc, char** argv) {
                                    {"regularizer", true, "both | quad | tv (default both)"},
                                    {"camera-only", false,
                                     "static scenes seen by a moving camera (with Kinect-like noise): segments and "
-                                    "EPE of the default solve against one motion label (initial_labels=1)"}});
+                                    "EPE of the default solve against one motion label (initial_labels=1)"},
+                                   {"real", true,
+                                    "DIR of real pairs written by `mcflow export-real` (PFM): time, segments and "
+                                    "residuals per pair"}});
   try {
     cli.parse(argc, argv);
   } catch (const CommandLineError& e) {
@@ -98,6 +175,11 @@ int main(int argc, char** argv) {
     base.backend = parseBackend(cli.text("backend", "auto"));
     cli.applySettings(base);
     const std::vector<Regularizer> regs = regularizerChoice(cli.text("regularizer", "both"));
+    if (cli.has("real")) {
+      Config real = base;
+      if (regs.size() == 1) real.regularizer = regs.front();
+      return realBench(cli.text("real", ""), real, repeat);
+    }
     if (cli.has("camera-only")) {
       Config camera_only = base;
       if (regs.size() == 1) camera_only.regularizer = regs.front();  // "both": the default regulariser
@@ -123,22 +205,8 @@ int main(int argc, char** argv) {
         Config config = base;
         config.regularizer = reg;
         Solver solver(config);
-        std::vector<double> total, cpu, pyr, init, motion, labels, occl, output, launches;
         Result r;
-        for (int rep = 0; rep < repeat; ++rep) {
-          const std::clock_t cpu_start = std::clock();
-          const std::uint64_t launches_before = cudaCounters().kernel_launches;
-          r = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
-          cpu.push_back(1000.0 * double(std::clock() - cpu_start) / CLOCKS_PER_SEC);
-          launches.push_back(double(cudaCounters().kernel_launches - launches_before));
-          total.push_back(r.timings.total);
-          pyr.push_back(r.timings.preprocessing);
-          init.push_back(r.timings.initialisation);
-          motion.push_back(r.timings.motion);
-          labels.push_back(r.timings.labels + r.timings.adaptation);
-          occl.push_back(r.timings.occlusion);
-          output.push_back(r.timings.outputs);
-        }
+        const StageMedians m = solveRepeatedly(solver, pair.frame1, pair.frame2, pair.intrinsics, repeat, r);
         const FlowErrors fe = opticalFlowErrors(r.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion);
         const double epe3d = sceneFlowEpe(r.scene_flow, pair.gt_scene_flow, &pair.gt_occlusion);
         const double seg = segmentationAgreement(r.labels, pair.gt_parts);
@@ -146,8 +214,8 @@ int main(int argc, char** argv) {
         const ResidualRmse rr = warpResidualRmse(pair.frame1, pair.frame2, pair.intrinsics, &r.scene_flow, &r.occlusion);
         std::printf("synth-%-2d %-5s %7.3f %7.3f %8.2f %7.3f %7.3f %7.4f %7.4f %6d | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f\n",
                     variant, reg == Regularizer::Quadratic ? "quad" : "tv", fe.epe, fe.aae_deg, epe3d * 1000.0, seg, occ,
-                    rr.photometric, rr.geometric, int(r.segments.size()), median(total), median(cpu), median(pyr), median(init),
-                    median(motion), median(labels), median(occl), median(output), median(launches));
+                    rr.photometric, rr.geometric, int(r.segments.size()), m.total, m.cpu, m.pyr, m.init, m.motion, m.labels,
+                    m.occl, m.output, m.launches);
         std::fflush(stdout);
       }
     }

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <cstddef>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,11 @@
 
 namespace mc_flow {
 namespace io {
+
+/// @brief A file could not be created or written.
+struct FileError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
 
 /// @brief Writes a 2-channel flow image [px] as Middlebury .flo.
 void writeFlo(const std::string& path, const ImageF& flow);

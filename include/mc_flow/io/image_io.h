@@ -15,14 +15,10 @@
 #include <opencv2/core.hpp>
 
 #include "mc_flow/core/image.h"
+#include "mc_flow/io/flow_io.h"  // FileError
 
 namespace mc_flow {
 namespace io {
-
-/// @brief A file could not be created or written.
-struct FileError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
 
 /// @brief Grey intensity in [0, 1] from an 8-bit or 16-bit image with 1, 3 (BGR, as OpenCV stores it)
 /// or 4 (BGRA) channels: 0.299 R + 0.587 G + 0.114 B. `what` names the source in error messages.
