@@ -7,13 +7,18 @@
 //                [--regularizer both|quad|tv] [--set name=value ...] [--camera-only] [--real DIR]
 //
 // --real DIR: the real pairs as `mcflow export-real` writes them (PFM, no OpenCV needed), one row per pair and size.
+// --concurrent N: N solvers (N cameras) in N threads on the same backend, each solving synth-0 `repeat` times: pairs
+// per second against one solver alone.
 #include <algorithm>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
+#include <chrono>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "mc_flow/core/config.h"
@@ -142,6 +147,43 @@ int realBench(const std::string& dir, const Config& base, int repeat) {
   return 0;
 }
 
+int concurrentBench(const Config& base, int width, int height, int solvers, int repeat) {
+  SyntheticSceneOptions so;
+  so.width = width;
+  so.height = height;
+  const SyntheticPair pair = renderSyntheticPair(so);
+  auto run = [&](int count) {
+    std::vector<std::unique_ptr<Solver>> each;
+    for (int i = 0; i < count; ++i) {
+      each.push_back(std::make_unique<Solver>(base));
+      each.back()->solve(pair.frame1, pair.frame2, pair.intrinsics);  // warm-up: buffers of this size
+    }
+    std::vector<std::string> errors(static_cast<std::size_t>(count));
+    const auto start = std::chrono::steady_clock::now();
+    std::vector<std::thread> threads;
+    for (int i = 0; i < count; ++i)
+      threads.emplace_back([&, i] {
+        try {
+          for (int k = 0; k < repeat; ++k) each[std::size_t(i)]->solve(pair.frame1, pair.frame2, pair.intrinsics);
+        } catch (const std::exception& e) {
+          errors[std::size_t(i)] = e.what();
+        }
+      });
+    for (std::thread& t : threads) t.join();
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    for (const std::string& e : errors)
+      if (!e.empty()) throw std::runtime_error("a concurrent solve failed: " + e);
+    return double(count * repeat) / seconds;
+  };
+  const double alone = run(1), together = run(solvers);
+  std::printf("# mcflow_bench --concurrent %d: synth-0 %dx%d, %d solves per solver, backend %s\n", solvers, width,
+              height, repeat, toString(base.backend).c_str());
+  std::printf("one solver: %.1f pairs/s (%.1f ms per pair); %d solvers in %d threads: %.1f pairs/s in all, %.1f per "
+              "solver (%.2fx the throughput of one)\n",
+              alone, 1000.0 / alone, solvers, solvers, together, together / solvers, together / alone);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -154,6 +196,7 @@ int main(int argc, char** argv) {
                                    {"camera-only", false,
                                     "static scenes seen by a moving camera (with Kinect-like noise): segments and "
                                     "EPE of the default solve against one motion label (initial_labels=1)"},
+                                   {"concurrent", true, "N solvers in N threads on synth-0: throughput against one"},
                                    {"real", true,
                                     "DIR of real pairs written by `mcflow export-real` (PFM): time, segments and "
                                     "residuals per pair"}});
@@ -175,6 +218,8 @@ int main(int argc, char** argv) {
     base.backend = parseBackend(cli.text("backend", "auto"));
     cli.applySettings(base);
     const std::vector<Regularizer> regs = regularizerChoice(cli.text("regularizer", "both"));
+    if (cli.has("concurrent"))
+      return concurrentBench(base, width, height, cli.integer("concurrent", 2, 1, 64), repeat);
     if (cli.has("real")) {
       Config real = base;
       if (regs.size() == 1) real.regularizer = regs.front();
