@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the gtest unit tests with ASan+UBSan (-DMCFLOW_SANITIZE=ON, CPU only) in their own build folder and
 # runs them through ctest; any finding aborts its test.
-#   scripts/test_sanitized.sh           core, I/O (with the mcflow tool they run) and ROS unit tests
+#   scripts/test_sanitized.sh           core, I/O (with the mcflow tool they run), ROS unit and bag tests
 #   scripts/test_sanitized.sh core-io   core and I/O only, without ROS (what CI runs after the other tests)
 # No rostests: a sanitized nodelet cannot be loaded into the uninstrumented nodelet manager.
 # Build folder: $MCFLOW_SANITIZE_BUILD_DIR, or build-sanitize (all) / build-sanitize-core-io.
@@ -10,7 +10,7 @@ ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 scope="${1:-all}"
 exclude='^$'
 case "$scope" in
-  all)     ros=ON;  targets="test_core test_io test_ros_units"; labels='^(test_core|test_io|test_ros_units)$' ;;
+  all)     ros=ON;  targets="test_core test_io test_ros_units test_ros_bag"; labels='^(test_core|test_io|test_ros_units|test_ros_bag)$' ;;
   # The four real-pair accuracy tests (90 s under the sanitizers) are left to the full run; their loader
   # and halving code is also run by BenchRealCli on one pair.
   core-io) ros=OFF; targets="test_core test_io";                labels='^(test_core|test_io)$'
