@@ -83,9 +83,14 @@ struct BagSequence::Impl {
     }
     const std::string wanted = ros::message_traits::datatype<T>();
     for (const rosbag::ConnectionInfo* c : view.getConnections()) {
-      if (c->datatype != wanted || c->md5sum != ros::message_traits::md5sum<T>()) {
+      if (c->datatype != wanted) {
         throw mc_flow::InputError("bag '" + path + "': " + option + " '" + topic + "' holds " + c->datatype +
                                   " messages, not " + wanted);
+      }
+      if (c->md5sum != ros::message_traits::md5sum<T>()) {
+        throw mc_flow::InputError("bag '" + path + "': " + option + " '" + topic + "' holds " + wanted +
+                                  " of another definition (md5sum " + c->md5sum + ", this build reads " +
+                                  ros::message_traits::md5sum<T>() + ")");
       }
     }
   }

@@ -290,6 +290,24 @@ TEST(BagSequence, WrongTopicsAndFilesAreNamed) {
   EXPECT_NE(error.find("--depth-topic '/camera/rgb/camera_info' holds sensor_msgs/CameraInfo messages, not "
                        "sensor_msgs/Image"), std::string::npos) << error;
 
+  // The right type of another definition (a bag recorded with other message versions).
+  const fs::path old_definition = workDir() / "old_definition.bag";
+  {
+    rosbag::Bag bag(old_definition.string(), rosbag::bagmode::Write);
+    mc_flow::Intrinsics K;
+    const auto& [frame, colour] = renderedFrame(0, &K);
+    auto header = boost::make_shared<ros::M_string>();
+    (*header)["topic"] = kRgb;
+    (*header)["type"] = "sensor_msgs/Image";
+    (*header)["md5sum"] = "0123456789abcdef0123456789abcdef";
+    (*header)["message_definition"] = ros::message_traits::definition<sensor_msgs::Image>();
+    bag.write(kRgb, stampOf(0), colourMessage(colour, stampOf(0), "rgb8"), header);
+    bag.write(kDepth, stampOf(0), depthMessage(frame.depth, stampOf(0), "32FC1", false));
+  }
+  error = inputError([&] { BagSequence(old_definition.string(), BagReadOptions()); });
+  EXPECT_NE(error.find("--rgb-topic '/camera/rgb/image_rect_color' holds sensor_msgs/Image of another definition "
+                       "(md5sum 0123456789abcdef0123456789abcdef"), std::string::npos) << error;
+
   error = inputError([&] { BagSequence((workDir() / "missing.bag").string(), BagReadOptions()); });
   EXPECT_NE(error.find("missing.bag': does not exist"), std::string::npos) << error;
   const fs::path not_a_bag = workDir() / "not_a.bag";
