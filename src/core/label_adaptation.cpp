@@ -80,9 +80,11 @@ LabelCostModel costModelFromEquations(const MotionNormalEquations& equations, in
   LabelCostModel model;
   model.curvature.resize(std::size_t(motion_labels));
   model.gradient.resize(std::size_t(motion_labels));
+  model.cost.resize(std::size_t(motion_labels));
   for (int i = 0; i < motion_labels; ++i) {
     model.curvature[std::size_t(i)] = equations.H.block<6, 6>(6 * i, 6 * i);
     model.gradient[std::size_t(i)] = equations.g.segment<6>(6 * i);
+    model.cost[std::size_t(i)] = equations.label_cost(i);
   }
   return model;
 }
@@ -94,7 +96,21 @@ double mergeCostIncrease(const Matrix6d& H_a, const Matrix6d& H_b, const Vector6
   return std::max(0.0, (H_a * d).dot(regularised(H_a + H_b).ldlt().solve(Hb_d)));
 }
 
+// A merge priced relatively never raises the smaller label's own cost by more than this share of it, so a small part
+// that moves differently is not priced by the background it would join.
+constexpr double kMaxShareOfSmallerCost = 0.5;
+
 double labelCost(const Config& config, int valid_pixels) { return config.label_cost * double(valid_pixels); }
+
+// The price of keeping two motions apart where the two labels pay cost_a and cost_b now: the absolute price, or the
+// relative one where that is larger, a fraction of the parallel sum cost_a cost_b / (cost_a + cost_b) (about the
+// smaller label's cost: a small part is judged by what it pays, not by the background it would join). The same
+// rule decides merges and splits, so a split is not merged back.
+double priceFor(double absolute_price, double cost_a, double cost_b, const Config& config) {
+  const double a = std::max(0.0, cost_a), b = std::max(0.0, cost_b);
+  const double relative = std::min(config.label_cost_relative * (a + b), kMaxShareOfSmallerCost * std::min(a, b));
+  return std::max(absolute_price, relative);
+}
 
 void validateRemap(const std::vector<int>& target, int old_count, int new_count) {
   if (int(target.size()) != old_count || new_count < 1 || new_count > old_count)
@@ -118,6 +134,7 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
                      std::to_string(model.curvature.size()) + " cost models for " + std::to_string(n0) +
                      " motion labels");
   const double price = labelCost(config, valid_pixels);
+  if (model.cost.size() != model.curvature.size()) model.cost.assign(model.curvature.size(), 0.0);
   std::vector<double> support = labels.supports();
   // group[i]: the current label of original label i (-1: removed to the outlier label). The labels
   // themselves change once, at the end, by one remap.
@@ -129,12 +146,14 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
       if (g > drop) --g;  // the labels after `drop` (the merge target included) move down by one
     }
   };
-  // n x n table of predicted increases; after a merge only the merged label's row and column change.
+  // n x n table of predicted increases less their price (a merge pays off below 0); after a merge only the merged
+  // label's row and column change.
   std::vector<std::vector<double>> increase(std::size_t(n0), std::vector<double>(std::size_t(n0), 0.0));
   auto fill = [&](int a, int b) {
     const double v = mergeCostIncrease(model.curvature[std::size_t(a)], model.curvature[std::size_t(b)],
                                        twists[std::size_t(a)], twists[std::size_t(b)]);
-    increase[std::size_t(a)][std::size_t(b)] = increase[std::size_t(b)][std::size_t(a)] = v;
+    const double pair_price = priceFor(price, model.cost[std::size_t(a)], model.cost[std::size_t(b)], config);
+    increase[std::size_t(a)][std::size_t(b)] = increase[std::size_t(b)][std::size_t(a)] = v - pair_price;
   };
   for (int a = 0; a < n0; ++a)
     for (int b = a + 1; b < n0; ++b) fill(a, b);
@@ -149,8 +168,10 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
           best_a = a;
           best_b = b;
         }
-    if (best_a < 0 || !(best < price)) {
-      stats.smallest_refused_merge = best;
+    if (best_a < 0 || !(best < 0.0)) {
+      stats.smallest_refused_merge =
+          best_a < 0 ? best
+                     : best + priceFor(price, model.cost[std::size_t(best_a)], model.cost[std::size_t(best_b)], config);
       break;
     }
     const int keep = support[std::size_t(best_a)] >= support[std::size_t(best_b)] ? best_a : best_b;
@@ -160,12 +181,16 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
                                                             model.curvature[std::size_t(drop)] * twists[std::size_t(drop)]);
     model.curvature[std::size_t(keep)] = H;
     model.gradient[std::size_t(keep)] += model.gradient[std::size_t(drop)];
+    // The union pays both costs and the predicted increase (best is the increase less the price).
+    model.cost[std::size_t(keep)] += model.cost[std::size_t(drop)] + best +
+                                     priceFor(price, model.cost[std::size_t(keep)], model.cost[std::size_t(drop)], config);
     support[std::size_t(keep)] += support[std::size_t(drop)];
     dropLabel(drop, keep);
     support.erase(support.begin() + drop);
     twists.erase(twists.begin() + drop);
     model.curvature.erase(model.curvature.begin() + drop);
     model.gradient.erase(model.gradient.begin() + drop);
+    model.cost.erase(model.cost.begin() + drop);
     increase.erase(increase.begin() + drop);
     for (auto& row : increase) row.erase(row.begin() + drop);
     const int kept = keep > drop ? keep - 1 : keep;
@@ -184,6 +209,7 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
         twists.erase(twists.begin() + i);
         model.curvature.erase(model.curvature.begin() + i);
         model.gradient.erase(model.gradient.begin() + i);
+        model.cost.erase(model.cost.begin() + i);
         ++stats.removed;
       }
     }
@@ -240,7 +266,10 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
     const Vector6d& g2 = model.gradient[std::size_t(n + c)];
     // What two motions gain over the one best motion for the whole label.
     const double gain = newtonDecrement(H1, g1) + newtonDecrement(H2, g2) - newtonDecrement(H1 + H2, g1 + g2);
-    if (gain > price) gains.emplace_back(gain, c);
+    const bool costs = model.cost.size() > std::size_t(n + c);
+    const double split_price =
+        priceFor(price, costs ? model.cost[std::size_t(p)] : 0.0, costs ? model.cost[std::size_t(n + c)] : 0.0, config);
+    if (gain > split_price) gains.emplace_back(gain, c);
   }
   std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
   const int take = std::min({int(gains.size()), room, config.max_splits_per_iteration});

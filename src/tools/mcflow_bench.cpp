@@ -107,10 +107,12 @@ StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const Rgbd
 }
 
 // The real pairs on any machine: folders <pair>_<W>x<H> of PFM frames and intrinsics.txt (mcflow export-real).
-int realBench(const std::string& dir, const Config& base, int repeat) {
+int realBench(const std::string& dir, const std::string& match, const Config& base, int repeat) {
   std::vector<std::filesystem::path> folders;
   for (const auto& entry : std::filesystem::directory_iterator(dir))
-    if (entry.is_directory() && std::filesystem::exists(entry.path() / "intrinsics.txt")) folders.push_back(entry.path());
+    if (entry.is_directory() && std::filesystem::exists(entry.path() / "intrinsics.txt") &&
+        entry.path().filename().string().find(match) != std::string::npos)
+      folders.push_back(entry.path());
   if (folders.empty())
     throw InputError("--real " + dir + ": no folder with intrinsics.txt (write them with mcflow export-real)");
   std::sort(folders.begin(), folders.end());
@@ -119,6 +121,7 @@ int realBench(const std::string& dir, const Config& base, int repeat) {
               dir.c_str(), base.regularizer == Regularizer::Quadratic ? "quad" : "tv", repeat);
   std::printf("%-28s %6s %7s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s\n", "pair", "segs", "rmseI", "rmseZ_mm",
               "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "occl", "output", "launches");
+  std::printf("# last column: motion labels over the outer iterations, K-means > after each (merged, split)\n");
   std::map<std::string, std::vector<double>> totals_by_size;
   for (const std::filesystem::path& folder : folders) {
     auto frame = [&](const char* intensity, const char* depth) {
@@ -136,9 +139,13 @@ int realBench(const std::string& dir, const Config& base, int repeat) {
     Result r;
     const StageMedians m = solveRepeatedly(solver, frame1, frame2, K, repeat, r);
     const ResidualRmse rr = warpResidualRmse(frame1, frame2, K, &r.scene_flow, &r.occlusion);
-    std::printf("%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f\n",
+    std::string counts = r.iterations.empty() ? "-" : std::to_string(r.iterations.front().labels_before);
+    for (const OuterIterationStats& it : r.iterations)
+      counts += " > " + std::to_string(it.labels_after) + "(-" + std::to_string(it.merged) + "+" +
+                std::to_string(it.split) + ")";
+    std::printf("%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f  %s\n",
                 folder.filename().string().c_str(), r.segments.size(), rr.photometric, 1000.0 * rr.geometric, m.total,
-                m.cpu, m.pyr, m.init, m.motion, m.labels, m.occl, m.output, m.launches);
+                m.cpu, m.pyr, m.init, m.motion, m.labels, m.occl, m.output, m.launches, counts.c_str());
     std::fflush(stdout);
     totals_by_size[std::to_string(frame1.width()) + "x" + std::to_string(frame1.height())].push_back(m.total);
   }
@@ -197,6 +204,7 @@ int main(int argc, char** argv) {
                                     "static scenes seen by a moving camera (with Kinect-like noise): segments and "
                                     "EPE of the default solve against one motion label (initial_labels=1)"},
                                    {"concurrent", true, "N solvers in N threads on synth-0: throughput against one"},
+                                   {"match", true, "with --real: only the folders whose name contains this text"},
                                    {"real", true,
                                     "DIR of real pairs written by `mcflow export-real` (PFM): time, segments and "
                                     "residuals per pair"}});
@@ -223,7 +231,7 @@ int main(int argc, char** argv) {
     if (cli.has("real")) {
       Config real = base;
       if (regs.size() == 1) real.regularizer = regs.front();
-      return realBench(cli.text("real", ""), real, repeat);
+      return realBench(cli.text("real", ""), cli.text("match", ""), real, repeat);
     }
     if (cli.has("camera-only")) {
       Config camera_only = base;

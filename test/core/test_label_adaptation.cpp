@@ -118,6 +118,33 @@ TEST(LabelAdaptation, MergesWhenSharingAMotionCostsLessThanALabel) {
   EXPECT_EQ(u.count, 2);
 }
 
+// label_cost_relative: where the labels already pay a large data cost (model errors everywhere), a merge that raises
+// it by less than that share is taken although it exceeds the absolute price; a small label is never priced by the
+// large one it would join (at most half its own cost).
+TEST(LabelAdaptation, RelativePriceMergesWhereTheLabelsPayALotButNotASmallPartIntoTheBackground) {
+  auto run = [](double relative, double cost_a, double cost_b) {
+    SoftLabels u;
+    ImageF points;
+    makeBands(u, points);
+    Vector6d a = Vector6d::Zero(), b = Vector6d::Zero(), c = Vector6d::Zero();
+    a(0) = 0.020;
+    b(0) = 0.030;  // 1 cm apart: increase 1e5 / 2 * 1e-4 = 5
+    c(0) = -0.5;   // far from both: never merged
+    std::vector<Vector6d> twists{a, b, c};
+    LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
+    model.cost = {cost_a, cost_b, 1000.0};
+    Config config;
+    config.label_cost = 0.001;  // x 300 valid pixels = 0.3, far below 5
+    config.label_cost_relative = relative;
+    return adaptOnHost(u, twists, model, 300, config).merged;
+  };
+  EXPECT_EQ(run(0.0, 200.0, 200.0), 0) << "the absolute price alone keeps them apart";
+  EXPECT_EQ(run(0.03, 200.0, 200.0), 1) << "0.03 x 400 = 12 > 5: merged";
+  EXPECT_EQ(run(0.01, 200.0, 200.0), 0) << "0.01 x 400 = 4 < 5: kept apart";
+  EXPECT_EQ(run(0.03, 2000.0, 8.0), 0) << "a small part: at most half its own cost (4) < 5";
+  EXPECT_EQ(run(0.03, 2000.0, 12.0), 1) << "half of 12 = 6 > 5: merged";
+}
+
 TEST(LabelAdaptation, DirectionsTheDataDoesNotConstrainDoNotKeepLabelsApart) {
   // A rotation about the optical axis that the segments' pixels barely see (tiny curvature there): the
   // twists differ by 3 degrees, yet one motion explains both; the same difference in a constrained

@@ -35,6 +35,7 @@ struct AdaptationStats {
 struct LabelCostModel {
   std::vector<Matrix6d> curvature;  ///< H_i
   std::vector<Vector6d> gradient;   ///< g_i
+  std::vector<double> cost;         ///< E_i, the data cost the label pays now (robust cost shared by weight)
 };
 
 /// @brief What a label owns (u_i >= 0.5, valid depth): pixel count, sum of P, sum of P P^T [m, m^2].
