@@ -19,8 +19,8 @@
 //    are added in warp order, each block writes its sums to its own slot, and a second kernel adds the slots
 //    in block order (one warp per value, fixed lane partition, shuffle tree).
 //  - Label pairs (blended pixels only): the per-pixel kernel stores the mass-weighted 6x6 upper triangle of
-//    the blended pixels and flags them; the flagged pixels are compacted in ascending order (CUB), and a
-//    pair kernel (one block per pair) sums w_a w_b times it over that list in a fixed order.
+//    the blended pixels and flags them; block (chunk, pair) of the pair kernel sums w_a w_b times it over the
+//    flagged pixels of its chunk of the level, and the chunks are added in order.
 #include <cuda_runtime.h>
 
 #include <Eigen/Core>
@@ -32,7 +32,6 @@
 #include <string>
 #include <vector>
 
-#include <cub/device/device_select.cuh>
 
 #include "cuda_check.h"
 #include "mc_flow/core/error.h"
@@ -85,8 +84,6 @@ struct KernelParams {
   float* blended_hessian = nullptr;  // kUpper planes: mass * Hp of the blended pixels
   float* active_mass = nullptr;      // per pixel: sum of the active labels' weights (blended pixels)
   float* mass = nullptr;             // per pixel: motion-label mass (blended pixels)
-  const int* blended_list = nullptr;   // the blended pixels in ascending order (compacted after the pixel pass)
-  const int* blended_count = nullptr;  // their number
 };
 
 // ----------------------------------------------------------------- SE(3) in double (as src/core/se3.cpp)
@@ -382,10 +379,6 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
   }
 }
 
-__global__ void pixelIndicesKernel(int* __restrict__ indices, int count) {
-  const int i = int(blockIdx.x * blockDim.x + threadIdx.x);
-  if (i < count) indices[i] = i;
-}
 
 // Adds the blocks' partial sums in block order: one warp per value, lane l takes blocks l, l + 32, ...
 __global__ void reduceBlockPartials(const double* __restrict__ partials, int blocks, int values,
@@ -400,9 +393,10 @@ __global__ void reduceBlockPartials(const double* __restrict__ partials, int blo
 }
 
 // Off-diagonal block of the label pair (a, b), a < b: sum over the blended pixels of w_a w_b mass Hp
-// (the CPU adds (w_a w_b) Hd to blocks (a, b) and (b, a)). Block (chunk, pair) sums its chunk of the blended
-// list into partials[(pair * chunks + chunk) * kUpper + k]; addChunksKernel adds the chunks in order. (One block
-// per pair over the whole list was latency-bound: 42-65 us per call at 320x240, ncu.)
+// (the CPU adds (w_a w_b) Hd to blocks (a, b) and (b, a)). Block (chunk, pair) sums the blended pixels of its chunk
+// of the level into partials[(pair * chunks + chunk) * kUpper + k]; addChunksKernel adds the chunks in order. (One
+// block per pair over a CUB-compacted list of the blended pixels was latency-bound: 42-65 us per call at 320x240,
+// ncu; the compaction itself took two more launches.)
 __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p, int chunk_pixels,
                                                             double* __restrict__ partials) {
   __shared__ double warp_sums[kWarps][kUpper];
@@ -417,10 +411,12 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
   double acc[kUpper];
 #pragma unroll
   for (int k = 0; k < kUpper; ++k) acc[k] = 0.0;
-  const int blended = *p.blended_count;
-  const int begin = int(blockIdx.x) * chunk_pixels, end = min(blended, begin + chunk_pixels);
-  for (int j = begin + int(threadIdx.x); j < end; j += blockDim.x) {
-    const std::size_t idx = std::size_t(p.blended_list[j]);
+  const std::size_t begin = std::size_t(blockIdx.x) * std::size_t(chunk_pixels);
+  const std::size_t end = begin + std::size_t(chunk_pixels) < plane ? begin + std::size_t(chunk_pixels) : plane;
+  bool any = false;
+  for (std::size_t idx = begin + threadIdx.x; idx < end; idx += blockDim.x) {
+    if (!p.blended[idx]) continue;
+    any = true;
     const float mass = p.mass[idx];
     const float wa_raw = rawWeight(p, plane, idx, a, mass), wb_raw = rawWeight(p, plane, idx, b, mass);
     if (!(wa_raw >= p.min_weight && wb_raw >= p.min_weight)) continue;
@@ -430,7 +426,7 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
     for (int k = 0; k < kUpper; ++k) acc[k] += wab * double(p.blended_hessian[k * plane + idx]);
   }
   double* out = partials + (std::size_t(blockIdx.y) * gridDim.x + blockIdx.x) * kUpper;
-  if (__syncthreads_or(begin < end) == 0) {  // an empty chunk (past the blended count): zeros, no reduction
+  if (__syncthreads_or(any) == 0) {  // no blended pixel in the chunk: zeros, no reduction
     if (threadIdx.x < kUpper) out[threadIdx.x] = 0.0;
     return;
   }
@@ -625,9 +621,6 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       shared_bytes_allowed_ = shared_bytes;
     }
     p.sum_regions = regions;
-    if (pairs > 0) prepareBlendedList(plane);
-    p.blended_list = blended_list_.get();
-    p.blended_count = blended_count_.get();
     accumulateNormalEquations<<<blocks, kThreads, shared_bytes, s>>>(p);
     MCFLOW_CUDA_CHECK_LAUNCH("accumulateNormalEquations");
     const unsigned reduce_blocks = unsigned((block_values * 32 + kThreads - 1) / kThreads);
@@ -635,9 +628,6 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
                                                           sums_.get());
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
     if (pairs > 0) {
-      std::size_t temp_bytes = select_temp_bytes_;
-      MCFLOW_CUDA_CHECK_CUB(cub::DeviceSelect::Flagged(select_temp_.get(), temp_bytes, pixel_indices_.get(), blended_.get(),
-                                                   blended_list_.get(), blended_count_.get(), int(plane), s));
       const int chunks = int((plane + kPairChunkPixels - 1) / kPairChunkPixels);
       pair_partials_.reserve(std::size_t(chunks) * pairs * kUpper);
       accumulatePairs<<<dim3(unsigned(chunks), unsigned(pairs)), kThreads, 0, s>>>(p, kPairChunkPixels,
@@ -683,23 +673,6 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   }
 
  private:
-  // The pixel indices 0..plane-1, the compaction's output and its scratch, grown to `plane` pixels.
-  void prepareBlendedList(std::size_t plane) {
-    if (plane > indexed_pixels_) {
-      pixel_indices_.reserve(plane);
-      blended_list_.reserve(plane);
-      pixelIndicesKernel<<<unsigned((plane + kThreads - 1) / kThreads), kThreads, 0, stream_>>>(pixel_indices_.get(),
-                                                                                               int(plane));
-      MCFLOW_CUDA_CHECK_LAUNCH("pixelIndicesKernel");
-      std::size_t bytes = 0;
-      MCFLOW_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, pixel_indices_.get(), blended_.get(),
-                                                   blended_list_.get(), blended_count_.get(), int(plane)));
-      select_temp_.reserve(std::max<std::size_t>(bytes, 1));
-      select_temp_bytes_ = std::max(select_temp_bytes_, bytes);
-      indexed_pixels_ = plane;
-    }
-    blended_count_.reserve(1);
-  }
 
   template <typename T>
   void upload(T* device, const T* host, std::size_t count) {
@@ -718,9 +691,6 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   DeviceBuffer<std::uint8_t> occluded_, blended_;
   DeviceBuffer<LabelMotion> motions_;
   DeviceBuffer<double> sums_, partials_, pair_partials_;
-  DeviceBuffer<int> pixel_indices_, blended_list_, blended_count_;
-  DeviceBuffer<unsigned char> select_temp_;
-  std::size_t select_temp_bytes_ = 0, indexed_pixels_ = 0;
   std::size_t max_shared_bytes_ = 48 * 1024, shared_bytes_allowed_ = 48 * 1024;
   PinnedBuffer<LabelMotion> host_motions_;
   PinnedBuffer<double> host_sums_;
