@@ -1,6 +1,7 @@
 // One RGB-D stream: preprocessing, pairing and resets, the warm start and the segment tracks.
 #include "mc_flow/core/sequence.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 
@@ -8,6 +9,7 @@
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/solve_backend.h"
+#include "mc_flow/core/warm_start.h"
 
 namespace mc_flow {
 
@@ -145,8 +147,14 @@ SequenceStep SequencePipeline::push(StreamFrame input) {
   const PreparedFrame& first = *previous_frame_;
   Result result;
   try {
-    result = last_result_ ? solver_->solve(first.frame, frame.frame, first.K, *last_result_)
-                          : solver_->solve(first.frame, frame.frame, first.K);
+    if (last_result_) {
+      result = solver_->solve(first.frame, frame.frame, first.K, *last_result_);
+    } else {
+      // No prior (the first pair, after a reset or a failed pair): the solver numbers the segments 1..m; they
+      // are moved above every id handed out so far, so no earlier segment's id (track, TF frame) is reused.
+      result = solver_->solve(first.frame, frame.frame, first.K);
+      offsetSegmentIds(result, next_id_);
+    }
   } catch (const BackendError& e) {
     // The GPU failed at run time: the following pairs run on the CPU.
     step.backend_fallback = std::string(e.what());
@@ -173,6 +181,7 @@ SequenceStep SequencePipeline::push(StreamFrame input) {
   pair_first_ = std::move(previous_frame_);
   previous_frame_ = std::make_unique<PreparedFrame>(std::move(frame));
   last_result_ = std::make_unique<Result>(std::move(result));
+  next_id_ = std::max(next_id_, last_result_->next_id);
   updateTracks(*last_result_);
   step.outcome = SequenceStep::Outcome::Solved;
   step.first = pair_first_.get();

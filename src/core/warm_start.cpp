@@ -254,4 +254,23 @@ void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32
   }
 }
 
+void offsetSegmentIds(Result& result, int first_id) {
+  if (first_id < 1) throw InputError("segment ids: the first id " + std::to_string(first_id) + " is not >= 1");
+  const int offset = first_id - 1;
+  if (offset == 0) return;
+  for (Segment& s : result.segments) s.id += offset;
+  for (int& label : result.labels.data)
+    if (label > 0) label += offset;
+  for (int& id : result.dormant_regions.data)
+    if (id > 0) id += offset;
+  for (auto& [id, into] : result.merged_ids) {
+    id += offset;
+    into += offset;
+  }
+  for (int& id : result.ended_ids) id += offset;
+  for (int& id : result.revived_ids) id += offset;
+  for (auto& dormant : result.dormant_ids) dormant.first += offset;
+  result.next_id += offset;
+}
+
 }  // namespace mc_flow

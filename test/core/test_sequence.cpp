@@ -1,11 +1,17 @@
 // The ROS-free stream pipeline: preprocessing rule, pairing and resets, warm starts, tracks.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <set>
+#include <vector>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/fault_injection.h"
 #include "mc_flow/core/sequence.h"
+#include "mc_flow/core/solve_backend.h"
+#include "mc_flow/core/warm_start.h"
 #include "mc_flow/testing/synthetic_scene.h"
 
 namespace mc_flow {
@@ -138,6 +144,133 @@ TEST(SequencePipeline, AFailedPairKeepsTheStreamGoingWithoutAPrior) {
   for (float& z : no_depth.frame.depth.data) z = 0.f;
   EXPECT_THROW(pipeline.push(std::move(no_depth)), InputError);
   EXPECT_EQ(pipeline.push(syntheticFrame(5, 1.15)).outcome, SequenceStep::Outcome::Solved);
+}
+
+// Every id a solved pair hands out: its segments and the ids it reports as merged, ended, revived or dormant.
+std::set<int> idsOf(const Result& r) {
+  std::set<int> ids;
+  for (const Segment& s : r.segments) ids.insert(s.id);
+  for (const auto& [id, into] : r.merged_ids) ids.insert({id, into});
+  ids.insert(r.ended_ids.begin(), r.ended_ids.end());
+  ids.insert(r.revived_ids.begin(), r.revived_ids.end());
+  for (const auto& [id, age] : r.dormant_ids) ids.insert(id);
+  return ids;
+}
+
+// A pair solved without a prior (first of a sequence after a reset, or after a failed pair): its ids are all
+// above every earlier id, its labels carry them, and every track starts at this pair.
+void expectFreshIds(const SequencePipeline& pipeline, const SequenceStep& step, int highest_before) {
+  ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
+  const Result& r = *step.result;
+  EXPECT_EQ(r.start, StartKind::Cold);
+  ASSERT_FALSE(r.segments.empty());
+  std::set<int> segment_ids;
+  for (const Segment& s : r.segments) {
+    EXPECT_GT(s.id, highest_before) << "pair " << step.pair_index << " reuses an earlier id";
+    segment_ids.insert(s.id);
+    const SegmentTrack& track = pipeline.tracks().at(s.id);
+    EXPECT_EQ(track.first_pair, step.pair_index) << "id " << s.id << " continues an earlier track";
+    EXPECT_TRUE(track.pose.isApprox(s.transform, 1e-12));
+  }
+  EXPECT_EQ(pipeline.tracks().size(), r.segments.size());
+  EXPECT_GT(r.next_id, *segment_ids.rbegin());
+  EXPECT_EQ(pipeline.nextId(), r.next_id);
+  for (int label : r.labels.data)
+    if (label != 0) EXPECT_TRUE(segment_ids.count(label)) << "label " << label << " is no segment's id";
+}
+
+TEST(SequencePipeline, IdsAfterAResetStartAboveEveryEarlierId) {
+  Config config;
+  config.outer_iterations = 2;
+  SequencePipeline pipeline(config, 0, 0.5);
+  int highest = 0;
+  pipeline.push(syntheticFrame(0, 1.0));
+  for (int t = 1; t <= 3; ++t) {
+    SequenceStep step = pipeline.push(syntheticFrame(t, 1.0 + 0.033 * t));
+    ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
+    for (int id : idsOf(*step.result)) highest = std::max(highest, id);
+    highest = std::max(highest, step.result->next_id - 1);
+  }
+  ASSERT_GE(highest, 3);
+  const int before_reset = highest;
+
+  // The stamps go back (a bag looping): a new sequence whose segments take none of the earlier ids.
+  EXPECT_EQ(pipeline.push(syntheticFrame(0, 0.5)).reset_key, "back");
+  SequenceStep cold = pipeline.push(syntheticFrame(1, 0.533));
+  expectFreshIds(pipeline, cold, before_reset);
+  EXPECT_TRUE(cold.result->merged_ids.empty() && cold.result->ended_ids.empty() && cold.result->dormant_ids.empty());
+  // The sequence goes on warm from the renumbered result: its ids continue and new ones come after them.
+  SequenceStep warm = pipeline.push(syntheticFrame(2, 0.566));
+  ASSERT_EQ(warm.outcome, SequenceStep::Outcome::Solved) << warm.problem;
+  EXPECT_EQ(warm.result->start, StartKind::Warm) << warm.result->start_note;
+  int continued = 0;
+  for (const Segment& s : warm.result->segments) {
+    EXPECT_GT(s.id, before_reset);
+    if (pipeline.tracks().at(s.id).first_pair == cold.pair_index) ++continued;
+  }
+  EXPECT_GE(continued, 3) << "the warm pair after the reset continues the cold pair's ids";
+  for (int id : idsOf(*warm.result)) highest = std::max(highest, id);
+  highest = std::max(highest, warm.result->next_id - 1);
+
+  // A gap resets again: above both earlier sequences.
+  EXPECT_EQ(pipeline.push(syntheticFrame(3, 5.0)).reset_key, "gap");
+  expectFreshIds(pipeline, pipeline.push(syntheticFrame(4, 5.033)), highest);
+}
+
+TEST(SequencePipeline, APairAfterAFailedOneContinuesNoEarlierTrack) {
+  Config config;
+  config.outer_iterations = 1;
+  config.backend = Backend::Cuda;  // the factory stands in for a CUDA backend whose second solve fails
+  BackendFault fault;
+  fault.solve = 2;
+  SequencePipeline pipeline(config, 0, 0.5, [&](Backend backend, std::string* note) {
+    *note = "test";
+    std::unique_ptr<SolveBackend> cpu = makeCpuSolveBackend();
+    return backend == Backend::Cuda ? withBackendFault(std::move(cpu), fault) : std::move(cpu);
+  });
+  pipeline.push(syntheticFrame(0, 1.0));
+  SequenceStep first = pipeline.push(syntheticFrame(1, 1.033));
+  ASSERT_EQ(first.outcome, SequenceStep::Outcome::Solved) << first.problem;
+  int highest = 0;
+  for (int id : idsOf(*first.result)) highest = std::max(highest, id);
+  highest = std::max(highest, first.result->next_id - 1);
+  ASSERT_EQ(pipeline.tracks().size(), first.result->segments.size());
+  // The failed pair is no reset: the first pair's tracks are still there, and the cold pair after it must not
+  // continue them (numbered 1..m again, its segments extended the first pair's poses of ids 1..m).
+  SequenceStep failed = pipeline.push(syntheticFrame(2, 1.066));
+  ASSERT_EQ(failed.outcome, SequenceStep::Outcome::PairFailed);
+  ASSERT_FALSE(failed.backend_fallback.empty());
+  EXPECT_EQ(pipeline.resets(), 0);
+  expectFreshIds(pipeline, pipeline.push(syntheticFrame(3, 1.099)), highest);
+}
+
+TEST(OffsetSegmentIds, MovesEveryIdOfAResultTogether) {
+  Result r;
+  r.width = 3;
+  r.height = 1;
+  r.segments.resize(2);
+  r.segments[0].id = 1;
+  r.segments[1].id = 2;
+  r.labels = ImageI32(3, 1, 1, 0);
+  r.labels.data = {1, 0, 2};
+  r.dormant_regions = ImageI32(3, 1, 1, 0);
+  r.dormant_regions.data = {0, 4, 0};
+  r.merged_ids = {{3, 1}};
+  r.ended_ids = {5};
+  r.revived_ids = {2};
+  r.dormant_ids = {{4, 1}};
+  r.next_id = 6;
+  offsetSegmentIds(r, 11);
+  EXPECT_EQ(r.segments[0].id, 11);
+  EXPECT_EQ(r.segments[1].id, 12);
+  EXPECT_EQ(r.labels.data, (std::vector<int>{11, 0, 12}));
+  EXPECT_EQ(r.dormant_regions.data, (std::vector<int>{0, 14, 0}));
+  EXPECT_EQ(r.merged_ids, (std::vector<std::pair<int, int>>{{13, 11}}));
+  EXPECT_EQ(r.ended_ids, std::vector<int>{15});
+  EXPECT_EQ(r.revived_ids, std::vector<int>{12});
+  EXPECT_EQ(r.dormant_ids, (std::vector<std::pair<int, int>>{{14, 1}}));
+  EXPECT_EQ(r.next_id, 16);
+  EXPECT_THROW(offsetSegmentIds(r, 0), InputError);
 }
 
 TEST(SequencePipeline, RejectsBadSettings) {

@@ -1,8 +1,9 @@
 // Stream mode at the node level (docs/STREAMS.md), with the nodelet's defaults (warm_start on): the first pair of
 // a sequence starts cold and every later one warm, which ~segments says (SegmentArray.start) and /diagnostics
 // count; the background keeps its id from pair to pair; stamps going back (a bag loop) reset the sequence with a
-// warning, and the pair after the reset starts cold, the one after it warm again. Frames go in lockstep (each
-// after the previous pair's output), so none is dropped and every pair is the one the test means.
+// warning, and the pair after the reset starts cold, with ids above every earlier one, the one after it warm
+// again. Frames go in lockstep (each after the previous pair's output), so none is dropped and every pair is the
+// one the test means.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -116,6 +117,12 @@ TEST_F(Stream, PairsAfterTheFirstStartWarmIdsPersistAndAResetStartsCold) {
   const auto after_reset = solve(1, loop + kInterval);
   ASSERT_TRUE(after_reset) << "no pair solved after the reset" << dump(*watcher_);
   EXPECT_EQ(after_reset->start, "cold") << "the reset left a prior: " << after_reset->start_note;
+  // A new sequence takes no earlier id (its TF frames would be those of unrelated segments).
+  std::uint32_t highest_before = 0;
+  for (const auto& pair : pairs)
+    for (const auto& s : pair->segments) highest_before = std::max(highest_before, s.id);
+  for (const auto& s : after_reset->segments)
+    EXPECT_GT(s.id, highest_before) << "id " << s.id << " after the reset was handed out before it";
   const auto next = solve(2, loop + kInterval * 2);
   ASSERT_TRUE(next) << "no second pair after the reset" << dump(*watcher_);
   EXPECT_EQ(next->start, "warm") << next->start_note;

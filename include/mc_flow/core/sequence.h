@@ -103,7 +103,9 @@ class SequencePipeline {
   /// InputError when the frame itself is unusable (it is then not kept).
   SequenceStep push(StreamFrame frame);
 
-  /// @brief Forgets the previous frame, result and tracks (ids keep increasing).
+  /// @brief Forgets the previous frame, result and tracks. Ids keep increasing: the next sequence's segments
+  /// are numbered from nextId() on, above every id handed out before, so a new segment never continues the
+  /// track (or the nodelet's TF frame) of an earlier, unrelated one.
   void reset();
   /// @brief A new solver for the following pairs (parameters changed); the sequence continues.
   void setConfig(const Config& config);
@@ -112,6 +114,8 @@ class SequencePipeline {
   /// @brief Tracks of the segments alive after the last solved pair, by id.
   const std::map<int, SegmentTrack>& tracks() const { return tracks_; }
   long pairsSolved() const { return pairs_solved_; }
+  /// @brief The id the next new segment gets: above every id of every pair solved so far, across resets.
+  int nextId() const { return next_id_; }
   long resets() const { return resets_; }
   /// @brief How often a BackendError moved the pipeline to the CPU (SequenceStep::backend_fallback).
   long backendFallbacks() const { return backend_fallbacks_; }
@@ -132,6 +136,7 @@ class SequencePipeline {
   std::unique_ptr<PreparedFrame> previous_frame_;  // the next pair's first frame
   std::unique_ptr<Result> last_result_;            // the prior of the next pair (only while it ends at previous_frame_)
   std::map<int, SegmentTrack> tracks_;
+  int next_id_ = 1;  // above every id handed out: a pair solved without a prior is numbered from here
   long pairs_solved_ = 0, resets_ = 0, backend_fallbacks_ = 0;
 };
 

@@ -55,4 +55,10 @@ std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, cons
 void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32& carried_dormant,
                      const Result& previous, double min_overlap, int memory_pairs);
 
+/// @brief Adds `first_id` - 1 to every segment id of `result` (Segment::id, Result::labels > 0, next_id, the
+/// merged, ended, revived and dormant ids, Result::dormant_regions > 0), so that a pair solved alone (ids 1..m)
+/// numbers its segments first_id, first_id + 1, ... SequencePipeline uses it after a reset, so that a new
+/// sequence does not reuse the ids of the ones before. Throws InputError when `first_id` < 1.
+void offsetSegmentIds(Result& result, int first_id);
+
 }  // namespace mc_flow
