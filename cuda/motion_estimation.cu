@@ -58,7 +58,8 @@ constexpr float kMinMass = 0.05f;       // pixels with less motion-label mass ar
 // label_cost, label_pixels.
 constexpr int kUpper = 21;
 constexpr int kLabelStride = kUpper + 6 + 2;
-constexpr int kPairChunkPixels = 4 * kThreads;  // blended pixels per block of accumulatePairs: 4 per thread
+constexpr int kPairChunkPixels = 4 * kThreads;  // pixels per block of accumulatePairs: 4 per thread
+constexpr int kLabelMaskWords = (kMaxMotionLabels + 63) / 64;
 constexpr int kLabelCost = kUpper + 6, kLabelPixels = kUpper + 7;
 
 /// One motion label's linearisation point as the CPU uses it: the transform and left Jacobian in float
@@ -81,6 +82,9 @@ struct KernelParams {
   double out_of_view_cost = 0;
   double* block_partials = nullptr;  // per block: motion_labels * kLabelStride label sums, then cost, pixels
   std::uint8_t* blended = nullptr;   // per pixel: 1 when in view with several active labels
+  // Per chunk of kPairChunkPixels pixels, kLabelMaskWords words: bit i set when a blended pixel of the chunk has
+  // label i active (atomicOr: the same bits whatever the order), so a pair block skips chunks without both labels.
+  unsigned long long* chunk_labels = nullptr;
   float* blended_hessian = nullptr;  // kUpper planes: mass * Hp of the blended pixels
   float* active_mass = nullptr;      // per pixel: sum of the active labels' weights (blended pixels)
   float* mass = nullptr;             // per pixel: motion-label mass (blended pixels)
@@ -199,6 +203,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
 
   // Per-pixel state; a lane without a usable pixel keeps valid = false and joins the warp reductions with zeros.
   bool valid = false, in_view = false;
+  unsigned long long blended_labels[kLabelMaskWords] = {};  // a blended pixel's active labels, one bit each
   float mass = 0.f, active_mass = 0.f;
   int first = n, n_active = 0;
   float Hm[kUpper];  // mass * Hp, upper triangle
@@ -320,6 +325,17 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
       }
     }
     p.blended[idx] = in_view && n_active > 1 ? 1 : 0;
+    if (in_view && n_active > 1)
+      for (int i = first; i < n; i = nextActive(p, plane, idx, i + 1, mass)) blended_labels[i / 64] |= 1ull << (i % 64);
+  }
+  // The chunk's label mask: one atomicOr per warp and word (a warp's 32 pixels lie in one chunk; OR is
+  // order-independent, so the mask is the same on every run).
+  for (int w = 0; w < kLabelMaskWords; ++w) {
+    const unsigned lo = __reduce_or_sync(0xffffffffu, unsigned(blended_labels[w]));
+    const unsigned hi = __reduce_or_sync(0xffffffffu, unsigned(blended_labels[w] >> 32));
+    if ((threadIdx.x & 31) == 0 && (lo | hi) != 0u)
+      atomicOr(p.chunk_labels + (std::size_t(blockIdx.x) * blockDim.x / kPairChunkPixels) * kLabelMaskWords + w,
+               (static_cast<unsigned long long>(hi) << 32) | lo);
   }
 
   // Pixel totals (every lane takes part in the shuffles).
@@ -408,6 +424,12 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
   }
   const int b = a + 1 + pair;
   const std::size_t plane = std::size_t(p.width) * p.height;
+  double* out = partials + (std::size_t(blockIdx.y) * gridDim.x + blockIdx.x) * kUpper;
+  const unsigned long long* mask = p.chunk_labels + std::size_t(blockIdx.x) * kLabelMaskWords;
+  if (!((mask[a / 64] >> (a % 64)) & 1ull) || !((mask[b / 64] >> (b % 64)) & 1ull)) {  // the pair never meets here
+    if (threadIdx.x < kUpper) out[threadIdx.x] = 0.0;
+    return;
+  }
   double acc[kUpper];
 #pragma unroll
   for (int k = 0; k < kUpper; ++k) acc[k] = 0.0;
@@ -425,7 +447,6 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
 #pragma unroll
     for (int k = 0; k < kUpper; ++k) acc[k] += wab * double(p.blended_hessian[k * plane + idx]);
   }
-  double* out = partials + (std::size_t(blockIdx.y) * gridDim.x + blockIdx.x) * kUpper;
   if (__syncthreads_or(any) == 0) {  // no blended pixel in the chunk: zeros, no reduction
     if (threadIdx.x < kUpper) out[threadIdx.x] = 0.0;
     return;
@@ -621,6 +642,10 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       shared_bytes_allowed_ = shared_bytes;
     }
     p.sum_regions = regions;
+    const std::size_t pair_chunks = (plane + kPairChunkPixels - 1) / kPairChunkPixels;
+    chunk_labels_.reserve(pair_chunks * kLabelMaskWords);
+    MCFLOW_CUDA_CHECK(cudaMemsetAsync(chunk_labels_.get(), 0, pair_chunks * kLabelMaskWords * sizeof(unsigned long long), s));
+    p.chunk_labels = chunk_labels_.get();
     accumulateNormalEquations<<<blocks, kThreads, shared_bytes, s>>>(p);
     MCFLOW_CUDA_CHECK_LAUNCH("accumulateNormalEquations");
     const unsigned reduce_blocks = unsigned((block_values * 32 + kThreads - 1) / kThreads);
@@ -628,7 +653,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
                                                           sums_.get());
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
     if (pairs > 0) {
-      const int chunks = int((plane + kPairChunkPixels - 1) / kPairChunkPixels);
+      const int chunks = int(pair_chunks);
       pair_partials_.reserve(std::size_t(chunks) * pairs * kUpper);
       accumulatePairs<<<dim3(unsigned(chunks), unsigned(pairs)), kThreads, 0, s>>>(p, kPairChunkPixels,
                                                                                    pair_partials_.get());
@@ -691,6 +716,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   DeviceBuffer<std::uint8_t> occluded_, blended_;
   DeviceBuffer<LabelMotion> motions_;
   DeviceBuffer<double> sums_, partials_, pair_partials_;
+  DeviceBuffer<unsigned long long> chunk_labels_;
   std::size_t max_shared_bytes_ = 48 * 1024, shared_bytes_allowed_ = 48 * 1024;
   PinnedBuffer<LabelMotion> host_motions_;
   PinnedBuffer<double> host_sums_;
