@@ -30,6 +30,12 @@ target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet mc_flow_testing
 set_target_properties(make_synthetic_bag PROPERTIES
   RUNTIME_OUTPUT_DIRECTORY ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_BIN_DESTINATION})
 
+# Issue 6: the nodelet's own work per pair (conversions, output messages, serialisation) without a master.
+# A benchmark, not a test: docs/PERFORMANCE.md, "Nodelet overhead per pair".
+add_executable(mcflow_bench_nodelet src/ros/mcflow_bench_nodelet.cpp)
+target_link_libraries(mcflow_bench_nodelet PRIVATE mc_flow_nodelet mc_flow_io mc_flow_testing)
+target_compile_options(mcflow_bench_nodelet PRIVATE -Wall -Wextra)
+
 install(TARGETS mc_flow_nodelet make_synthetic_bag
   LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
   RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})

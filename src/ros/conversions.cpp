@@ -360,6 +360,30 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
   return cloud;
 }
 
+std::vector<geometry_msgs::TransformStamped> makeSegmentTransforms(const mc_flow::Result& result,
+                                                                   const std::map<int, mc_flow::SegmentTrack>& tracks,
+                                                                   const PairContext& pair, const std::string& prefix) {
+  std::vector<geometry_msgs::TransformStamped> transforms;
+  for (const mc_flow::Segment& s : result.segments) {
+    const auto track = tracks.find(s.id);
+    if (track == tracks.end()) continue;
+    const Eigen::Quaterniond orientation(Eigen::Matrix3d(track->second.pose.topLeftCorner<3, 3>()));
+    const Eigen::Vector3d& origin = track->second.origin;
+    geometry_msgs::TransformStamped t;
+    t.header = pair.header;
+    t.child_frame_id = prefix + std::to_string(s.id);
+    t.transform.translation.x = origin.x();
+    t.transform.translation.y = origin.y();
+    t.transform.translation.z = origin.z();
+    t.transform.rotation.x = orientation.x();
+    t.transform.rotation.y = orientation.y();
+    t.transform.rotation.z = orientation.z();
+    t.transform.rotation.w = orientation.w();
+    transforms.push_back(t);
+  }
+  return transforms;
+}
+
 visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result, const PairContext& pair, double seconds_ahead) {
   visualization_msgs::MarkerArray markers;
   visualization_msgs::Marker clear;

@@ -545,27 +545,7 @@ void MCFlowNodelet::publish(const mc_flow::Result& result, const PairContext& pa
 }
 
 void MCFlowNodelet::publishTf(const mc_flow::Result& result, const PairContext& pair) {
-  // Child frame per segment: origin at the segment's centroid at the current stamp, orientation = the
-  // segment's rotation accumulated since it appeared (SequencePipeline's tracks).
-  std::vector<geometry_msgs::TransformStamped> transforms;
-  for (const mc_flow::Segment& s : result.segments) {
-    const auto track = pipeline_->tracks().find(s.id);
-    if (track == pipeline_->tracks().end()) continue;
-    const Eigen::Quaterniond orientation(Eigen::Matrix3d(track->second.pose.topLeftCorner<3, 3>()));
-    const Eigen::Vector3d& origin = track->second.origin;
-    geometry_msgs::TransformStamped t;
-    t.header = pair.header;
-    t.child_frame_id = params_.segment_frame_prefix + std::to_string(s.id);
-    t.transform.translation.x = origin.x();
-    t.transform.translation.y = origin.y();
-    t.transform.translation.z = origin.z();
-    t.transform.rotation.x = orientation.x();
-    t.transform.rotation.y = orientation.y();
-    t.transform.rotation.z = orientation.z();
-    t.transform.rotation.w = orientation.w();
-    transforms.push_back(t);
-  }
-  tf_broadcaster_->sendTransform(transforms);
+  tf_broadcaster_->sendTransform(makeSegmentTransforms(result, pipeline_->tracks(), pair, params_.segment_frame_prefix));
 }
 
 void MCFlowNodelet::saveAndSummarise(const mc_flow::Result& result, const PairContext& pair, const cv::Mat& segmentation) {

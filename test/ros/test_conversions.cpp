@@ -377,6 +377,26 @@ TEST(Conversions, SceneFlowCloudHasTheDocumentedFields) {
   EXPECT_EQ(*occluded, 1);
 }
 
+TEST(Conversions, SegmentTransformsFollowTheTracksOfTheSegmentsThatHaveOne) {
+  const Fixture f = makeFixture();
+  std::map<int, mc_flow::SegmentTrack> tracks;
+  mc_flow::SegmentTrack& track = tracks[9];
+  track.pose = mc_flow::se3Exp(f.result.segments[1].twist);
+  track.origin = Eigen::Vector3d(0.5, -0.25, 2.0);
+  tracks[3];  // a track without a segment in this pair: no frame
+  const auto transforms = mc_flow_ros::makeSegmentTransforms(f.result, tracks, f.pair, "seg_");
+  ASSERT_EQ(transforms.size(), 1u) << "id 7 has no track, id 3 no segment";
+  const geometry_msgs::TransformStamped& t = transforms[0];
+  EXPECT_EQ(t.header.frame_id, "camera_rgb_optical_frame");
+  EXPECT_EQ(t.header.stamp, f.pair.header.stamp);
+  EXPECT_EQ(t.child_frame_id, "seg_9");
+  EXPECT_DOUBLE_EQ(t.transform.translation.x, 0.5);
+  EXPECT_DOUBLE_EQ(t.transform.translation.y, -0.25);
+  EXPECT_DOUBLE_EQ(t.transform.translation.z, 2.0);
+  EXPECT_NEAR(t.transform.rotation.z, std::sin(0.005), 1e-9);
+  EXPECT_NEAR(t.transform.rotation.w, std::cos(0.005), 1e-9);
+}
+
 TEST(Conversions, MotionMarkersClearThenOneArrowAndTextPerSegment) {
   const Fixture f = makeFixture();
   const auto markers = mc_flow_ros::makeMotionMarkers(f.result, f.pair, 1.0);

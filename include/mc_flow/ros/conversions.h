@@ -9,6 +9,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -17,11 +18,13 @@
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_msgs/Header.h>
+#include <geometry_msgs/TransformStamped.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include "mc_flow/SegmentArray.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/image.h"
+#include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/ros/input_error.h"
 #include "mc_flow/ros/message_validation.h"
@@ -98,6 +101,13 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
 /// (length = speed x `seconds_ahead`) and a text with id and speed; starts with a DELETEALL marker.
 visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result, const PairContext& pair,
                                                   double seconds_ahead = 1.0);
+
+/// @brief The TF transforms of ~publish_tf: per segment that has a track, child frame `prefix` + id, origin at
+/// its centroid at the current stamp, orientation its rotation accumulated since it appeared (`tracks`:
+/// SequencePipeline::tracks()); parent and stamp from the pair's header.
+std::vector<geometry_msgs::TransformStamped> makeSegmentTransforms(const mc_flow::Result& result,
+                                                                   const std::map<int, mc_flow::SegmentTrack>& tracks,
+                                                                   const PairContext& pair, const std::string& prefix);
 
 /// @brief Velocity of a segment's centroid [m/s] over the pair interval.
 Eigen::Vector3d centroidVelocity(const mc_flow::Segment& segment, double interval);
