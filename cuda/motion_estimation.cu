@@ -1,5 +1,6 @@
 // Motion step's normal equations on the GPU: the per-pixel part of CpuMotionAccumulator
-// (src/core/motion_estimation.cpp, the reference), one thread per pixel, sums in double.
+// (src/core/motion_estimation.cpp, the reference), one thread per pixel; each warp's 32 values of H and g are
+// added in float, everything beyond the warp in double.
 //
 // Arithmetic. Warping, projection, the in-view test, the bilinear samples and the residuals use explicitly
 // rounded float intrinsics in the CPU's order (cuda/sampling_device.cuh), so every discrete decision (in view,
@@ -174,6 +175,14 @@ __device__ __forceinline__ int nextActive(const KernelParams& p, std::size_t pla
   return p.motion_labels;
 }
 
+// The warp's total in every lane (an xor butterfly: lanes i and i^offset add the same two values, so all lanes end
+// with the same bits).
+__device__ __forceinline__ float warpAllSum(float v) {
+#pragma unroll
+  for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_xor_sync(0xffffffffu, v, offset);
+  return v;
+}
+
 __device__ __forceinline__ double warpSum(double v) {
 #pragma unroll
   for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_down_sync(0xffffffffu, v, offset);
@@ -331,11 +340,11 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
   // The chunk's label mask: one atomicOr per warp and word (a warp's 32 pixels lie in one chunk; OR is
   // order-independent, so the mask is the same on every run).
   for (int w = 0; w < kLabelMaskWords; ++w) {
-    const unsigned lo = __reduce_or_sync(0xffffffffu, unsigned(blended_labels[w]));
-    const unsigned hi = __reduce_or_sync(0xffffffffu, unsigned(blended_labels[w] >> 32));
-    if ((threadIdx.x & 31) == 0 && (lo | hi) != 0u)
-      atomicOr(p.chunk_labels + (std::size_t(blockIdx.x) * blockDim.x / kPairChunkPixels) * kLabelMaskWords + w,
-               (static_cast<unsigned long long>(hi) << 32) | lo);
+    unsigned long long bits = blended_labels[w];
+#pragma unroll
+    for (int offset = 16; offset > 0; offset >>= 1) bits |= __shfl_xor_sync(0xffffffffu, bits, offset);
+    if ((threadIdx.x & 31) == 0 && bits != 0ull)
+      atomicOr(p.chunk_labels + (std::size_t(blockIdx.x) * blockDim.x / kPairChunkPixels) * kLabelMaskWords + w, bits);
   }
 
   // Pixel totals (every lane takes part in the shuffles).
@@ -363,17 +372,22 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
           w = double(w_float);
         }
         double* sums = region + label * kLabelStride;
-        const double ww = w * w;
+        // The 27 values of H and g: each warp total in float (32 float products; the CPU's double sums agree to
+        // ~1e-7 relative, test_motion_estimation_cuda.cpp), then lane k adds value k to the double sums, all lanes at
+        // once. Double shuffle trees and 27 additions by lane 0 in turn took about 60 % of this kernel (ncu, H100).
+        const float ww = float(w * w), wf = float(w);
+        float lane_total = 0.f;
 #pragma unroll
         for (int k = 0; k < kUpper; ++k) {
-          const double s = warpSum(in_view ? ww * double(Hm[k]) : 0.0);
-          if (lane == 0) sums[k] += s;
+          const float s = warpAllSum(in_view ? ww * Hm[k] : 0.f);
+          if (lane == k) lane_total = s;
         }
 #pragma unroll
         for (int k = 0; k < 6; ++k) {
-          const double s = warpSum(in_view ? w * double(gm[k]) : 0.0);
-          if (lane == 0) sums[kUpper + k] += s;
+          const float s = warpAllSum(in_view ? wf * gm[k] : 0.f);
+          if (lane == kUpper + k) lane_total = s;
         }
+        if (lane < kUpper + 6) sums[lane] += double(lane_total);
         const double label_cost =
             !mine ? 0.0 : in_view ? w * double(mass) * cost : double(mulRn(mass, w_float)) * p.out_of_view_cost;
         const double s_cost = warpSum(label_cost);
