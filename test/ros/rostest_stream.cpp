@@ -93,7 +93,10 @@ TEST_F(Stream, PairsAfterTheFirstStartWarmIdsPersistAndAResetStartsCold) {
   EXPECT_EQ(pairs[0]->start, "cold");
   for (std::size_t k = 1; k < pairs.size(); ++k) {
     EXPECT_EQ(pairs[k]->start, "warm") << "pair " << k + 1 << ": " << pairs[k]->start_note;
-    EXPECT_EQ(pairs[k]->start_note, "") << "pair " << k + 1;
+    // A warm pair has no note, unless the energy check ran a cold solve that did no better and kept the warm one.
+    EXPECT_TRUE(pairs[k]->start_note.empty() ||
+                pairs[k]->start_note.find("the warm result is kept") != std::string::npos)
+        << "pair " << k + 1 << ": " << pairs[k]->start_note;
   }
   // Ids persist: the background has one id throughout, and most ids of a pair are there in the next.
   const std::uint32_t background = largestId(*pairs[0]);
