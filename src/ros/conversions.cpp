@@ -47,32 +47,45 @@ cv::Mat colourToRgb8(const cv_bridge::CvImageConstPtr& image, const std::string&
   return rgb;
 }
 
-/// Intensity in [0, 1] at the input resolution (16-bit grey keeps its precision).
-cv::Mat colourToIntensity(const cv_bridge::CvImageConstPtr& image, const std::string& encoding, const cv::Mat& rgb8) {
-  cv::Mat intensity;
+// A cv::Mat over an ImageF's pixels: OpenCV writes into the core's image, no copy after.
+cv::Mat matOver(mc_flow::ImageF& image) { return cv::Mat(image.height, image.width, CV_32F, image.ptr()); }
+
+/// Intensity in [0, 1] of the `crop` of the colour image (16-bit grey keeps its precision), written into `out`
+/// (crop-sized).
+void colourToIntensity(const cv_bridge::CvImageConstPtr& image, const std::string& encoding, const cv::Mat& rgb8,
+                       const cv::Rect& crop, mc_flow::ImageF& out) {
+  cv::Mat intensity = matOver(out);
   if (encoding == enc::MONO16) {
-    image->image.convertTo(intensity, CV_32F, 1.0 / 65535.0);
+    image->image(crop).convertTo(intensity, CV_32F, 1.0 / 65535.0);
   } else if (encoding == enc::MONO8) {
-    image->image.convertTo(intensity, CV_32F, 1.0 / 255.0);
+    image->image(crop).convertTo(intensity, CV_32F, 1.0 / 255.0);
   } else {
-    // The one grey conversion (mc_flow::greyFromRgb), as the command-line tool reads colour files.
-    intensity.create(rgb8.rows, rgb8.cols, CV_32F);
-    for (int y = 0; y < rgb8.rows; ++y) {
-      const cv::Vec3b* in = rgb8.ptr<cv::Vec3b>(y);
-      float* out = intensity.ptr<float>(y);
-      for (int x = 0; x < rgb8.cols; ++x) out[x] = float(mc_flow::greyFromRgb(in[x][0], in[x][1], in[x][2]) / 255.0);
+    // The one grey conversion (mc_flow::greyFromRgb), as the command-line tool reads colour files. The products
+    // come from tables (the same doubles as 0.299 * r etc.), summed in the same order.
+    double red[256], green[256], blue[256];
+    for (int v = 0; v < 256; ++v) {
+      red[v] = 0.299 * v;
+      green[v] = 0.587 * v;
+      blue[v] = 0.114 * v;
+    }
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < crop.height; ++y) {
+      const std::uint8_t* in = rgb8.ptr<std::uint8_t>(crop.y + y) + 3 * crop.x;
+      float* row = intensity.ptr<float>(y);
+      for (int x = 0; x < crop.width; ++x, in += 3) row[x] = float((red[in[0]] + green[in[1]] + blue[in[2]]) / 255.0);
     }
   }
-  return intensity;
+  if (intensity.data != reinterpret_cast<const uchar*>(out.ptr()))
+    throw std::logic_error("colourToIntensity: OpenCV reallocated the intensity image");
 }
 
 /// Depth in metres (0 = invalid) at the input resolution.
-cv::Mat depthToMetres(const cv_bridge::CvImageConstPtr& image, const std::string& encoding) {
-  cv::Mat metres(image->image.size(), CV_32F);
+cv::Mat depthToMetres(const cv::Mat& image, const std::string& encoding) {
+  cv::Mat metres(image.size(), CV_32F);
   if (encoding == enc::TYPE_16UC1) {
-    image->image.convertTo(metres, CV_32F, 0.001);
+    image.convertTo(metres, CV_32F, 0.001);
   } else {
-    image->image.copyTo(metres);
+    image.copyTo(metres);
     for (int y = 0; y < metres.rows; ++y) {
       float* row = metres.ptr<float>(y);
       for (int x = 0; x < metres.cols; ++x) {
@@ -83,10 +96,18 @@ cv::Mat depthToMetres(const cv_bridge::CvImageConstPtr& image, const std::string
   return metres;
 }
 
-mc_flow::ImageF toImageF(const cv::Mat& m) {
-  mc_flow::ImageF image(m.cols, m.rows, 1);
-  for (int y = 0; y < m.rows; ++y) std::memcpy(&image(0, y), m.ptr<float>(y), sizeof(float) * std::size_t(m.cols));
-  return image;
+/// Depth in metres (0 = invalid) of the `crop` of a depth image of the colour image's size, written into `out`.
+void depthToMetres(const cv::Mat& image, const std::string& encoding, const cv::Rect& crop, mc_flow::ImageF& out) {
+  cv::Mat metres = matOver(out);
+  if (encoding == enc::TYPE_16UC1) {
+    image(crop).convertTo(metres, CV_32F, 0.001);
+  } else {
+    image(crop).copyTo(metres);
+    for (float& z : out.data)
+      if (!mc_flow::isValidDepth(z)) z = 0.f;
+  }
+  if (metres.data != reinterpret_cast<const uchar*>(out.ptr()))
+    throw std::logic_error("depthToMetres: OpenCV reallocated the depth image");
 }
 
 sensor_msgs::ImagePtr emptyImage(const PairContext& pair, int w, int h, const std::string& encoding, int bytes_per_pixel) {
@@ -99,6 +120,11 @@ sensor_msgs::ImagePtr emptyImage(const PairContext& pair, int w, int h, const st
   msg->step = std::uint32_t(w * bytes_per_pixel);
   msg->data.resize(std::size_t(msg->step) * std::size_t(h));
   return msg;
+}
+
+// PCL's rgb field: 0x00RRGGBB in the bytes of a float.
+std::uint32_t packedColour(const Rgb8& c) {
+  return (std::uint32_t(c.r) << 16) | (std::uint32_t(c.g) << 8) | std::uint32_t(c.b);
 }
 
 // Result::labels holds the segments' persistent ids (0 = outlier or no depth).
@@ -161,15 +187,20 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs
   out.K = intrinsicsFromCameraInfo(info, w, h).scaled(1.0 / factor);
 
   const cv::Mat rgb8 = colourToRgb8(rgb_cv, rgb.encoding);
-  const cv::Mat intensity = colourToIntensity(rgb_cv, rgb.encoding, rgb8);
-  cv::Mat metres = depthToMetres(depth_cv, depth.encoding);
-  if (dw != w || dh != h) {  // registered depth of another resolution: nearest keeps real measurements
-    cv::Mat resized;
-    cv::resize(metres, resized, cv::Size(w, h), 0, 0, cv::INTER_NEAREST);
-    metres = resized;
-  }
   // Crop to a multiple of the factor at the right/bottom: the principal point needs no change then.
   const cv::Rect crop(0, 0, out_w * factor, out_h * factor);
+  // The solver's frame at the input resolution, converted straight into the core's images (no copies after).
+  mc_flow::RgbdFrame full;
+  full.intensity = mc_flow::ImageF(crop.width, crop.height, 1);
+  full.depth = mc_flow::ImageF(crop.width, crop.height, 1);
+  colourToIntensity(rgb_cv, rgb.encoding, rgb8, crop, full.intensity);
+  if (dw != w || dh != h) {  // registered depth of another resolution: nearest keeps real measurements
+    cv::Mat resized;
+    cv::resize(depthToMetres(depth_cv->image, depth.encoding), resized, cv::Size(w, h), 0, 0, cv::INTER_NEAREST);
+    depthToMetres(resized, enc::TYPE_32FC1, crop, full.depth);  // zeros stay zeros: a plain copy
+  } else {
+    depthToMetres(depth_cv->image, depth.encoding, crop, full.depth);
+  }
   // The solver's frame: the core's downsampling rule (the pyramid's), as `mcflow run-seq` uses it. The
   // colour picture is for display only.
   cv::Mat colour_small;
@@ -177,11 +208,8 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs
     colour_small = rgb8(crop).clone();
   else
     cv::resize(rgb8(crop), colour_small, cv::Size(out_w, out_h), 0, 0, cv::INTER_AREA);
-  mc_flow::RgbdFrame full;
-  full.intensity = toImageF(intensity(crop));
-  full.depth = toImageF(metres(crop));
   out.colour = colour_small;
-  out.frame = factor == 1 ? std::move(full) : mc_flow::downsampleFrame(full, factor, depth_range);
+  out.frame = factor == 1 ? std::move(full) : mc_flow::downsampleFrame(std::move(full), factor, depth_range);
   for (float z : out.frame.depth.data) out.valid_depth += mc_flow::isValidDepth(z) ? 1 : 0;
   if (out.valid_depth == 0) {
     throw FrameInputError(InputProblem::Depth, "depth image (" + depth.encoding + ", " + mc_flow::imageSizeText(dw, dh) +
@@ -259,9 +287,10 @@ sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const P
   const int n = std::max(u.count, 1);
   auto msg = emptyImage(pair, u.width, u.height, "32FC" + std::to_string(n), int(sizeof(float)) * n);
   auto* out = reinterpret_cast<float*>(msg->data.data());
-  const std::size_t plane = u.planeSize();
-  for (std::size_t p = 0; p < plane; ++p) {
-    for (int c = 0; c < u.count; ++c) out[p * std::size_t(n) + std::size_t(c)] = u.plane(c)[p];
+  const long plane = long(u.planeSize());
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < plane; ++p) {
+    for (int c = 0; c < u.count; ++c) out[std::size_t(p) * std::size_t(n) + std::size_t(c)] = u.plane(c)[p];
   }
   return msg;
 }
@@ -326,35 +355,57 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
   const mc_flow::Intrinsics K = first ? first->K : result.intrinsics;
   const float nan = std::numeric_limits<float>::quiet_NaN();
 
-  sensor_msgs::PointCloud2Iterator<float> it_x(*cloud, "x"), it_rgb(*cloud, "rgb"), it_v(*cloud, "vx");
-  sensor_msgs::PointCloud2Iterator<std::uint32_t> it_label(*cloud, "label");
-  sensor_msgs::PointCloud2Iterator<std::uint8_t> it_occ(*cloud, "occluded");
+  const bool have_flow = result.scene_flow.sameSize(result.width, result.height) && result.scene_flow.channels >= 3;
+  const bool have_occlusion = !result.occlusion.empty();
+  const bool image_colour = colour == CloudColour::Image && have_colour;
+  // (x - cx) / fx per column and (y - cy) / fy per row: the same doubles as per pixel, two divisions fewer each.
+  const std::size_t columns = std::size_t(std::max(result.width, 0)), rows = std::size_t(std::max(result.height, 0));
+  std::vector<double> ray_x(columns), ray_y(rows);
+  for (int x = 0; x < result.width; ++x) ray_x[std::size_t(x)] = (x - K.cx) / K.fx;
+  for (int y = 0; y < result.height; ++y) ray_y[std::size_t(y)] = (y - K.cy) / K.fy;
+  // Each point written at the fields' offsets (as the PointCloud2 iterators would), rows in parallel.
+  const auto offset = [&](const std::string& name) {
+    for (const sensor_msgs::PointField& f : cloud->fields)
+      if (f.name == name) return std::size_t(f.offset);
+    throw std::logic_error("scene-flow cloud: no field " + name);
+  };
+  const std::size_t at_x = offset("x"), at_rgb = offset("rgb"), at_v = offset("vx"), at_label = offset("label"),
+                    at_occluded = offset("occluded"), step = cloud->point_step;
+  std::uint8_t* const data = cloud->data.data();
+  const auto put = [](std::uint8_t* to, const auto& value) { std::memcpy(to, &value, sizeof value); };
+
+#pragma omp parallel for schedule(static)
   for (int y = 0; y < result.height; ++y) {
-    for (int x = 0; x < result.width; ++x, ++it_x, ++it_rgb, ++it_v, ++it_label, ++it_occ) {
+    // Segment colours: a palette look-up per pixel cost more than the rest of the point (fmod, lround); the
+    // pixels of a segment come in runs, so the last id's colour is kept.
+    std::uint32_t cached_id = 0;
+    std::uint32_t cached_rgb = packedColour(colourForId(0));
+    std::uint8_t* point = data + std::size_t(y) * std::size_t(cloud->row_step);
+    for (int x = 0; x < result.width; ++x, point += step) {
       const float z = have_depth ? first->frame.depth(x, y) : nan;
       const bool valid = mc_flow::isValidDepth(z);
-      it_x[0] = valid ? float((x - K.cx) / K.fx * z) : nan;
-      it_x[1] = valid ? float((y - K.cy) / K.fy * z) : nan;
-      it_x[2] = valid ? z : nan;
-      const bool flow_ok = valid && result.scene_flow.sameSize(result.width, result.height) && result.scene_flow.channels >= 3;
-      for (int c = 0; c < 3; ++c) it_v[c] = flow_ok ? result.scene_flow(x, y, c) : nan;
+      const float xyz[3] = {valid ? float(ray_x[std::size_t(x)] * z) : nan, valid ? float(ray_y[std::size_t(y)] * z) : nan,
+                            valid ? z : nan};
+      put(point + at_x, xyz);
+      const bool flow_ok = valid && have_flow;
+      const float* flow = flow_ok ? &result.scene_flow(x, y, 0) : nullptr;
+      const float v[3] = {flow_ok ? flow[0] : nan, flow_ok ? flow[1] : nan, flow_ok ? flow[2] : nan};
+      put(point + at_v, v);
       const std::uint32_t id = idAt(result, x, y);
-      *it_label = id;
-      *it_occ = (!result.occlusion.empty() && result.occlusion(x, y) > 0) ? 1 : 0;
-      std::uint8_t r = 0, g = 0, b = 0;
-      if (colour == CloudColour::Image && have_colour) {
+      put(point + at_label, id);
+      point[at_occluded] = (have_occlusion && result.occlusion(x, y) > 0) ? 1 : 0;
+      std::uint32_t packed = 0;
+      if (image_colour) {
         const cv::Vec3b& p = first->colour.at<cv::Vec3b>(y, x);
-        r = p[0];
-        g = p[1];
-        b = p[2];
+        packed = packedColour({p[0], p[1], p[2]});
       } else {
-        const Rgb8 c = colourForId(id);
-        r = c.r;
-        g = c.g;
-        b = c.b;
+        if (id != cached_id) {
+          cached_id = id;
+          cached_rgb = packedColour(colourForId(id));
+        }
+        packed = cached_rgb;
       }
-      const std::uint32_t packed = (std::uint32_t(r) << 16) | (std::uint32_t(g) << 8) | std::uint32_t(b);
-      std::memcpy(&it_rgb[0], &packed, sizeof(float));
+      put(point + at_rgb, packed);
     }
   }
   return cloud;

@@ -28,6 +28,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <ros/serialization.h>
+#include <sys/resource.h>
 #include <sensor_msgs/image_encodings.h>
 
 #include "mc_flow/core/error.h"
@@ -112,25 +113,36 @@ InputMessages realMessages(const std::string& dir, int t, const ros::Time& stamp
   return toMessages(colour, depth, mc_flow::io::realPairIntrinsics640(name), stamp);
 }
 
-// Per-step times [ms] over the repetitions, in the order the steps were first timed.
+// Minor page faults of the process so far: a fresh allocation of a few MB (a message's buffer) costs a fault per
+// 4 KiB page on first touch, which on this VM is much of the time of the large outputs.
+long minorFaults() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_minflt;
+}
+
+// Per-step times [ms] and minor page faults over the repetitions, in the order the steps were first timed.
 class StepTimes {
  public:
   template <typename F>
   void time(const std::string& step, F&& work) {
+    const long faults = minorFaults();
     const auto start = Clock::now();
     work();
-    add(step, std::chrono::duration<double, std::milli>(Clock::now() - start).count());
+    add(step, std::chrono::duration<double, std::milli>(Clock::now() - start).count(), minorFaults() - faults);
   }
-  void add(const std::string& step, double ms) {
+  void add(const std::string& step, double ms, long faults) {
     if (!times_.count(step)) order_.push_back(step);
     times_[step].push_back(ms);
+    faults_[step].push_back(double(faults));
   }
   const std::vector<std::string>& order() const { return order_; }
   const std::vector<double>& of(const std::string& step) const { return times_.at(step); }
+  const std::vector<double>& faultsOf(const std::string& step) const { return faults_.at(step); }
 
  private:
   std::vector<std::string> order_;
-  std::map<std::string, std::vector<double>> times_;
+  std::map<std::string, std::vector<double>> times_, faults_;
 };
 
 double percentile90(std::vector<double> v) {
@@ -140,9 +152,11 @@ double percentile90(std::vector<double> v) {
   return v[std::min(k, v.size() - 1)];
 }
 
-void printRow(const std::string& step, const std::vector<double>& ms, std::size_t bytes) {
+void printRow(const std::string& step, const std::vector<double>& ms, const std::vector<double>& faults,
+              std::size_t bytes) {
   char line[160];
-  std::snprintf(line, sizeof(line), "  %-44s %9.3f %9.3f", step.c_str(), mc_flow::median(ms), percentile90(ms));
+  std::snprintf(line, sizeof(line), "  %-44s %9.3f %9.3f %7.0f", step.c_str(), mc_flow::median(ms), percentile90(ms),
+                mc_flow::median(faults));
   std::cout << line;
   if (bytes > 0) std::cout << "  " << bytes << " B";
   std::cout << "\n";
@@ -151,6 +165,18 @@ void printRow(const std::string& step, const std::vector<double>& ms, std::size_
 template <typename M>
 std::size_t serialise(const M& message) {
   return ros::serialization::serializeMessage(message).num_bytes;
+}
+
+void writeFile(const std::string& path, const void* data, std::size_t bytes) {
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (!f || std::fwrite(data, 1, bytes, f) != bytes || std::fclose(f) != 0)
+    throw std::runtime_error("cannot write " + path);
+}
+
+template <typename M>
+void dumpMessage(const std::string& path, const M& message) {
+  const ros::SerializedMessage m = ros::serialization::serializeMessage(message);
+  writeFile(path, m.buf.get(), m.num_bytes);
 }
 
 template <typename M>
@@ -166,7 +192,9 @@ int run(int argc, char** argv) {
                             {"size", true, "input WxH (640x480)"},
                             {"variant", true, "synthetic scene variant (0)"},
                             {"depth-noise", true, "synthetic depth noise [m] at 1 m, growing with depth^2 (0)"},
-                            {"real", true, "a real pair's folder (shared/data/real_pairs/NAME) instead of the synthetic scene"}});
+                            {"real", true, "a real pair's folder (shared/data/real_pairs/NAME) instead of the synthetic scene"},
+                            {"dump", true, "write the first repetition's messages (serialised) and converted frame to DIR "
+                                           "(to compare two builds byte for byte)"}});
   cli.parse(argc, argv);
   if (cli.helpRequested()) {
     std::cout << cli.usage();
@@ -222,7 +250,7 @@ int run(int argc, char** argv) {
     pair.previous_stamp = first.header.stamp;
     pair.previous = &first;
     pair.current = &second;
-    pair.solve_time_ms = solve_ms;
+    pair.solve_time_ms = cli.has("dump") ? 0.0 : solve_ms;  // a dump compares builds: no clock in it
 
     // What arrives from a driver in another process (the length prefix, then the message).
     const std::vector<ros::SerializedMessage> arrived = {ros::serialization::serializeMessage(m1.rgb),
@@ -233,6 +261,7 @@ int run(int argc, char** argv) {
     std::size_t sink = 0;
     for (int r = 0; r < repetitions; ++r) {
       const auto pair_start = Clock::now();
+      const long pair_faults = minorFaults();
       // ---- input: one new frame per pair (process(): toFrameInput, then the StreamFrame for the pipeline)
       mc_flow_ros::FrameInput input;
       own.time("toFrameInput (validation + conversion)", [&] {
@@ -271,11 +300,13 @@ int run(int argc, char** argv) {
       own.time("TF transforms", [&] {
         transforms = mc_flow_ros::makeSegmentTransforms(result, pipeline.tracks(), pair, defaults.segment_frame_prefix);
       });
-      own.add("total", std::chrono::duration<double, std::milli>(Clock::now() - pair_start).count());
+      own.add("total", std::chrono::duration<double, std::milli>(Clock::now() - pair_start).count(),
+              minorFaults() - pair_faults);
 
       // ---- the wire (not the nodelet's own code: roscpp serialises once per publish for remote subscribers,
       // and deserialises the inputs from a driver in another process; nodelets in one manager skip both)
       const auto wire_start = Clock::now();
+      const long wire_faults = minorFaults();
       wire.time("~scene_flow cloud", [&] { bytes["~scene_flow cloud"] = serialise(*cloud); });
       wire.time("~soft_labels", [&] { bytes["~soft_labels"] = serialise(*soft); });
       wire.time("~segmentation", [&] { bytes["~segmentation"] = serialise(*segmentation); });
@@ -284,7 +315,8 @@ int run(int argc, char** argv) {
       wire.time("~segments + ~motion_markers + ~camera_info", [&] {
         bytes["~segments + ~motion_markers + ~camera_info"] = serialise(segments) + serialise(markers) + serialise(info);
       });
-      wire.add("total (outputs)", std::chrono::duration<double, std::milli>(Clock::now() - wire_start).count());
+      wire.add("total (outputs)", std::chrono::duration<double, std::milli>(Clock::now() - wire_start).count(),
+               minorFaults() - wire_faults);
       wire.time("inputs: deserialise rgb + depth + camera_info", [&] {
         sensor_msgs::Image rgb, depth;
         sensor_msgs::CameraInfo camera;
@@ -293,6 +325,23 @@ int run(int argc, char** argv) {
         deserialise(arrived[2], camera);
         sink += rgb.data.size() + depth.data.size() + camera.D.size();
       });
+      if (r == 0 && cli.has("dump")) {
+        const std::string prefix = cli.text("dump", "") + "/downsample" + std::to_string(downsample) + "_";
+        const mc_flow::RgbdFrame& converted = std::any_cast<const mc_flow_ros::FrameInput&>(frame.extra).frame;
+        writeFile(prefix + "intensity.f32", converted.intensity.data.data(), converted.intensity.data.size() * 4);
+        writeFile(prefix + "depth.f32", converted.depth.data.data(), converted.depth.data.size() * 4);
+        const cv::Mat& colour = std::any_cast<const mc_flow_ros::FrameInput&>(frame.extra).colour;
+        writeFile(prefix + "colour.rgb", colour.data, colour.total() * colour.elemSize());
+        dumpMessage(prefix + "segments.msg", segments);
+        dumpMessage(prefix + "soft_labels.msg", *soft);
+        dumpMessage(prefix + "labels.msg", *labels);
+        dumpMessage(prefix + "occlusion.msg", *occlusion);
+        dumpMessage(prefix + "segmentation.msg", *segmentation);
+        dumpMessage(prefix + "scene_flow.msg", *cloud);
+        dumpMessage(prefix + "markers.msg", markers);
+        dumpMessage(prefix + "camera_info.msg", info);
+        for (std::size_t i = 0; i < transforms.size(); ++i) dumpMessage(prefix + "tf" + std::to_string(i) + ".msg", transforms[i]);
+      }
       sink += segments.segments.size() + soft->data.size() + labels->data.size() + occlusion->data.size() +
               segmentation->data.size() + cloud->data.size() + markers.markers.size() + info.D.size() + transforms.size();
     }
@@ -302,11 +351,12 @@ int run(int argc, char** argv) {
               << downsample << " -> factor " << first.downsample << ", outputs " << result.width << "x" << result.height
               << "; " << result.segments.size() << " segments, one solve " << std::lround(solve_ms) << " ms ("
               << result.backend << "); " << repetitions << " repetitions\n";
-    std::cout << "  the nodelet's own work per pair (every output subscribed, publish_tf on)   median [ms]  p90 [ms]\n";
-    for (const std::string& name : own.order()) printRow(name, own.of(name), 0);
+    std::cout << "  the nodelet's own work per pair (every output subscribed, publish_tf on)\n"
+              << "                                               median [ms]  p90 [ms]  faults\n";
+    for (const std::string& name : own.order()) printRow(name, own.of(name), own.faultsOf(name), 0);
     std::cout << "  serialisation (remote subscribers / a driver in another process; not in the total above)\n";
     for (const std::string& name : wire.order())
-      printRow(name, wire.of(name), bytes.count(name) ? bytes.at(name) : std::size_t(0));
+      printRow(name, wire.of(name), wire.faultsOf(name), bytes.count(name) ? bytes.at(name) : std::size_t(0));
     std::cout << "  (checksum " << sink % 997 << ")\n\n";
   }
   return 0;

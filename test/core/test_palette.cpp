@@ -1,7 +1,10 @@
 // Display colours of segment ids.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <random>
+#include <vector>
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/palette.h"
@@ -41,6 +44,49 @@ TEST(Palette, SegmentationPictureBlendsSegmentColoursOverTheImage) {
   const ImageU8 no_image = segmentationPicture(u, {7, 3}, nullptr, 0.6);
   EXPECT_NEAR(no_image(1, 0, 1), 0.6 * c3.g + 0.4 * 128.0, 1.0);
   EXPECT_THROW(segmentationPicture(u, {7}, &grey, 0.6), InputError);
+}
+
+TEST(Palette, SegmentationPictureRoundsAsLroundDoes) {
+  // Each channel is std::lround of the clamped blend, halves away from zero (the picture rounds without the
+  // library call): random soft labels and greys, and exact halves (blend 0.5 over grey 0 and 255).
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> unit(0.f, 1.f);
+  const int w = 64, h = 8, segments = 5;
+  SoftLabels u(w, h, segments + 1, 0.f);
+  ImageF grey(w, h, 1, 0.f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (y < 2) {  // one label per pixel, grey 0 or 1: 0.5 * colour (+ 127.5) is a half for odd (even) colours
+        u.at(x % (segments + 1), x, y) = 1.f;
+        grey(x, y) = float(y);
+        continue;
+      }
+      float sum = 0.f;
+      for (int i = 0; i <= segments; ++i) sum += (u.at(i, x, y) = unit(rng));
+      for (int i = 0; i <= segments; ++i) u.at(i, x, y) /= sum;
+      grey(x, y) = unit(rng) * 1.2f - 0.1f;  // also outside [0, 1]
+    }
+  const std::vector<int> ids = {1, 2, 3, 4, 5};
+  for (const double blend : {0.5, 0.6, 1.0, 1.3}) {
+    const ImageU8 picture = segmentationPicture(u, ids, &grey, blend);
+    int halves = 0;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        for (int c = 0; c < 3; ++c) {
+          double mixed = 0;
+          for (int i = 0; i <= segments; ++i) {
+            const double weight = u.at(i, x, y);
+            if (!(weight > 0)) continue;
+            const Rgb8 colour = colourForId(std::uint32_t(i < segments ? ids[std::size_t(i)] : 0));
+            mixed += weight * (c == 0 ? colour.r : c == 1 ? colour.g : colour.b);
+          }
+          const double g = 255.0 * std::clamp(double(grey(x, y)), 0.0, 1.0);
+          const double value = std::clamp(blend * mixed + (1 - blend) * g, 0.0, 255.0);
+          halves += value - std::floor(value) == 0.5 ? 1 : 0;
+          ASSERT_EQ(int(picture(x, y, c)), int(std::lround(value))) << "blend " << blend << " at " << x << "," << y;
+        }
+    if (blend == 0.5) EXPECT_GT(halves, 20);
+  }
 }
 
 }  // namespace

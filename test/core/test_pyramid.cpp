@@ -1,11 +1,17 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <random>
+#include <utility>
+#include <vector>
 #include <Eigen/Core>
 #include <limits>
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/pyramid.h"
+#include "mc_flow/core/pyramid_pixel.h"
 
 namespace mc_flow {
 namespace {
@@ -110,6 +116,62 @@ TEST(Pyramid, DepthDownsampleIgnoresInvalidPixels) {
   const ImageF out2 = downsampleDepth(holes, 0.1);
   EXPECT_EQ(out2(2, 2), 0.f);
   EXPECT_FLOAT_EQ(out2(1, 1), 2.f);
+}
+
+TEST(Pyramid, DepthDownsampleIsThePerPixelRuleBitForBit) {
+  // downsampleDepth runs the interior through its own branch-free copy of pyramid_pixel::downsampledDepth (the
+  // rule the CUDA pyramid shares): the same bits on noisy depth with holes, NaN, infinities, negatives and -0, on
+  // odd and tiny sizes, for ranges that reject many samples, none, or (NaN) none either way.
+  std::mt19937 rng(7);
+  std::normal_distribution<float> noise(0.f, 0.03f);
+  std::uniform_int_distribution<int> pick(0, 99);
+  const float specials[] = {0.f, -0.f, -1.f, std::numeric_limits<float>::quiet_NaN(),
+                            std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+                            std::numeric_limits<float>::max(), std::numeric_limits<float>::denorm_min()};
+  for (const auto& [w, h] : std::vector<std::pair<int, int>>{{64, 48}, {63, 47}, {37, 5}, {5, 4}, {4, 3}, {2, 2}, {1, 1}}) {
+    ImageF depth(w, h, 1, 0.f);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const int p = pick(rng);
+        depth(x, y) = p < 8 ? specials[p] : (x < w / 2 ? 1.f : 2.5f) + 0.01f * y + noise(rng);
+      }
+    for (const double range : {0.1, 0.02, 10.0, std::nan("")}) {
+      const ImageF out = downsampleDepth(depth, range);
+      const auto at = [&](int x, int y) { return depth(x, y); };
+      for (int y = 0; y < out.height; ++y)
+        for (int x = 0; x < out.width; ++x) {
+          const float expected = pyramid_pixel::downsampledDepth(at, w, h, x, y, float(range));
+          std::uint32_t a, b;
+          std::memcpy(&a, &out(x, y), 4);
+          std::memcpy(&b, &expected, 4);
+          ASSERT_EQ(a, b) << w << "x" << h << " range " << range << " at (" << x << ", " << y << "): " << out(x, y)
+                          << " vs " << expected;
+        }
+    }
+  }
+}
+
+TEST(Pyramid, IntensityDownsampleIsThePerPixelRuleBitForBit) {
+  // downsampleIntensity reads one-channel interiors straight from the rows: the same bits as
+  // pyramid_pixel::downsampledIntensity (the rule the CUDA pyramid shares), on odd and tiny sizes.
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> value(-0.5f, 1.5f);
+  for (const auto& [w, h] : std::vector<std::pair<int, int>>{{64, 48}, {63, 47}, {37, 5}, {5, 4}, {4, 3}, {2, 2}, {1, 1}}) {
+    for (const int channels : {1, 2}) {
+      ImageF image(w, h, channels, 0.f);
+      for (float& v : image.data) v = value(rng);
+      const ImageF out = downsampleIntensity(image);
+      for (int c = 0; c < channels; ++c) {
+        const auto at = [&](int x, int y) { return image(x, y, c); };
+        for (int y = 0; y < out.height; ++y)
+          for (int x = 0; x < out.width; ++x) {
+            const float expected = pyramid_pixel::downsampledIntensity(at, w, h, x, y);
+            ASSERT_EQ(std::memcmp(&out(x, y, c), &expected, 4), 0)
+                << w << "x" << h << "x" << channels << " at (" << x << ", " << y << "): " << out(x, y, c) << " vs " << expected;
+          }
+      }
+    }
+  }
 }
 
 TEST(Pyramid, DepthDownsampleAveragesWithinRange) {

@@ -36,8 +36,9 @@ int chooseDownsample(int requested, int width);
 
 /// @brief A frame at `factor` times fewer pixels per axis by the pyramid's rules (depth: neighbours within
 /// `depth_range` [m] of the block's median; intensity: [1 3 3 1] smoothing), halving log2(factor) times;
-/// odd last columns/rows are dropped, so the principal point needs no shift (Intrinsics::scaled).
-RgbdFrame downsampleFrame(const RgbdFrame& frame, int factor, double depth_range);
+/// odd last columns/rows are dropped, so the principal point needs no shift (Intrinsics::scaled). Taken by value:
+/// a caller that moves its frame in saves a copy of it.
+RgbdFrame downsampleFrame(RgbdFrame frame, int factor, double depth_range);
 
 /// @brief One frame of a stream at the input resolution.
 struct StreamFrame {
