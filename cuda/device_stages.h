@@ -88,17 +88,6 @@ __device__ __forceinline__ void transformPointDevice(const float T[12], const fl
   }
 }
 
-/// @brief Sums `values` doubles per thread (shared[thread * values + v]) over the block into the first thread's
-/// slots, in a fixed order (a tree over blockDim.x, a power of two), so repeated runs give the same bits.
-__device__ inline void blockSum(double* shared, int values) {
-  for (int stride = blockDim.x / 2; stride > 0; stride >>= 1) {
-    __syncthreads();
-    if (int(threadIdx.x) < stride)
-      for (int v = 0; v < values; ++v) shared[threadIdx.x * values + v] += shared[(threadIdx.x + stride) * values + v];
-  }
-  __syncthreads();
-}
-
 // ---------------------------------------------------------------- per-label sums over many blocks
 // A per-label sum over the pixels of a level used to run in one block per label (or one block in all), whose
 // strided loop was latency-bound: 35-850 us per call on an H100 (ncu, 320x240). Now the pixels are cut into
