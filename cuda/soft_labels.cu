@@ -1,7 +1,7 @@
 // Soft-label operations of the device-resident solve (src/core/soft_labels.cpp, solve_backend.cpp's initialisation and
 // the HostLabelStore of label_adaptation.cpp are the references): initial hard labels, resampling between
 // pyramid levels, remapping planes (merges, removals), per-label supports and owned-pixel moments, cuts.
-// Sums run in a fixed order (one block per label, a fixed tree), so repeated solves are bit-identical.
+// Sums run in a fixed order (the chunked sums of device_stages.h), so repeated solves are bit-identical.
 #include <cuda_runtime.h>
 
 #include <cmath>
@@ -117,7 +117,6 @@ __global__ void remapKernel(const float* __restrict__ in, std::size_t plane, int
   }
 }
 
-// One block per motion label.
 // Pixel k's share of label `label`'s support: sum of u.
 struct SupportPixel {
   const float* u;
