@@ -102,10 +102,6 @@ constexpr std::size_t kMaxChunks = 1024;
 inline std::size_t chunkCount(std::size_t pixels) {
   return std::max<std::size_t>(1, std::min(kMaxChunks, (pixels + kChunkPixels - 1) / kChunkPixels));
 }
-/// @brief Doubles of scratch the chunked sums need for `labels` labels of `values` values each.
-inline std::size_t chunkScratchSize(std::size_t pixels, int labels, int values) {
-  return chunkCount(pixels) * std::size_t(std::max(labels, 1)) * std::size_t(values);
-}
 
 /// @brief Block (chunk, label): `pixel(label, k, sums)` adds pixel k's V values into `sums` for every k of the
 /// chunk; the block's sums go to partials[(label * chunks + chunk) * V + v].
@@ -153,21 +149,22 @@ __global__ void addChunksKernel(const double* __restrict__ partials, int chunks,
   if (lane == 0) out[value] = s;
 }
 
-/// @brief Per label (labels of them), V sums over `pixels` pixels into out[label * V + v]; `partials` holds
-/// chunkScratchSize(pixels, labels, V) doubles. For the .cu files' launchers.
+/// @brief Per label (labels of them), V sums over `pixels` pixels into out[label * V + v]; `partials` is grown to
+/// the chunks' scratch. For the .cu files' launchers.
 template <int V, class Pixel>
-void launchChunkSums(Pixel pixel, std::size_t pixels, int labels, double* partials, double* out, cudaStream_t stream,
-                     const char* what) {
+void launchChunkSums(Pixel pixel, std::size_t pixels, int labels, DeviceBuffer<double>& partials, double* out,
+                     cudaStream_t stream, const char* what) {
   if (labels <= 0 || pixels == 0) return;
   const std::size_t chunks = chunkCount(pixels);
+  partials.reserve(chunks * std::size_t(labels) * V);
   const std::size_t chunk_pixels = (pixels + chunks - 1) / chunks;
   chunkSumsKernel<V><<<dim3(unsigned(chunks), unsigned(labels)), kChunkThreads, 0, stream>>>(pixel, pixels,
-                                                                                           chunk_pixels, partials);
+                                                                                           chunk_pixels, partials.get());
   kernel_launches.fetch_add(1, std::memory_order_relaxed);
   check(cudaGetLastError(), what, __FILE__, __LINE__);
   const unsigned warps_per_block = kChunkThreads / 32;
   const unsigned blocks = unsigned((std::size_t(labels) * V + warps_per_block - 1) / warps_per_block);
-  addChunksKernel<V><<<blocks, kChunkThreads, 0, stream>>>(partials, int(chunks), labels, out);
+  addChunksKernel<V><<<blocks, kChunkThreads, 0, stream>>>(partials.get(), int(chunks), labels, out);
   kernel_launches.fetch_add(1, std::memory_order_relaxed);
   check(cudaGetLastError(), what, __FILE__, __LINE__);
 }
@@ -242,9 +239,9 @@ void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, cons
                             const Intrinsics& K, float* scene_flow, float* optical_flow, float* moved_depth,
                             int* ids, cudaStream_t stream);
 /// @brief labelCentroids: per motion label the u-weighted sums of the valid points and of u (4 doubles:
-/// x, y, z, weight), in a fixed order; `partials`: chunkScratchSize(plane, motion_labels, 4) doubles.
-void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels, double* partials,
-                             double* out, cudaStream_t stream);
+/// x, y, z, weight), in a fixed order.
+void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels,
+                             DeviceBuffer<double>& scratch, double* out, cudaStream_t stream);
 
 // ---------------------------------------------------------------- motion step (motion_estimation.cu)
 /// @brief The motion step's accumulator on device-resident data (no uploads but the twists).
@@ -303,22 +300,20 @@ void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint
 /// @brief out plane j = sum of the in planes i with target[i] == j, in ascending i (target on the device).
 void launchRemapLabels(const float* in, std::size_t plane, int count, const int* target, int new_count, float* out,
                        cudaStream_t stream);
-/// @brief Per motion label of `u` (count planes): sum of u (double), in a fixed order; `partials`: scratch of
-/// chunkScratchSize(plane, motion_labels, 1) doubles.
-void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, double* partials, double* out,
-                         cudaStream_t stream);
-/// @brief Per motion label: owned-pixel moments, 10 doubles (count, sum xyz, sum xx xy xz yy yz zz); `partials`:
-/// chunkScratchSize(plane, motion_labels, 10) doubles.
-void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, double* partials, double* out,
-                        cudaStream_t stream);
+/// @brief Per motion label of `u` (count planes): sum of u (double), in a fixed order (`scratch`: the chunked
+/// sums' partials, grown as needed).
+void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, DeviceBuffer<double>& scratch,
+                         double* out, cudaStream_t stream);
+/// @brief Per motion label: owned-pixel moments, 10 doubles (count, sum xyz, sum xx xy xz yy yz zz).
+void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, DeviceBuffer<double>& scratch,
+                        double* out, cudaStream_t stream);
 /// @brief Cuts (parent, centre xyz, axis xyz as doubles; 7 values each) appended as planes
 /// [motion_labels, motion_labels + cuts) of `out` (count + cuts planes); counts the moved pixels per cut.
 void launchCutLabels(const float* in, const DeviceImage& points, int count, const double* cuts, int cut_count,
                      float* out, unsigned long long* moved, cudaStream_t stream);
-/// @brief Sum over planes of |a - b| per pixel, added into one double (fixed order); `partials`:
-/// chunkScratchSize(values, 1, 1) doubles.
-void launchAbsoluteChange(const float* a, const float* b, std::size_t values, double* partials, double* out,
-                          cudaStream_t stream);
+/// @brief Sum over planes of |a - b| per pixel, added into one double (fixed order).
+void launchAbsoluteChange(const float* a, const float* b, std::size_t values, DeviceBuffer<double>& scratch,
+                          double* out, cudaStream_t stream);
 
 // ---------------------------------------------------------------- occlusion (occlusion.cu)
 /// @brief detectOcclusions(warpPoints(points, u, twists), depth2, K) at one level into `occluded`.

@@ -558,14 +558,19 @@ bool cudaBackendAvailable(std::string* why, int requested_device) {
   }
   const int device = requested_device;
   cudaDeviceProp properties{};
-  if (cudaSetDevice(device) != cudaSuccess || cudaGetDeviceProperties(&properties, device) != cudaSuccess) {
+  if (cudaGetDeviceProperties(&properties, device) != cudaSuccess) {
     const cudaError_t error = cudaGetLastError();
-    if (why) *why = std::string("cannot query the current CUDA device: ") + cudaGetErrorString(error);
+    if (why) *why = "cannot query CUDA device " + std::to_string(device) + ": " + cudaGetErrorString(error);
     return false;
   }
-  // A build without code for this GPU's architecture fails only at the first launch: ask now.
+  // A build without code for this GPU's architecture fails only at the first launch: ask now. The question is
+  // answered for the current device, so that device is made current for it and the caller's is restored.
+  int previous = 0;
   cudaFuncAttributes attributes{};
-  const cudaError_t kernel_status = cudaFuncGetAttributes(&attributes, primalStep);
+  cudaError_t kernel_status = cudaGetDevice(&previous);
+  if (kernel_status == cudaSuccess) kernel_status = cudaSetDevice(device);
+  if (kernel_status == cudaSuccess) kernel_status = cudaFuncGetAttributes(&attributes, primalStep);
+  if (previous != device) cudaSetDevice(previous);
   if (kernel_status != cudaSuccess) {
     cudaGetLastError();
     if (why)

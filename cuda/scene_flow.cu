@@ -91,10 +91,10 @@ void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, cons
   MCFLOW_CUDA_CHECK_LAUNCH("outputsKernel");
 }
 
-void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels, double* partials,
-                             double* out, cudaStream_t stream) {
+void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels,
+                             DeviceBuffer<double>& scratch, double* out, cudaStream_t stream) {
   const std::size_t plane = std::size_t(points.width) * points.height;
-  launchChunkSums<kCentroidValues>(CentroidPixel{u, points, plane}, plane, motion_labels, partials, out, stream,
+  launchChunkSums<kCentroidValues>(CentroidPixel{u, points, plane}, plane, motion_labels, scratch, out, stream,
                                    "label centroid sums");
 }
 

@@ -227,15 +227,15 @@ void launchRemapLabels(const float* in, std::size_t plane, int count, const int*
   MCFLOW_CUDA_CHECK_LAUNCH("remapKernel");
 }
 
-void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, double* partials, double* out,
-                         cudaStream_t stream) {
-  launchChunkSums<1>(SupportPixel{u, plane}, plane, motion_labels, partials, out, stream, "label supports");
+void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, DeviceBuffer<double>& scratch,
+                         double* out, cudaStream_t stream) {
+  launchChunkSums<1>(SupportPixel{u, plane}, plane, motion_labels, scratch, out, stream, "label supports");
 }
 
-void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, double* partials, double* out,
-                        cudaStream_t stream) {
+void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, DeviceBuffer<double>& scratch,
+                        double* out, cudaStream_t stream) {
   const std::size_t plane = std::size_t(points.width) * points.height;
-  launchChunkSums<kMomentValues>(MomentPixel{u, points, plane}, plane, motion_labels, partials, out, stream,
+  launchChunkSums<kMomentValues>(MomentPixel{u, points, plane}, plane, motion_labels, scratch, out, stream,
                                  "owned moments");
 }
 
@@ -248,9 +248,9 @@ void launchCutLabels(const float* in, const DeviceImage& points, int count, cons
   MCFLOW_CUDA_CHECK_LAUNCH("cutKernel");
 }
 
-void launchAbsoluteChange(const float* a, const float* b, std::size_t values, double* partials, double* out,
-                          cudaStream_t stream) {
-  launchChunkSums<1>(AbsoluteChangePixel{a, b}, values, 1, partials, out, stream, "absolute label change");
+void launchAbsoluteChange(const float* a, const float* b, std::size_t values, DeviceBuffer<double>& scratch,
+                          double* out, cudaStream_t stream) {
+  launchChunkSums<1>(AbsoluteChangePixel{a, b}, values, 1, scratch, out, stream, "absolute label change");
 }
 
 }  // namespace cuda_detail

@@ -277,8 +277,7 @@ class CudaSolveBackend final : public SolveBackend {
     const LabelStats ls = primal_dual_->run(problem, labels(), dual_.get(), iterations, tolerance);
 
     scalar_.reserve(1);
-    partials_.reserve(cuda_detail::chunkScratchSize(values, 1, 1));
-    cuda_detail::launchAbsoluteChange(labels(), before_.get(), values, partials_.get(), scalar_.get(), s);
+    cuda_detail::launchAbsoluteChange(labels(), before_.get(), values, partials_, scalar_.get(), s);
     double* change = staged_doubles_.reserve(1);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(change, scalar_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
@@ -314,8 +313,7 @@ class CudaSolveBackend final : public SolveBackend {
     // Per label: the u-weighted point sums and sum u over the valid pixels, which is the support (the pixels
     // without depth were just moved to the outlier label).
     scalar_.reserve(std::size_t(std::max(1, 4 * n)));
-    partials_.reserve(cuda_detail::chunkScratchSize(p, n, 4));
-    cuda_detail::launchLabelCentroidSums(labels(), L.points1, n, partials_.get(), scalar_.get(), s);
+    cuda_detail::launchLabelCentroidSums(labels(), L.points1, n, partials_, scalar_.get(), s);
 
     // One transfer down: every image into one page-locked buffer per type, then a single synchronisation.
     const std::size_t label_values = p * std::size_t(count_);
@@ -376,8 +374,7 @@ class CudaSolveBackend final : public SolveBackend {
     std::vector<double> out(std::size_t(std::max(0, n)));
     if (n <= 0) return out;
     scalar_.reserve(std::size_t(n));
-    partials_.reserve(cuda_detail::chunkScratchSize(plane(), n, 1));
-    cuda_detail::launchLabelSupports(labels(), plane(), n, partials_.get(), scalar_.get(), stream_.stream);
+    cuda_detail::launchLabelSupports(labels(), plane(), n, partials_, scalar_.get(), stream_.stream);
     download(out.data(), scalar_.get(), std::size_t(n), staged_doubles_);
     return out;
   }
@@ -398,8 +395,7 @@ class CudaSolveBackend final : public SolveBackend {
     if (n <= 0) return out;
     std::vector<double> values(std::size_t(n) * 10);
     scalar_.reserve(values.size());
-    partials_.reserve(cuda_detail::chunkScratchSize(plane(), n, 10));
-    cuda_detail::launchOwnedMoments(labels(), levels_[std::size_t(level_)].points1, n, partials_.get(), scalar_.get(),
+    cuda_detail::launchOwnedMoments(labels(), levels_[std::size_t(level_)].points1, n, partials_, scalar_.get(),
                                     stream_.stream);
     download(values.data(), scalar_.get(), values.size(), staged_doubles_);
     for (int i = 0; i < n; ++i) {
@@ -605,7 +601,8 @@ bool cudaDeviceMemory(std::size_t* used, std::size_t* total) {
 std::unique_ptr<SolveBackend> makeCudaSolveBackend(int cuda_device) {
   std::string why;
   if (!cudaBackendAvailable(&why, cuda_device)) throw BackendError("CUDA backend requested but unavailable: " + why);
-  return std::make_unique<CudaSolveBackend>(cuda_device);  // the device is current: the stream and buffers go there
+  MCFLOW_CUDA_CHECK(cudaSetDevice(cuda_device));  // the backend's stream and buffers are created on it
+  return std::make_unique<CudaSolveBackend>(cuda_device);
 }
 
 }  // namespace mc_flow

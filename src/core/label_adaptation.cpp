@@ -129,12 +129,13 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
   AdaptationStats stats;
   stats.smallest_refused_merge = std::numeric_limits<double>::infinity();
   const int n0 = labels.labelCount() - 1;
-  if (int(twists.size()) != n0 || int(model.curvature.size()) != n0)
-    throw InputError("adaptLabelCount: " + std::to_string(twists.size()) + " twists and " +
-                     std::to_string(model.curvature.size()) + " cost models for " + std::to_string(n0) +
+  if (int(twists.size()) != n0 || int(model.curvature.size()) != n0 || int(model.gradient.size()) != n0 ||
+      int(model.cost.size()) != n0)
+    throw InputError("adaptLabelCount: " + std::to_string(twists.size()) + " twists and cost models of " +
+                     std::to_string(model.curvature.size()) + " curvatures, " + std::to_string(model.gradient.size()) +
+                     " gradients and " + std::to_string(model.cost.size()) + " costs for " + std::to_string(n0) +
                      " motion labels");
   const double price = labelCost(config, valid_pixels);
-  if (model.cost.size() != model.curvature.size()) model.cost.assign(model.curvature.size(), 0.0);
   std::vector<double> support = labels.supports();
   // group[i]: the current label of original label i (-1: removed to the outlier label). The labels
   // themselves change once, at the end, by one remap.
@@ -266,10 +267,8 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
     const Vector6d& g2 = model.gradient[std::size_t(n + c)];
     // What two motions gain over the one best motion for the whole label.
     const double gain = newtonDecrement(H1, g1) + newtonDecrement(H2, g2) - newtonDecrement(H1 + H2, g1 + g2);
-    const bool costs = model.cost.size() > std::size_t(n + c);
-    const double split_price =
-        priceFor(price, costs ? model.cost[std::size_t(p)] : 0.0, costs ? model.cost[std::size_t(n + c)] : 0.0, config);
-    if (gain > split_price) gains.emplace_back(gain, c);
+    if (gain > priceFor(price, model.cost[std::size_t(p)], model.cost[std::size_t(n + c)], config))
+      gains.emplace_back(gain, c);
   }
   std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
   const int take = std::min({int(gains.size()), room, config.max_splits_per_iteration});

@@ -31,6 +31,7 @@ LabelCostModel uniformModel(int labels, const Matrix6d& H) {
   LabelCostModel model;
   model.curvature.assign(std::size_t(labels), H);
   model.gradient.assign(std::size_t(labels), Vector6d::Zero());
+  model.cost.assign(std::size_t(labels), 0.0);  // no relative price: the absolute one decides
   return model;
 }
 
@@ -217,6 +218,10 @@ TEST(LabelAdaptation, MismatchedInputsAreRefused) {
   std::vector<Vector6d> twists(2, Vector6d::Zero());
   LabelCostModel model = uniformModel(3, Matrix6d::Identity());
   EXPECT_THROW(adaptOnHost(u, twists, model, 300, Config()), InputError);
+  // A cost model without the labels' costs is refused too (the relative price needs them).
+  std::vector<Vector6d> three(3, Vector6d::Zero());
+  model.cost.clear();
+  EXPECT_THROW(adaptOnHost(u, three, model, 300, Config()), InputError);
 }
 
 TEST(LabelAdaptation, CentroidsAreSupportWeighted) {

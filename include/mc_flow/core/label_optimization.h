@@ -71,8 +71,8 @@ class LabelOptimizer {
 
 /// @brief The CPU implementation (OpenMP).
 std::unique_ptr<LabelOptimizer> makeCpuLabelOptimizer();
-/// @brief True when the CUDA backend is compiled in and CUDA device `device` exists and is usable (it becomes the
-/// calling thread's current device); otherwise `why` says why not.
+/// @brief True when the CUDA backend is compiled in and CUDA device `device` exists and is usable; otherwise `why`
+/// says why not. The calling thread's current device is left as it was.
 bool cudaBackendAvailable(std::string* why, int device = 0);
 /// @brief The CUDA implementation; throws BackendError when unavailable.
 std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer();
