@@ -137,7 +137,9 @@ __global__ void __launch_bounds__(kChunkThreads) chunkSumsKernel(Pixel pixel, st
 /// @brief out[j] = sum over chunks c in order of partials[(j / V * chunks + c) * V + j % V], j < labels * V:
 /// one warp per value, lane l adds chunks l, l + 32, ..., then a fixed shuffle tree.
 template <int V>
-__global__ void addChunksKernel(const double* __restrict__ partials, int chunks, int labels, double* __restrict__ out) {
+__global__ void addChunksKernel(const double* __restrict__ partials, int chunks, int labels, double* __restrict__ out,
+                                const int* skip = nullptr) {
+  if (skip && *skip) return;  // a stopped device loop (motion_estimation.cu)
   const int value = int((std::size_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5);
   const int lane = threadIdx.x & 31;
   if (value >= labels * V) return;  // whole warps leave together

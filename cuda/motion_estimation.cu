@@ -26,6 +26,7 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -38,6 +39,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/motion_estimation.h"
+#include "mc_flow/core/motion_step_control.h"
 #include "device_stages.h"
 #include "sampling_device.cuh"
 
@@ -89,6 +91,9 @@ struct KernelParams {
   float* blended_hessian = nullptr;  // kUpper planes: mass * Hp of the blended pixels
   float* active_mass = nullptr;      // per pixel: sum of the active labels' weights (blended pixels)
   float* mass = nullptr;             // per pixel: motion-label mass (blended pixels)
+  // The device IRLS loop's stop flag (null outside it): once a level's loop has stopped, the kernels still
+  // queued for its remaining iterations return at once.
+  const int* skip = nullptr;
 };
 
 // ----------------------------------------------------------------- SE(3) in double (as src/core/se3.cpp)
@@ -167,13 +172,6 @@ __device__ __forceinline__ float rawWeight(const KernelParams& p, std::size_t pl
   return divRn(__ldg(p.labels + i * plane + idx), mass);
 }
 
-// Next active label at or after `from` (n when none).
-__device__ __forceinline__ int nextActive(const KernelParams& p, std::size_t plane, std::size_t idx, int from,
-                                          float mass) {
-  for (int i = from; i < p.motion_labels; ++i)
-    if (rawWeight(p, plane, idx, i, mass) >= p.min_weight) return i;
-  return p.motion_labels;
-}
 
 // The warp's total in every lane (an xor butterfly: lanes i and i^offset add the same two values, so all lanes end
 // with the same bits).
@@ -189,15 +187,11 @@ __device__ __forceinline__ double warpSum(double v) {
   return v;
 }
 
-__device__ __forceinline__ int warpMin(int v) {
-#pragma unroll
-  for (int offset = 16; offset > 0; offset >>= 1) v = min(v, __shfl_xor_sync(0xffffffffu, v, offset));
-  return v;
-}
 
 // Three blocks per SM (at most 80 registers, a few spilled): a 320x240 level's 300 blocks then run in one wave instead
 // of 1.14 (128 registers, two blocks per SM); 320x240 solves took 11.8-12.2 ms against 13.2-13.7 ms (H100, same run).
 __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const KernelParams p) {
+  if (p.skip && *p.skip) return;
   // sum_regions regions of block_values each: motion_labels * kLabelStride, then cost, pixels
   extern __shared__ double block_sums[];
   const int n = p.motion_labels;
@@ -212,7 +206,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
 
   // Per-pixel state; a lane without a usable pixel keeps valid = false and joins the warp reductions with zeros.
   bool valid = false, in_view = false;
-  unsigned long long blended_labels[kLabelMaskWords] = {};  // a blended pixel's active labels, one bit each
+  unsigned long long active_labels[kLabelMaskWords] = {};  // the pixel's active labels, one bit each
   float mass = 0.f, active_mass = 0.f;
   int first = n, n_active = 0;
   float Hm[kUpper];  // mass * Hp, upper triangle
@@ -234,6 +228,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
           const float w = rawWeight(p, plane, idx, i, mass);
           if (w >= p.min_weight) {
             if (n_active == 0) first = i;
+            active_labels[i / 64] |= 1ull << (i % 64);
             active_mass = addRn(active_mass, w);
             ++n_active;
           }
@@ -248,10 +243,12 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
       const float* left_jacobian = J;
       if (n_active > 1) {
         double xi_bar[6] = {0, 0, 0, 0, 0, 0};
-        for (int i = first; i < n; i = nextActive(p, plane, idx, i + 1, mass)) {
-          const double w = double(divRn(rawWeight(p, plane, idx, i, mass), active_mass));
-          for (int k = 0; k < 6; ++k) xi_bar[k] += w * p.motions[i].twist[k];
-        }
+        for (int word = 0; word < kLabelMaskWords; ++word)
+          for (unsigned long long bits = active_labels[word]; bits != 0ull; bits &= bits - 1ull) {
+            const int i = word * 64 + __ffsll(static_cast<long long>(bits)) - 1;
+            const double w = double(divRn(rawWeight(p, plane, idx, i, mass), active_mass));
+            for (int k = 0; k < 6; ++k) xi_bar[k] += w * p.motions[i].twist[k];
+          }
         se3ExpDevice(xi_bar, T);
         se3LeftJacobianDevice(xi_bar, J);
       } else {
@@ -334,13 +331,12 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
       }
     }
     p.blended[idx] = in_view && n_active > 1 ? 1 : 0;
-    if (in_view && n_active > 1)
-      for (int i = first; i < n; i = nextActive(p, plane, idx, i + 1, mass)) blended_labels[i / 64] |= 1ull << (i % 64);
   }
   // The chunk's label mask: one atomicOr per warp and word (a warp's 32 pixels lie in one chunk; OR is
   // order-independent, so the mask is the same on every run).
+  const bool blended = in_view && n_active > 1;
   for (int w = 0; w < kLabelMaskWords; ++w) {
-    unsigned long long bits = blended_labels[w];
+    unsigned long long bits = blended ? active_labels[w] : 0ull;
 #pragma unroll
     for (int offset = 16; offset > 0; offset >>= 1) bits |= __shfl_xor_sync(0xffffffffu, bits, offset);
     if ((threadIdx.x & 31) == 0 && bits != 0ull)
@@ -362,9 +358,20 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
         region[n * kLabelStride] += total_cost;
         region[n * kLabelStride + 1] += total_pixels;
       }
-      int cursor = valid ? first : n;
-      for (int label = warpMin(cursor); label < n; label = warpMin(cursor)) {
-        const bool mine = cursor == label;
+      // The labels present in the warp (an OR of the lanes' active labels), visited in ascending order.
+      unsigned long long warp_labels[kLabelMaskWords];
+#pragma unroll
+      for (int word = 0; word < kLabelMaskWords; ++word) {
+        unsigned long long bits = valid ? active_labels[word] : 0ull;
+#pragma unroll
+        for (int offset = 16; offset > 0; offset >>= 1) bits |= __shfl_xor_sync(0xffffffffu, bits, offset);
+        warp_labels[word] = bits;
+      }
+#pragma unroll
+      for (int word = 0; word < kLabelMaskWords; ++word)
+      for (unsigned long long remaining = warp_labels[word]; remaining != 0ull; remaining &= remaining - 1ull) {
+        const int label = word * 64 + __ffsll(static_cast<long long>(remaining)) - 1;
+        const bool mine = valid && ((active_labels[word] >> (label % 64)) & 1ull) != 0ull;
         double w = 0.0;
         float w_float = 0.f;
         if (mine) {
@@ -375,6 +382,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
         // The 27 values of H and g: each warp total in float (32 float products; the CPU's double sums agree to
         // ~1e-7 relative, test_motion_estimation_cuda.cpp), then lane k adds value k to the double sums, all lanes at
         // once. Double shuffle trees and 27 additions by lane 0 in turn took about 60 % of this kernel (ncu, H100).
+        // (A reduce-scatter over the lanes, 31 shuffles instead of 27 x 5, was tried: 5-15 % slower at every level.)
         const float ww = float(w * w), wf = float(w);
         float lane_total = 0.f;
 #pragma unroll
@@ -396,7 +404,6 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
           sums[kLabelCost] += s_cost;
           sums[kLabelPixels] += s_pixels;
         }
-        if (mine) cursor = nextActive(p, plane, idx, label + 1, mass);
       }
     }
     __syncthreads();
@@ -412,7 +419,8 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
 
 // Adds the blocks' partial sums in block order: one warp per value, lane l takes blocks l, l + 32, ...
 __global__ void reduceBlockPartials(const double* __restrict__ partials, int blocks, int values,
-                                    double* __restrict__ sums) {
+                                    double* __restrict__ sums, const int* skip) {
+  if (skip && *skip) return;
   const int value = int((std::size_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5);
   const int lane = threadIdx.x & 31;
   if (value >= values) return;  // whole warps leave together (value is warp-uniform)
@@ -429,6 +437,7 @@ __global__ void reduceBlockPartials(const double* __restrict__ partials, int blo
 // ncu; the compaction itself took two more launches.)
 __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p, int chunk_pixels,
                                                             double* __restrict__ partials) {
+  if (p.skip && *p.skip) return;
   __shared__ double warp_sums[kWarps][kUpper];
   const int n = p.motion_labels;
   int a = 0, pair = int(blockIdx.y);
@@ -479,6 +488,349 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
   }
 }
 
+// ----------------------------------------------------------------- the IRLS loop on the device
+// One iteration's step control and solve after the sums (estimateMotionsWith's host loop, the same
+// motion_step_control.h), in one block, so that a level's iterations are queued at once and the host reads the
+// result once per level instead of once per iteration.
+
+constexpr int kStepThreads = 256;
+
+/// @brief The state of a level's device loop (read by the host once, at the end of the level).
+struct IrlsState {
+  int done;        ///< the loop has stopped: the kernels still queued return at once
+  int stop;        ///< MotionStop
+  int iterations;  ///< accumulations done
+  int pixels_used;
+  int largest_group;  ///< most labels coupled in one solve
+  double cost_before, cost_after;
+};
+
+struct StepParams {
+  const double* sums = nullptr;  // per label kLabelStride values, then cost and pixels, then the pairs' kUpper each
+  int n = 0, iteration = 0;
+  bool last = false;  // the last iteration only checks the previous step
+  double min_label_pixels = 0, min_damping = 0, min_update = 0;
+  MotionLabelControl* control = nullptr;
+  double* twists = nullptr;  // 6 per label: the current linearisation point
+  LabelMotion* motions = nullptr;  // written for the next accumulation
+  IrlsState* state = nullptr;
+  double* matrix = nullptr;  // scratch for a group of coupled labels: 6n x (6n + 1) (global memory when shared is too small)
+  bool matrix_in_shared = false;  // dynamic shared memory: the matrix (when it fits), then the 6 x 6n panel
+};
+
+// Row and column of the k-th value of a symmetric 6x6 block's upper triangle (row-major, r <= c).
+__constant__ int kUpperRow[kUpper] = {0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 4, 4, 5};
+__constant__ int kUpperCol[kUpper] = {0, 1, 2, 3, 4, 5, 1, 2, 3, 4, 5, 2, 3, 4, 5, 3, 4, 5, 4, 5, 5};
+
+__device__ __forceinline__ int pairIndex(int n, int a, int b) { return a * n - a * (a + 1) / 2 + (b - a - 1); }
+
+// Damped 6x6 block of label i (upper triangle in `upper`), written into M at (r0, c0) with leading dimension ld.
+__device__ __forceinline__ void dampedLabelBlock(const double* upper, double damping, double* M, int ld, int r0) {
+  double block_max = upper[0];
+  {
+    int k = 0;
+    for (int r = 0; r < 6; ++r)
+      for (int c = r; c < 6; ++c, ++k)
+        if (r == c && upper[k] > block_max) block_max = upper[k];
+  }
+  int k = 0;
+  for (int r = 0; r < 6; ++r)
+    for (int c = r; c < 6; ++c, ++k) {
+      const double v = r == c ? dampedDiagonal(upper[k], damping, block_max) : upper[k];
+      M[(r0 + r) * ld + r0 + c] = v;
+      M[(r0 + c) * ld + r0 + r] = v;
+    }
+}
+
+// Cholesky of the 6x6 SPD matrix M (row-major) and the solution of M x = b, by one thread.
+__device__ void solveSmall(double M[36], const double b[6], double x[6]) {
+  for (int j = 0; j < 6; ++j) {
+    double d = M[j * 6 + j];
+    for (int k = 0; k < j; ++k) d -= M[j * 6 + k] * M[j * 6 + k];
+    d = sqrt(d);
+    M[j * 6 + j] = d;
+    for (int i = j + 1; i < 6; ++i) {
+      double v = M[i * 6 + j];
+      for (int k = 0; k < j; ++k) v -= M[i * 6 + k] * M[j * 6 + k];
+      M[i * 6 + j] = v / d;
+    }
+  }
+  double y[6];
+  for (int i = 0; i < 6; ++i) {
+    double v = b[i];
+    for (int k = 0; k < i; ++k) v -= M[i * 6 + k] * y[k];
+    y[i] = v / M[i * 6 + i];
+  }
+  for (int i = 5; i >= 0; --i) {
+    double v = y[i];
+    for (int k = i + 1; k < 6; ++k) v -= M[k * 6 + i] * x[k];
+    x[i] = v / M[i * 6 + i];
+  }
+}
+
+__global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
+  extern __shared__ double shared_matrix[];
+  __shared__ int s_stop;
+  __shared__ bool frozen[kMaxMotionLabels];
+  __shared__ int root[kMaxMotionLabels], members[kMaxMotionLabels], group_start[kMaxMotionLabels + 1];
+  __shared__ int group_count;
+  __shared__ double delta[6 * kMaxMotionLabels];
+  __shared__ double rhs[6 * kMaxMotionLabels];
+  __shared__ double inverse_diagonal[6 * kMaxMotionLabels];  // of the group's Cholesky factor
+  __shared__ unsigned coupled[(kMaxMotionLabels * (kMaxMotionLabels - 1) / 2 + 31) / 32];
+  __shared__ double largest_step[kStepThreads / 32];
+  const int n = q.n, tid = threadIdx.x;
+  const double* pair_sums = q.sums + n * kLabelStride + 2;
+  const int pairs = n * (n - 1) / 2;
+  IrlsState& state = *q.state;
+
+  if (tid == 0) {
+    s_stop = state.done;
+    if (!s_stop) {
+      const double cost = q.sums[n * kLabelStride];
+      const int pixels = int(llround(q.sums[n * kLabelStride + 1]));
+      if (q.iteration == 0) state.cost_before = cost;
+      state.cost_after = cost;
+      state.pixels_used = pixels;
+      state.iterations = q.iteration + 1;
+      if (pixels < 6) {
+        state.stop = int(MotionStop::TooFewPixels);
+        state.done = 1;
+        s_stop = 1;
+      }
+    }
+  }
+  for (int w = tid; w < (pairs + 31) / 32; w += blockDim.x) coupled[w] = 0u;
+  __syncthreads();
+  if (s_stop) return;
+
+  // Accept or undo each label's last step.
+  for (int i = tid; i < n; i += blockDim.x) {
+    const double* label = q.sums + i * kLabelStride;
+    frozen[i] = controlMotionLabel(label[kLabelCost], label[kLabelPixels], q.min_label_pixels, q.min_damping,
+                                   q.twists + 6 * i, q.control[i]);
+  }
+  __syncthreads();
+  if (q.last) {  // the last iteration only checks the previous step
+    if (tid == 0) state.done = 1;
+    return;
+  }
+
+  // Groups of coupled labels (a frozen label's rows and columns are zero: it is coupled to none).
+  for (int pair = tid; pair < pairs; pair += blockDim.x) {
+    int a = 0, rest = pair;
+    while (rest >= n - 1 - a) {
+      rest -= n - 1 - a;
+      ++a;
+    }
+    const int b = a + 1 + rest;
+    if (frozen[a] || frozen[b]) continue;
+    const double* block = pair_sums + std::size_t(pair) * kUpper;
+    int nonzero = 0;  // every value read (no short cut): 21 loads in flight at once
+#pragma unroll
+    for (int k = 0; k < kUpper; ++k) nonzero |= block[k] != 0.0 ? 1 : 0;
+    if (nonzero) atomicOr(&coupled[pair / 32], 1u << (pair % 32));
+  }
+  __syncthreads();
+  if (tid == 0) {
+    for (int i = 0; i < n; ++i) root[i] = i;
+    for (int a = 0; a < n; ++a)
+      for (int b = a + 1; b < n; ++b) {
+        const int pair = pairIndex(n, a, b);
+        if (!((coupled[pair / 32] >> (pair % 32)) & 1u)) continue;
+        int ra = a, rb = b;
+        while (root[ra] != ra) ra = root[ra];
+        while (root[rb] != rb) rb = root[rb];
+        if (ra != rb) root[rb > ra ? rb : ra] = rb > ra ? ra : rb;  // the smaller label is the group's root
+      }
+    // Members grouped by root (roots in ascending order, members ascending within a group).
+    for (int r = 0; r < n; ++r) {
+      int rr = r;
+      while (root[rr] != rr) rr = root[rr];
+      root[r] = rr;
+    }
+    int at = 0, count = 0, largest = 0;
+    for (int g = 0; g < n; ++g) {
+      if (root[g] != g) continue;
+      group_start[count++] = at;
+      for (int i = g; i < n; ++i)
+        if (root[i] == g) members[at++] = i;
+      largest = max(largest, at - group_start[count - 1]);
+    }
+    group_start[count] = at;
+    group_count = count;
+    state.largest_group = max(state.largest_group, largest);
+  }
+  __syncthreads();
+
+  // Single labels: a 6x6 solve per thread.
+  for (int g = tid; g < group_count; g += blockDim.x) {
+    if (group_start[g + 1] - group_start[g] != 1) continue;
+    const int i = members[group_start[g]];
+    const double* label = q.sums + i * kLabelStride;
+    double x[6] = {0, 0, 0, 0, 0, 0};
+    if (!frozen[i]) {
+      double M[36], b[6];
+      dampedLabelBlock(label, q.control[i].damping, M, 6, 0);
+      for (int k = 0; k < 6; ++k) b[k] = -label[kUpper + k];
+      solveSmall(M, b, x);
+    }
+    for (int k = 0; k < 6; ++k) delta[6 * i + k] = x[k];
+  }
+
+  // Groups of several labels: the whole block factors the group's dense matrix (Cholesky, right-looking).
+  double* M = q.matrix_in_shared ? shared_matrix : q.matrix;
+  double* panel = q.matrix_in_shared ? shared_matrix + 6 * n * (6 * n + 1) : shared_matrix;  // 6 x 6n, column-major
+  for (int g = 0; g < group_count; ++g) {
+    const int m = group_start[g + 1] - group_start[g];
+    if (m == 1) continue;
+    const int* group = members + group_start[g];
+    const int N = 6 * m, ld = N + 1;  // an odd leading dimension: column reads hit distinct banks
+    // Off-diagonal label blocks from the pair sums (each value read once, written to its four places), then the
+    // damped diagonal blocks.
+    const int pair_values = m * m * kUpper;
+#pragma unroll 4
+    for (int e = tid; e < pair_values; e += blockDim.x) {
+      const int ga = e / (m * kUpper), rest = e - ga * m * kUpper, gb = rest / kUpper, k = rest - gb * kUpper;
+      if (ga >= gb) continue;
+      const double v = pair_sums[std::size_t(pairIndex(n, group[ga], group[gb])) * kUpper + k];
+      const int r = kUpperRow[k], c = kUpperCol[k];
+      M[(6 * ga + r) * ld + 6 * gb + c] = v;
+      M[(6 * ga + c) * ld + 6 * gb + r] = v;
+      M[(6 * gb + r) * ld + 6 * ga + c] = v;
+      M[(6 * gb + c) * ld + 6 * ga + r] = v;
+    }
+    for (int k = tid; k < m; k += blockDim.x) {
+      const int i = group[k];
+      const double* label = q.sums + i * kLabelStride;
+      dampedLabelBlock(label, q.control[i].damping, M, ld, 6 * k);
+      for (int c = 0; c < 6; ++c) rhs[6 * k + c] = -label[kUpper + c];
+    }
+    __syncthreads();
+    // Cholesky by label blocks of 6 columns. Every thread factors the 6x6 diagonal block in registers (the same
+    // values in all: no barrier between it and the panel), the threads of the panel rows below it compute them
+    // (kept column-major in `panel` as well), then the rank-6 update of the trailing lower triangle (rows over
+    // warps, columns over lanes: contiguous, conflict-free shared-memory reads). Two barriers per label.
+    const int warp = tid >> 5, lane = tid & 31, warps = blockDim.x >> 5;
+    for (int c0 = 0; c0 < N; c0 += 6) {
+      double L[6][6], inverse[6];
+#pragma unroll
+      for (int r = 0; r < 6; ++r)
+#pragma unroll
+        for (int c = 0; c <= r; ++c) L[r][c] = M[(c0 + r) * ld + c0 + c];
+#pragma unroll
+      for (int c = 0; c < 6; ++c) {
+        double d = L[c][c];
+#pragma unroll
+        for (int t = 0; t < c; ++t) d -= L[c][t] * L[c][t];
+        d = sqrt(d);
+        L[c][c] = d;
+        inverse[c] = 1.0 / d;
+#pragma unroll
+        for (int r = c + 1; r < 6; ++r) {
+          double v = L[r][c];
+#pragma unroll
+          for (int t = 0; t < c; ++t) v -= L[r][t] * L[c][t];
+          L[r][c] = v * inverse[c];
+        }
+      }
+      for (int i = c0 + 6 + tid; i < N; i += blockDim.x) {
+        double l[6];
+#pragma unroll
+        for (int c = 0; c < 6; ++c) {
+          double v = M[i * ld + c0 + c];
+#pragma unroll
+          for (int t = 0; t < c; ++t) v -= l[t] * L[c][t];
+          l[c] = v * inverse[c];
+          M[i * ld + c0 + c] = l[c];
+          panel[c * N + i] = l[c];
+        }
+      }
+      __syncthreads();
+      if (tid == 0) {  // after the barrier: every thread has read the block before it is overwritten
+#pragma unroll
+        for (int r = 0; r < 6; ++r) {
+          inverse_diagonal[c0 + r] = inverse[r];
+#pragma unroll
+          for (int c = 0; c <= r; ++c) M[(c0 + r) * ld + c0 + c] = L[r][c];
+        }
+      }
+      for (int i = c0 + 6 + warp; i < N; i += warps) {
+        double l[6];
+        for (int t = 0; t < 6; ++t) l[t] = panel[t * N + i];
+        for (int k = c0 + 6 + lane; k <= i; k += 32) {
+          double v = M[i * ld + k];
+          for (int t = 0; t < 6; ++t) v -= l[t] * panel[t * N + k];
+          M[i * ld + k] = v;
+        }
+      }
+      __syncthreads();
+    }
+    if (tid < 32) {  // forward and back substitution by one warp
+      for (int j = 0; j < N; ++j) {
+        const double y = rhs[j] * inverse_diagonal[j];
+        __syncwarp();
+        for (int i = j + 1 + tid; i < N; i += 32) rhs[i] -= M[i * ld + j] * y;
+        if (tid == 0) rhs[j] = y;
+        __syncwarp();
+      }
+      for (int j = N - 1; j >= 0; --j) {
+        const double x = rhs[j] * inverse_diagonal[j];
+        __syncwarp();
+        for (int i = tid; i < j; i += 32) rhs[i] -= M[j * ld + i] * x;
+        if (tid == 0) rhs[j] = x;
+        __syncwarp();
+      }
+    }
+    __syncthreads();
+    for (int k = tid; k < N; k += blockDim.x) delta[6 * group[k / 6] + k % 6] = rhs[k];
+    __syncthreads();
+  }
+  __syncthreads();
+
+  // A non-finite step stops the loop (the host's SolveFailed); otherwise the trust region and the update.
+  double largest = 0.0;
+  bool finite = true;
+  for (int i = tid; i < n; i += blockDim.x) {
+    double d[6];
+    for (int k = 0; k < 6; ++k) {
+      d[k] = delta[6 * i + k];
+      finite = finite && isfinite(d[k]);
+    }
+    if (!finite) continue;
+    largest = fmax(largest, limitMotionStep(d));
+    for (int k = 0; k < 6; ++k) delta[6 * i + k] = d[k];
+  }
+  finite = __syncthreads_and(finite);
+  if (!finite) {
+    if (tid == 0) {
+      state.stop = int(MotionStop::SolveFailed);
+      state.done = 1;
+    }
+    return;
+  }
+  for (int offset = 16; offset > 0; offset >>= 1) largest = fmax(largest, __shfl_xor_sync(0xffffffffu, largest, offset));
+  if ((tid & 31) == 0) largest_step[tid >> 5] = largest;
+  __syncthreads();
+  // Twists move by the (scaled) step and the next accumulation's linearisation points follow.
+  for (int i = tid; i < n; i += blockDim.x) {
+    double* xi = q.twists + 6 * i;
+    for (int k = 0; k < 6; ++k) xi[k] += delta[6 * i + k];
+    LabelMotion& motion = q.motions[i];
+    se3ExpDevice(xi, motion.transform);
+    se3LeftJacobianDevice(xi, motion.left_jacobian);
+    for (int k = 0; k < 6; ++k) motion.twist[k] = xi[k];
+  }
+  if (tid == 0) {
+    double all = 0.0;
+    for (int w = 0; w < kStepThreads / 32; ++w) all = fmax(all, largest_step[w]);
+    if (all < q.min_update) {
+      state.stop = int(MotionStop::SmallUpdate);
+      state.done = 1;
+    }
+  }
+}
+
 // ----------------------------------------------------------------- host side
 
 void requireImage(const char* name, const ImageF& image, int width, int height, int channels) {
@@ -497,6 +849,9 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     MCFLOW_CUDA_CHECK(cudaGetDevice(&device));
     MCFLOW_CUDA_CHECK(cudaDeviceGetAttribute(&optin, cudaDevAttrMaxSharedMemoryPerBlockOptin, device));
     max_shared_bytes_ = std::size_t(std::max(optin, 48 * 1024));
+    cudaFuncAttributes step_attributes{};
+    MCFLOW_CUDA_CHECK(cudaFuncGetAttributes(&step_attributes, irlsStep));
+    step_static_shared_ = step_attributes.sharedSizeBytes;
     if (stream) {
       stream_ = stream;
     } else {
@@ -586,33 +941,141 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     out.reset(n);
     if (n == 0) return;
     cudaStream_t s = stream_;
-
-    const std::size_t pairs = std::size_t(n) * (n - 1) / 2;
-    const std::size_t label_values = std::size_t(n) * kLabelStride, pair_values = pairs * kUpper;
-    // Layout of the sums: per-label values, cost, pixels (block_values, as in the per-block partials), pairs.
-    const std::size_t block_values = label_values + 2;
-    const std::size_t sum_values = block_values + pair_values;
-    const std::size_t plane = std::size_t(level_.width) * level_.height;
-    const unsigned blocks = unsigned((plane + kThreads - 1) / kThreads);
-    motions_.reserve(std::size_t(n));
+    const Layout layout = reserve();
     host_motions_.reserve(std::size_t(n));
-    sums_.reserve(sum_values);
-    host_sums_.reserve(sum_values);
-    partials_.reserve(std::size_t(blocks) * block_values);
+    for (int i = 0; i < n; ++i) host_motions_.get()[i] = labelMotion(twists[std::size_t(i)]);
+    upload(motions_.get(), host_motions_.get(), std::size_t(n));
+    enqueueSums(layout, nullptr);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(host_sums_.get(), sums_.get(), layout.sum_values * sizeof(double),
+                                      cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    unpack(layout, out);
+  }
 
-    // Linearisation points in float, as the CPU computes them.
-    LabelMotion* motions = host_motions_.get();
+  bool iterateLevel(std::vector<Vector6d>& twists, const Config& config, MotionLevelStats& stats) override {
+    if (level_.width <= 0) throw InputError("CUDA motion step: iterateLevel() called before setLevel() or bind()");
+    const int n = motion_labels_;
+    if (int(twists.size()) != n)
+      throw InputError("CUDA motion step: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
+                       " motion labels");
+    if (n == 0) return false;
+    const auto start = std::chrono::steady_clock::now();
+    cudaStream_t s = stream_;
+    const Layout layout = reserve();
+    const int iterations = config.motion_iterations_per_level;
+
+    // Up: the linearisation points, the step control's start and the loop state, in one staging buffer.
+    const std::size_t motion_bytes = std::size_t(n) * sizeof(LabelMotion);
+    const std::size_t control_bytes = std::size_t(n) * sizeof(MotionLabelControl);
+    const std::size_t twist_bytes = std::size_t(n) * 6 * sizeof(double);
+    const std::size_t staging_bytes = motion_bytes + control_bytes + twist_bytes + sizeof(IrlsState);
+    level_staging_.reserve(staging_bytes);
+    level_device_.reserve(staging_bytes);
+    unsigned char* host = level_staging_.get();
+    auto* motions = reinterpret_cast<LabelMotion*>(host);
+    auto* control = reinterpret_cast<MotionLabelControl*>(host + motion_bytes);
+    auto* xi = reinterpret_cast<double*>(host + motion_bytes + control_bytes);
+    auto* state = reinterpret_cast<IrlsState*>(host + motion_bytes + control_bytes + twist_bytes);
     for (int i = 0; i < n; ++i) {
-      const Vector6d& xi = twists[std::size_t(i)];
-      const cuda_detail::DeviceTransform T = cuda_detail::deviceTransform(xi);
-      const Eigen::Matrix<float, 6, 6> J = se3LeftJacobian(xi).cast<float>();
-      for (int k = 0; k < 12; ++k) motions[i].transform[k] = T.m[k];
-      for (int r = 0; r < 6; ++r)
-        for (int c = 0; c < 6; ++c) motions[i].left_jacobian[r * 6 + c] = J(r, c);
-      for (int k = 0; k < 6; ++k) motions[i].twist[k] = xi(k);
+      motions[i] = labelMotion(twists[std::size_t(i)]);
+      startMotionLabelControl(twists[std::size_t(i)].data(), config.motion_damping, control[i]);
+      for (int k = 0; k < 6; ++k) xi[6 * i + k] = twists[std::size_t(i)](k);
     }
-    upload(motions_.get(), motions, std::size_t(n));
+    *state = IrlsState{0, int(MotionStop::IterationLimit), 0, 0, 0, 0.0, 0.0};
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(level_device_.get(), host, staging_bytes, cudaMemcpyHostToDevice, s));
+    unsigned char* device = level_device_.get();
 
+    StepParams q;
+    q.sums = sums_.get();
+    q.n = n;
+    q.min_label_pixels = config.motion_min_label_pixels;
+    q.min_damping = config.motion_damping;
+    q.min_update = config.motion_min_update;
+    q.motions = reinterpret_cast<LabelMotion*>(device);
+    q.control = reinterpret_cast<MotionLabelControl*>(device + motion_bytes);
+    q.twists = reinterpret_cast<double*>(device + motion_bytes + control_bytes);
+    q.state = reinterpret_cast<IrlsState*>(device + motion_bytes + control_bytes + twist_bytes);
+    const std::size_t matrix_bytes = std::size_t(6 * n) * std::size_t(6 * n + 1) * sizeof(double);
+    const std::size_t panel_bytes = std::size_t(6 * n) * 6 * sizeof(double);
+    q.matrix_in_shared = matrix_bytes + panel_bytes + step_static_shared_ <= max_shared_bytes_;
+    if (!q.matrix_in_shared) {
+      step_matrix_.reserve(std::size_t(6 * n) * std::size_t(6 * n + 1));
+      q.matrix = step_matrix_.get();
+    }
+    const std::size_t step_shared = (q.matrix_in_shared ? matrix_bytes : 0) + panel_bytes;
+    if (step_shared > step_shared_allowed_) {
+      MCFLOW_CUDA_CHECK(cudaFuncSetAttribute(irlsStep, cudaFuncAttributeMaxDynamicSharedMemorySize, int(step_shared)));
+      step_shared_allowed_ = step_shared;
+    }
+    // Every iteration is queued at once: once the loop stops, the rest return at once (they read q.state->done).
+    for (int iteration = 0; iteration < iterations; ++iteration) {
+      enqueueSums(layout, &q.state->done, q.motions);
+      q.iteration = iteration;
+      q.last = iteration + 1 == iterations;
+      irlsStep<<<1, kStepThreads, step_shared, s>>>(q);
+      MCFLOW_CUDA_CHECK_LAUNCH("irlsStep");
+    }
+    // Down: the accepted twists and the state (the control array and the state are adjacent).
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(control, q.control, control_bytes + twist_bytes + sizeof(IrlsState),
+                                      cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    for (int i = 0; i < n; ++i)
+      for (int k = 0; k < 6; ++k) twists[std::size_t(i)](k) = control[i].accepted_twist[k];
+    stats.iterations = state->iterations;
+    stats.pixels_used = state->pixels_used;
+    stats.cost_before = state->cost_before;
+    stats.cost_after = state->cost_after;
+    stats.stop = MotionStop(state->stop);
+    stats.largest_block = state->largest_group;
+    // The sums and the solves run together on the device: the loop's whole time is the accumulator's.
+    stats.accumulate_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    stats.solve_ms = 0;
+    return true;
+  }
+
+ private:
+  // Sizes of one accumulation's sums.
+  struct Layout {
+    std::size_t pairs = 0, label_values = 0, block_values = 0, sum_values = 0, plane = 0, pair_chunks = 0;
+    unsigned blocks = 0;
+  };
+
+  Layout reserve() {
+    const int n = motion_labels_;
+    Layout l;
+    l.pairs = std::size_t(n) * (n - 1) / 2;
+    l.label_values = std::size_t(n) * kLabelStride;
+    // Layout of the sums: per-label values, cost, pixels (block_values, as in the per-block partials), pairs.
+    l.block_values = l.label_values + 2;
+    l.sum_values = l.block_values + l.pairs * kUpper;
+    l.plane = std::size_t(level_.width) * level_.height;
+    l.blocks = unsigned((l.plane + kThreads - 1) / kThreads);
+    l.pair_chunks = (l.plane + kPairChunkPixels - 1) / kPairChunkPixels;
+    motions_.reserve(std::size_t(n));
+    sums_.reserve(l.sum_values);
+    host_sums_.reserve(l.sum_values);
+    partials_.reserve(std::size_t(l.blocks) * l.block_values);
+    chunk_labels_.reserve(l.pair_chunks * kLabelMaskWords);
+    if (l.pairs > 0) pair_partials_.reserve(l.pair_chunks * l.pairs * kUpper);
+    return l;
+  }
+
+  // A label's linearisation point in float, as the CPU computes it.
+  static LabelMotion labelMotion(const Vector6d& xi) {
+    LabelMotion m;
+    const cuda_detail::DeviceTransform T = cuda_detail::deviceTransform(xi);
+    const Eigen::Matrix<float, 6, 6> J = se3LeftJacobian(xi).cast<float>();
+    for (int k = 0; k < 12; ++k) m.transform[k] = T.m[k];
+    for (int r = 0; r < 6; ++r)
+      for (int c = 0; c < 6; ++c) m.left_jacobian[r * 6 + c] = J(r, c);
+    for (int k = 0; k < 6; ++k) m.twist[k] = xi(k);
+    return m;
+  }
+
+  // Queues one accumulation at the motions in `motions` (default: motions_) into sums_; `skip` as KernelParams.
+  void enqueueSums(const Layout& l, const int* skip, const LabelMotion* motions = nullptr) {
+    cudaStream_t s = stream_;
+    const int n = motion_labels_;
     KernelParams p;
     p.points1 = level_.points1;
     p.intensity1 = level_.intensity1;
@@ -622,7 +1085,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     p.depth_grad2 = level_.depth_grad2;
     p.labels = bound_labels_;
     p.occluded = bound_occluded_;
-    p.motions = motions_.get();
+    p.motions = motions ? motions : motions_.get();
     p.width = level_.width;
     p.height = level_.height;
     p.motion_labels = n;
@@ -640,9 +1103,10 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     p.blended_hessian = blended_hessian_.get();
     p.active_mass = active_mass_.get();
     p.mass = mass_.get();
+    p.skip = skip;
 
     // One shared-memory region per warp where they fit (the warps then reduce at once), else shared regions.
-    const std::size_t region_bytes = block_values * sizeof(double);
+    const std::size_t region_bytes = l.block_values * sizeof(double);
     int regions = kWarps;
     while (regions > 1 && std::size_t(regions) * region_bytes > max_shared_bytes_) regions /= 2;
     const std::size_t shared_bytes = std::size_t(regions) * region_bytes;
@@ -656,31 +1120,30 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       shared_bytes_allowed_ = shared_bytes;
     }
     p.sum_regions = regions;
-    const std::size_t pair_chunks = (plane + kPairChunkPixels - 1) / kPairChunkPixels;
-    chunk_labels_.reserve(pair_chunks * kLabelMaskWords);
-    MCFLOW_CUDA_CHECK(cudaMemsetAsync(chunk_labels_.get(), 0, pair_chunks * kLabelMaskWords * sizeof(unsigned long long), s));
+    MCFLOW_CUDA_CHECK(
+        cudaMemsetAsync(chunk_labels_.get(), 0, l.pair_chunks * kLabelMaskWords * sizeof(unsigned long long), s));
     p.chunk_labels = chunk_labels_.get();
-    accumulateNormalEquations<<<blocks, kThreads, shared_bytes, s>>>(p);
+    accumulateNormalEquations<<<l.blocks, kThreads, shared_bytes, s>>>(p);
     MCFLOW_CUDA_CHECK_LAUNCH("accumulateNormalEquations");
-    const unsigned reduce_blocks = unsigned((block_values * 32 + kThreads - 1) / kThreads);
-    reduceBlockPartials<<<reduce_blocks, kThreads, 0, s>>>(partials_.get(), int(blocks), int(block_values),
-                                                          sums_.get());
+    const unsigned reduce_blocks = unsigned((l.block_values * 32 + kThreads - 1) / kThreads);
+    reduceBlockPartials<<<reduce_blocks, kThreads, 0, s>>>(partials_.get(), int(l.blocks), int(l.block_values),
+                                                          sums_.get(), skip);
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
-    if (pairs > 0) {
-      const int chunks = int(pair_chunks);
-      pair_partials_.reserve(std::size_t(chunks) * pairs * kUpper);
-      accumulatePairs<<<dim3(unsigned(chunks), unsigned(pairs)), kThreads, 0, s>>>(p, kPairChunkPixels,
-                                                                                   pair_partials_.get());
+    if (l.pairs > 0) {
+      const int chunks = int(l.pair_chunks);
+      accumulatePairs<<<dim3(unsigned(chunks), unsigned(l.pairs)), kThreads, 0, s>>>(p, kPairChunkPixels,
+                                                                                     pair_partials_.get());
       MCFLOW_CUDA_CHECK_LAUNCH("accumulatePairs");
-      const unsigned add_blocks = unsigned((pairs * kUpper * 32 + kThreads - 1) / kThreads);
-      cuda_detail::addChunksKernel<kUpper>
-          <<<add_blocks, kThreads, 0, s>>>(pair_partials_.get(), chunks, int(pairs), sums_.get() + block_values);
+      const unsigned add_blocks = unsigned((l.pairs * kUpper * 32 + kThreads - 1) / kThreads);
+      cuda_detail::addChunksKernel<kUpper><<<add_blocks, kThreads, 0, s>>>(pair_partials_.get(), chunks, int(l.pairs),
+                                                                          sums_.get() + l.block_values, skip);
       MCFLOW_CUDA_CHECK_LAUNCH("addChunksKernel (label pairs)");
     }
-    MCFLOW_CUDA_CHECK(
-        cudaMemcpyAsync(host_sums_.get(), sums_.get(), sum_values * sizeof(double), cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+  }
 
+  void unpack(const Layout& l, MotionNormalEquations& out) {
+    const int n = motion_labels_;
+    const std::size_t label_values = l.label_values, block_values = l.block_values;
     // Unpack: symmetric diagonal blocks from their upper triangles, pair blocks into (a,b) and (b,a).
     const double* sums = host_sums_.get();
     auto fillSymmetric = [&out](const double* upper, int row0, int col0, bool mirror_block) {
@@ -711,8 +1174,6 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     out.pixels = int(std::llround(sums[label_values + 1]));
   }
 
- private:
-
   template <typename T>
   void upload(T* device, const T* host, std::size_t count) {
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(device, host, count * sizeof(T), cudaMemcpyHostToDevice, stream_));
@@ -734,6 +1195,11 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   std::size_t max_shared_bytes_ = 48 * 1024, shared_bytes_allowed_ = 48 * 1024;
   PinnedBuffer<LabelMotion> host_motions_;
   PinnedBuffer<double> host_sums_;
+  // The device IRLS loop: its motions, step control, twists and state in one buffer, staged in one.
+  PinnedBuffer<unsigned char> level_staging_;
+  DeviceBuffer<unsigned char> level_device_;
+  DeviceBuffer<double> step_matrix_;  // a group's matrix where it does not fit in shared memory
+  std::size_t step_static_shared_ = 0, step_shared_allowed_ = 48 * 1024;
 };
 
 }  // namespace

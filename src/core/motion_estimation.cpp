@@ -6,13 +6,16 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <numeric>
 #include <limits>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/motion_step_control.h"
 #include "mc_flow/core/sampling.h"
 #include "mc_flow/core/scene_flow.h"
 
@@ -30,11 +33,6 @@ using Vector6f = Eigen::Matrix<float, 6, 1>;
 // both kinds: otherwise a label could lower its cost by pushing its pixels out of the image.
 constexpr double kOutOfViewResidualScales = 10.0;
 constexpr float kDepthEdgeJump = 0.1f;  // [m] depth samples straddling a larger jump carry no geometric residual
-// A step is undone only when it raised its label's cost by more than this fraction: rounding and the
-// first-order twist update make tiny rises near the optimum that are not divergence.
-constexpr double kRejectRelativeIncrease = 0.01;
-constexpr double kMaxStepTranslation = 0.1;  // [m]
-constexpr double kMaxStepRotation = 0.1;     // [rad]
 
 // Jacobian of the transformed point P2 = exp(xi_bar) P with respect to a left increment eps
 // (exp(eps) exp(xi_bar)): dP2 = d_eps_v + d_eps_w x P2. The increment of the twist itself maps to eps through
@@ -265,6 +263,42 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
   return estimateMotionsWith(*accumulator, twists, config);
 }
 
+int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen::VectorXd& delta) {
+  const int n = int(g.size() / 6);
+  if (H.rows() != 6 * n || H.cols() != 6 * n || g.size() != 6 * n)
+    throw InputError("solveCoupledBlocks: H is " + std::to_string(H.rows()) + "x" + std::to_string(H.cols()) +
+                     " and g has " + std::to_string(g.size()) + " entries (expected 6n x 6n and 6n)");
+  // Groups of coupled labels: union-find over the non-zero off-diagonal blocks.
+  std::vector<int> parent(static_cast<std::size_t>(n));
+  std::iota(parent.begin(), parent.end(), 0);
+  auto root = [&parent](int i) {
+    while (parent[std::size_t(i)] != i) i = parent[std::size_t(i)] = parent[std::size_t(parent[std::size_t(i)])];
+    return i;
+  };
+  for (int a = 0; a < n; ++a)
+    for (int b = a + 1; b < n; ++b)
+      if (H.block<6, 6>(6 * a, 6 * b).cwiseAbs().maxCoeff() > 0.0) parent[std::size_t(root(b))] = root(a);
+  std::vector<std::vector<int>> groups(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) groups[std::size_t(root(i))].push_back(i);
+  delta.resize(6 * n);
+  int largest = 0;
+  for (const std::vector<int>& group : groups) {
+    if (group.empty()) continue;
+    largest = std::max(largest, int(group.size()));
+    const int m = 6 * int(group.size());
+    Eigen::MatrixXd A(m, m);
+    Eigen::VectorXd b(m);
+    for (std::size_t r = 0; r < group.size(); ++r) {
+      b.segment<6>(6 * Eigen::Index(r)) = -g.segment<6>(6 * group[r]);
+      for (std::size_t c = 0; c < group.size(); ++c)
+        A.block<6, 6>(6 * Eigen::Index(r), 6 * Eigen::Index(c)) = H.block<6, 6>(6 * group[r], 6 * group[c]);
+    }
+    const Eigen::VectorXd x = A.ldlt().solve(b);
+    for (std::size_t r = 0; r < group.size(); ++r) delta.segment<6>(6 * group[r]) = x.segment<6>(6 * Eigen::Index(r));
+  }
+  return largest;
+}
+
 MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::vector<Vector6d>& twists,
                                      const Config& config) {
   MotionLevelStats stats;
@@ -273,15 +307,28 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
   MotionAccumulator* accumulator = &bound_accumulator;
   MotionNormalEquations total;
 
-  // Per-label Levenberg-Marquardt with backtracking: a label whose cost rose after its last update goes back
-  // half way and is damped harder; labels are nearly decoupled (most pixels have one label), so each gets its own trust region.
-  std::vector<double> damping(static_cast<std::size_t>(motion_labels), config.motion_damping);
-  std::vector<double> accepted_cost(static_cast<std::size_t>(motion_labels), std::numeric_limits<double>::infinity());
-  std::vector<Vector6d> accepted_twist = twists;
+  // A device-resident accumulator runs the whole loop where its data lives (the same step control, one
+  // download per level instead of one per iteration).
+  if (accumulator->iterateLevel(twists, config, stats)) return stats;
 
+  // Per-label Levenberg-Marquardt with backtracking (motion_step_control.h): a label whose cost rose after its last
+  // update goes back half way and is damped harder; labels are nearly decoupled (most pixels have one label), so each
+  // gets its own trust region.
+  std::vector<MotionLabelControl> control(static_cast<std::size_t>(motion_labels));
+  for (int i = 0; i < motion_labels; ++i)
+    startMotionLabelControl(twists[std::size_t(i)].data(), config.motion_damping, control[std::size_t(i)]);
+
+  using Clock = std::chrono::steady_clock;
+  auto millisecondsSince = [](Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+  };
+  const auto level_start = Clock::now();
+  Eigen::VectorXd delta;
   stats.stop = MotionStop::IterationLimit;
   for (int iteration = 0; iteration < config.motion_iterations_per_level; ++iteration) {
+    const auto accumulate_start = Clock::now();
     accumulator->accumulate(twists, total);
+    stats.accumulate_ms += millisecondsSince(accumulate_start);
     if (iteration == 0) stats.cost_before = total.cost;
     stats.cost_after = total.cost;
     stats.pixels_used = total.pixels;
@@ -291,24 +338,12 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
       break;
     }
 
-    // Accept or reject each label's last step; rejected and unsupported labels get a zero update now.
+    // Accept or undo each label's last step; undone and unsupported labels get a zero update now.
     std::vector<bool> frozen(static_cast<std::size_t>(motion_labels), false);
-    for (int i = 0; i < motion_labels; ++i) {
-      const std::size_t k = std::size_t(i);
-      if (total.label_pixels(i) < config.motion_min_label_pixels) {
-        frozen[k] = true;
-      } else if (total.label_cost(i) > accepted_cost[k] * (1.0 + kRejectRelativeIncrease)) {
-        // Backtrack: the quadratic model overshot (residuals of textured images are linear over a fraction of
-        // a pixel only); try half the step next iteration and damp the following solves.
-        twists[k] = accepted_twist[k] + 0.5 * (twists[k] - accepted_twist[k]);
-        damping[k] = std::min(damping[k] * 4.0, 1e6);
-        frozen[k] = true;
-      } else {
-        accepted_cost[k] = total.label_cost(i);
-        accepted_twist[k] = twists[k];
-        damping[k] = std::max(damping[k] / 3.0, config.motion_damping);
-      }
-    }
+    for (int i = 0; i < motion_labels; ++i)
+      frozen[std::size_t(i)] = controlMotionLabel(total.label_cost(i), total.label_pixels(i),
+                                                  config.motion_min_label_pixels, config.motion_damping,
+                                                  twists[std::size_t(i)].data(), control[std::size_t(i)]);
     // The last iteration only checks the previous step: an unchecked step could leave a label worse off.
     if (iteration + 1 == config.motion_iterations_per_level) break;
     for (int i = 0; i < motion_labels; ++i) {
@@ -321,9 +356,9 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
       }
       const double block_max = total.H.block<6, 6>(6 * i, 6 * i).diagonal().maxCoeff();
       for (int d = 6 * i; d < 6 * i + 6; ++d)
-        total.H(d, d) += damping[std::size_t(i)] * total.H(d, d) + 1e-9 * std::max(block_max, 1e-12);
+        total.H(d, d) = dampedDiagonal(total.H(d, d), control[std::size_t(i)].damping, block_max);
     }
-    const Eigen::VectorXd delta = total.H.ldlt().solve(-total.g);
+    stats.largest_block = std::max(stats.largest_block, solveCoupledBlocks(total.H, total.g, delta));
     if (!delta.allFinite()) {
       stats.stop = MotionStop::SolveFailed;
       break;
@@ -331,11 +366,8 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
     double largest = 0;
     for (int i = 0; i < motion_labels; ++i) {
       Vector6d d = delta.segment<6>(6 * i);
-      // Trust region in metres / radians: one IRLS step never moves a label by more than this.
-      const double scale = std::max({1.0, d.head<3>().norm() / kMaxStepTranslation, d.tail<3>().norm() / kMaxStepRotation});
-      d /= scale;
+      largest = std::max(largest, limitMotionStep(d.data()));
       twists[std::size_t(i)] += d;
-      largest = std::max(largest, d.cwiseAbs().maxCoeff());
     }
     if (largest < config.motion_min_update) {
       stats.stop = MotionStop::SmallUpdate;
@@ -343,7 +375,9 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
     }
   }
   // A backtracked step that was not evaluated any more is dropped: return the last accepted twists.
-  twists = accepted_twist;
+  for (int i = 0; i < motion_labels; ++i)
+    for (int k = 0; k < 6; ++k) twists[std::size_t(i)](k) = control[std::size_t(i)].accepted_twist[k];
+  stats.solve_ms = millisecondsSince(level_start) - stats.accumulate_ms;
   return stats;
 }
 

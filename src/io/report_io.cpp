@@ -83,7 +83,10 @@ std::string reportJson(const Result& result, const Config& config, const RunInfo
                                {"stop", toString(m.stop)},
                                {"pixels", m.pixels_used},
                                {"cost_before", number(m.cost_before)},
-                               {"cost_after", number(m.cost_after)}});
+                               {"cost_after", number(m.cost_after)},
+                               {"largest_coupled_labels", m.largest_block},
+                               {"accumulate_ms", number(m.accumulate_ms)},
+                               {"solve_ms", number(m.solve_ms)}});
     iterations.push_back({{"iteration", it.iteration},
                           {"labels_before", it.labels_before},
                           {"labels_after", it.labels_after},

@@ -83,11 +83,14 @@ int cameraOnlyBench(const Config& base, int width, int height) {
 // Median wall time per stage over `repeat` solves of one pair, and the kernel launches.
 struct StageMedians {
   double total = 0, cpu = 0, pyr = 0, init = 0, motion = 0, labels = 0, occl = 0, output = 0, launches = 0;
+  // The motion step's split (outer iterations): time in the accumulator, in the host's step control and solves,
+  // and the IRLS iterations (each one accumulation and, on a GPU, one host round trip).
+  double motion_accumulate = 0, motion_solve = 0, irls = 0;
 };
 
 StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K,
                              int repeat, Result& r) {
-  std::vector<double> total, cpu, pyr, init, motion, labels, occl, output, launches;
+  std::vector<double> total, cpu, pyr, init, motion, labels, occl, output, launches, accumulate, solve, irls;
   for (int rep = 0; rep < repeat; ++rep) {
     const std::clock_t cpu_start = std::clock();
     const std::uint64_t launches_before = cudaCounters().kernel_launches;
@@ -101,9 +104,20 @@ StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const Rgbd
     labels.push_back(r.timings.labels + r.timings.adaptation);
     occl.push_back(r.timings.occlusion);
     output.push_back(r.timings.outputs);
+    double acc = 0, sol = 0, its = 0;
+    for (const OuterIterationStats& it : r.iterations)
+      for (const MotionLevelStats& level : it.motion_levels) {
+        acc += level.accumulate_ms;
+        sol += level.solve_ms;
+        its += level.iterations;
+      }
+    accumulate.push_back(acc);
+    solve.push_back(sol);
+    irls.push_back(its);
   }
-  return {median(total), median(cpu),    median(pyr),  median(init),    median(motion),
-          median(labels), median(occl), median(output), median(launches)};
+  return {median(total),  median(cpu),    median(pyr),      median(init),       median(motion),
+          median(labels), median(occl),   median(output),   median(launches),   median(accumulate),
+          median(solve),  median(irls)};
 }
 
 // The real pairs on any machine: folders <pair>_<W>x<H> of PFM frames and intrinsics.txt (mcflow export-real).
@@ -119,8 +133,9 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
   std::printf("# mcflow_bench --real %s: regularizer %s, repeat %d (median times); residuals: RMSE after warping frame 2 "
               "back, occluded pixels excluded\n",
               dir.c_str(), base.regularizer == Regularizer::Quadratic ? "quad" : "tv", repeat);
-  std::printf("%-28s %6s %7s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s\n", "pair", "segs", "rmseI", "rmseZ_mm",
-              "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "occl", "output", "launches");
+  std::printf("%-28s %6s %7s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %7s %7s %5s\n", "pair", "segs", "rmseI",
+              "rmseZ_mm", "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "occl", "output", "launches", "m_acc",
+              "m_lm", "irls");
   std::printf("# last column: motion labels over the outer iterations, K-means > after each (merged, split)\n");
   std::map<std::string, std::vector<double>> totals_by_size;
   for (const std::filesystem::path& folder : folders) {
@@ -143,9 +158,10 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
     for (const OuterIterationStats& it : r.iterations)
       counts += " > " + std::to_string(it.labels_after) + "(-" + std::to_string(it.merged) + "+" +
                 std::to_string(it.split) + ")";
-    std::printf("%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f  %s\n",
+    std::printf("%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f %7.2f %7.2f %5.0f  %s\n",
                 folder.filename().string().c_str(), r.segments.size(), rr.photometric, 1000.0 * rr.geometric, m.total,
-                m.cpu, m.pyr, m.init, m.motion, m.labels, m.occl, m.output, m.launches, counts.c_str());
+                m.cpu, m.pyr, m.init, m.motion, m.labels, m.occl, m.output, m.launches, m.motion_accumulate,
+                m.motion_solve, m.irls, counts.c_str());
     std::fflush(stdout);
     totals_by_size[std::to_string(frame1.width()) + "x" + std::to_string(frame1.height())].push_back(m.total);
   }
@@ -241,9 +257,9 @@ int main(int argc, char** argv) {
 
     std::printf("# mcflow_bench: synthetic scenes %dx%d, noise %s, repeat %d (median times)\n", width, height,
                 noise ? "on" : "off", repeat);
-    std::printf("%-8s %-5s %7s %7s %8s %7s %7s %7s %7s %6s | %8s %8s %8s %8s %8s %8s %8s %8s %8s\n", "scene", "reg", "EPE", "AAE",
-                "EPE3D_mm", "seg", "occ", "rmseI", "rmseZ", "labels", "total_ms", "cpu_ms", "pyr", "init", "motion",
-                "labels", "occl", "output", "launches");
+    std::printf("%-8s %-5s %7s %7s %8s %7s %7s %7s %7s %6s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %7s %7s %5s\n", "scene",
+                "reg", "EPE", "AAE", "EPE3D_mm", "seg", "occ", "rmseI", "rmseZ", "labels", "total_ms", "cpu_ms", "pyr",
+                "init", "motion", "labels", "occl", "output", "launches", "m_acc", "m_lm", "irls");
     for (int variant = 0; variant < syntheticVariantCount(); ++variant) {
       SyntheticSceneOptions so;
       so.width = width;
@@ -265,10 +281,10 @@ int main(int argc, char** argv) {
         const double seg = segmentationAgreement(r.labels, pair.gt_parts);
         const double occ = maskAgreement(r.occlusion, pair.gt_occlusion, nullptr);
         const ResidualRmse rr = warpResidualRmse(pair.frame1, pair.frame2, pair.intrinsics, &r.scene_flow, &r.occlusion);
-        std::printf("synth-%-2d %-5s %7.3f %7.3f %8.2f %7.3f %7.3f %7.4f %7.4f %6d | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f\n",
+        std::printf("synth-%-2d %-5s %7.3f %7.3f %8.2f %7.3f %7.3f %7.4f %7.4f %6d | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f %7.2f %7.2f %5.0f\n",
                     variant, reg == Regularizer::Quadratic ? "quad" : "tv", fe.epe, fe.aae_deg, epe3d * 1000.0, seg, occ,
                     rr.photometric, rr.geometric, int(r.segments.size()), m.total, m.cpu, m.pyr, m.init, m.motion, m.labels,
-                    m.occl, m.output, m.launches);
+                    m.occl, m.output, m.launches, m.motion_accumulate, m.motion_solve, m.irls);
         std::fflush(stdout);
       }
     }

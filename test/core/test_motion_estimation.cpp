@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
 #include <algorithm>
+#include <cstdlib>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -245,4 +247,39 @@ TEST(MotionNormalEquations, GaussNewtonHessianMatchesFiniteDifferencesOfTheGradi
   const double coupling = eq.H.block<6, 6>(0, 6).cwiseAbs().maxCoeff();
   EXPECT_GT(coupling, 0.05 * scale) << "the labels should be coupled";
   std::printf("[ measured ] Hessian: largest FD difference %.2e of max |H| = %.3g\n", worst, scale);
+}
+
+// The damped normal equations are solved per group of coupled labels: the solution must be the whole matrix's
+// (an LDLT of everything), whatever the grouping, and the largest group is reported.
+TEST(MotionNormalEquations, SolvingCoupledGroupsApartGivesTheWholeSolution) {
+  const int n = 7;
+  std::srand(7);
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(6 * n, 6 * n);
+  auto couple = [&H](int a, int b) {  // a random SPD contribution on the rows and columns of labels a and b
+    Eigen::MatrixXd J = Eigen::MatrixXd::Random(12, 12);
+    const Eigen::MatrixXd block = J * J.transpose();
+    const int idx[2] = {a, b};
+    for (int r = 0; r < 2; ++r)
+      for (int c = 0; c < 2; ++c)
+        H.block<6, 6>(6 * idx[r], 6 * idx[c]) += block.block<6, 6>(6 * r, 6 * c);
+  };
+  // Groups {0, 3, 5} (a chain), {1}, {2, 6}, {4}.
+  couple(0, 3);
+  couple(3, 5);
+  couple(2, 6);
+  for (int i = 0; i < n; ++i) H.block<6, 6>(6 * i, 6 * i) += Eigen::MatrixXd::Identity(6, 6);
+  const Eigen::VectorXd g = Eigen::VectorXd::Random(6 * n);
+  Eigen::VectorXd delta;
+  EXPECT_EQ(solveCoupledBlocks(H, g, delta), 3);
+  const Eigen::VectorXd whole = H.ldlt().solve(-g);
+  ASSERT_EQ(delta.size(), whole.size());
+  EXPECT_LT((delta - whole).cwiseAbs().maxCoeff(), 1e-9 * whole.cwiseAbs().maxCoeff());
+  EXPECT_LT((H * delta + g).norm(), 1e-9 * g.norm());
+
+  // One coupling between the groups joins them.
+  couple(5, 2);
+  EXPECT_EQ(solveCoupledBlocks(H, g, delta), 5);
+  EXPECT_LT((H * delta + g).norm(), 1e-9 * g.norm());
+  // Sizes that do not fit are refused.
+  EXPECT_THROW(solveCoupledBlocks(H, Eigen::VectorXd::Zero(6 * n - 1), delta), InputError);
 }

@@ -368,6 +368,42 @@ TEST(CudaMotionAccumulator, CoarseToFineTwistsMatchCpu) {
   EXPECT_LE(largest_difference, kTwistTolerance);
 }
 
+// The IRLS loop runs on the device (iterateLevel): the same step control and stops as the host loop, with a
+// Cholesky of each group of coupled labels instead of the host's LDLT. Blended labels couple every label with
+// others: 8 labels put the group's matrix (48x48) in shared memory, 30 labels (180x180, 259 KB) in global memory.
+TEST(CudaMotionAccumulator, DeviceLoopMatchesTheHostLoopForCoupledLabels) {
+  SKIP_WITHOUT_GPU();
+  const Scene s = makeScene(320, 240, 1, 1);
+  Config config;
+  for (const int motion_labels : {8, 30}) {
+    const SoftLabels u = makeLabels(s.pair, motion_labels, LabelKind::Blended, 5u);
+    std::vector<Vector6d> twists_cpu = makeTwists(s.pair, motion_labels, TwistKind::Truth, 3u);
+    for (Vector6d& xi : twists_cpu) xi(0) += 0.01;  // 1 cm off: something to estimate
+    std::vector<Vector6d> twists_gpu = twists_cpu;
+    auto cpu = makeCpuMotionAccumulator();
+    auto gpu = makeCudaMotionAccumulator();
+    const MotionLevelStats a = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_cpu, config, cpu.get());
+    const MotionLevelStats b = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_gpu, config, gpu.get());
+    EXPECT_EQ(a.iterations, b.iterations) << motion_labels << " labels";
+    EXPECT_EQ(a.stop, b.stop) << motion_labels << " labels: " << toString(a.stop) << " / " << toString(b.stop);
+    EXPECT_EQ(a.pixels_used, b.pixels_used) << motion_labels << " labels";
+    EXPECT_EQ(a.largest_block, b.largest_block) << motion_labels << " labels";
+    EXPECT_GE(b.largest_block, motion_labels / 2) << "the labels should be coupled";
+    EXPECT_NEAR(a.cost_after, b.cost_after, 1e-6 * a.cost_after);
+    double largest_difference = 0, largest_step = 0;
+    for (int i = 0; i < motion_labels; ++i) {
+      largest_difference = std::max(largest_difference,
+                                    (twists_cpu[std::size_t(i)] - twists_gpu[std::size_t(i)]).cwiseAbs().maxCoeff());
+      largest_step = std::max(largest_step, std::abs(twists_cpu[std::size_t(i)](0) -
+                                                     makeTwists(s.pair, motion_labels, TwistKind::Truth, 3u)[std::size_t(i)](0) - 0.01));
+    }
+    std::printf("%d labels: largest twist difference %.3g, largest x step %.3g, largest group %d\n", motion_labels,
+                largest_difference, largest_step, b.largest_block);
+    EXPECT_GT(largest_step, 1e-4) << "the labels did move";
+    EXPECT_LE(largest_difference, kTwistTolerance) << motion_labels << " labels";
+  }
+}
+
 // The whole solver on both backends: test_solve_backend_cuda.cpp, SolverMatchesCpuOnSyntheticScenes.
 
 }  // namespace

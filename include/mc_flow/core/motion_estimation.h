@@ -35,6 +35,9 @@ struct MotionLevelStats {
   double cost_before = 0;  ///< robust cost (normalised Cauchy) at the first iteration
   double cost_after = 0;   ///< at the last iteration
   MotionStop stop = MotionStop::NoLabels;
+  double accumulate_ms = 0;  ///< wall time in the accumulator (per-pixel sums; on a GPU, launches and the wait)
+  double solve_ms = 0;       ///< wall time in the step control and the damped solves (host)
+  int largest_block = 0;     ///< most labels coupled in one solve (labels that share no pixel are solved apart)
 };
 
 /// @brief The normal equations of one IRLS linearisation over all motion labels (6 unknowns per label).
@@ -61,6 +64,15 @@ class MotionAccumulator {
                         const ImageU8* occluded, const Config& config) = 0;
   /// @brief Linearises at `twists` (one per motion label) and writes the sums into `out`.
   virtual void accumulate(const std::vector<Vector6d>& twists, MotionNormalEquations& out) = 0;
+  /// @brief Runs the whole IRLS loop of the bound level where the sums are computed, with the step control of
+  /// motion_step_control.h, updating `twists` and filling `stats` as estimateMotionsWith's host loop does. Returns
+  /// false when this accumulator only builds sums (the host loop then runs; the CPU's case).
+  virtual bool iterateLevel(std::vector<Vector6d>& twists, const Config& config, MotionLevelStats& stats) {
+    (void)twists;
+    (void)config;
+    (void)stats;
+    return false;
+  }
   virtual std::string name() const = 0;
 };
 
@@ -75,6 +87,12 @@ double motionOutOfViewCost(const Config& config);
 MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
                                         const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator = nullptr);
+
+/// @brief Solves H delta = -g where H is 6n x 6n with 6x6 blocks per label pair: labels that share no pixel
+/// (an all-zero off-diagonal block) are solved apart, one LDLT per group of coupled labels (the same solution as
+/// one LDLT of the whole matrix up to rounding, in a fraction of the time when most labels touch few others).
+/// Returns the size of the largest group in labels.
+int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen::VectorXd& delta);
 
 /// @brief The same IRLS with an accumulator already bound to a level (setLevel called, or a backend's
 /// device-resident one); `twists` holds one twist per motion label of that binding.
