@@ -493,7 +493,7 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
 // motion_step_control.h), in one block, so that a level's iterations are queued at once and the host reads the
 // result once per level instead of once per iteration.
 
-constexpr int kStepThreads = 256;
+constexpr int kStepThreads = 512;  // 16 warps for the rank-6 updates of a group's factorization
 
 /// @brief The state of a level's device loop (read by the host once, at the end of the level).
 struct IrlsState {
@@ -514,7 +514,7 @@ struct StepParams {
   double* twists = nullptr;  // 6 per label: the current linearisation point
   LabelMotion* motions = nullptr;  // written for the next accumulation
   IrlsState* state = nullptr;
-  double* matrix = nullptr;  // scratch for a group of coupled labels: 6n x (6n + 1) (global memory when shared is too small)
+  double* matrix = nullptr;  // a group of coupled labels: (6n + 1)^2 with its right-hand side (global when shared is too small)
   bool matrix_in_shared = false;  // dynamic shared memory: the matrix (when it fits), then the 6 x 6n panel
 };
 
@@ -678,16 +678,18 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     for (int k = 0; k < 6; ++k) delta[6 * i + k] = x[k];
   }
 
-  // Groups of several labels: the whole block factors the group's dense matrix (Cholesky, right-looking).
+  // Groups of several labels: the whole block factors the group's dense matrix (Cholesky by label blocks) with the
+  // right-hand side appended as row N, so the factorization leaves the forward substitution's result in that row.
   double* M = q.matrix_in_shared ? shared_matrix : q.matrix;
-  double* panel = q.matrix_in_shared ? shared_matrix + 6 * n * (6 * n + 1) : shared_matrix;  // 6 x 6n, column-major
+  // 6 x (6n + 1), column-major, after the matrix when it is in shared memory
+  double* panel = q.matrix_in_shared ? shared_matrix + std::size_t(6 * n + 1) * (6 * n + 1) : shared_matrix;
   for (int g = 0; g < group_count; ++g) {
     const int m = group_start[g + 1] - group_start[g];
     if (m == 1) continue;
     const int* group = members + group_start[g];
-    const int N = 6 * m, ld = N + 1;  // an odd leading dimension: column reads hit distinct banks
+    const int N = 6 * m, ld = N + 1, rows = N + 1;  // ld odd: column reads hit distinct banks
     // Off-diagonal label blocks from the pair sums (each value read once, written to its four places), then the
-    // damped diagonal blocks.
+    // damped diagonal blocks and the right-hand side.
     const int pair_values = m * m * kUpper;
 #pragma unroll 4
     for (int e = tid; e < pair_values; e += blockDim.x) {
@@ -704,13 +706,13 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
       const int i = group[k];
       const double* label = q.sums + i * kLabelStride;
       dampedLabelBlock(label, q.control[i].damping, M, ld, 6 * k);
-      for (int c = 0; c < 6; ++c) rhs[6 * k + c] = -label[kUpper + c];
+      for (int c = 0; c < 6; ++c) M[N * ld + 6 * k + c] = -label[kUpper + c];
     }
     __syncthreads();
-    // Cholesky by label blocks of 6 columns. Every thread factors the 6x6 diagonal block in registers (the same
-    // values in all: no barrier between it and the panel), the threads of the panel rows below it compute them
-    // (kept column-major in `panel` as well), then the rank-6 update of the trailing lower triangle (rows over
-    // warps, columns over lanes: contiguous, conflict-free shared-memory reads). Two barriers per label.
+    // Per block of 6 columns: every thread factors the 6x6 diagonal block in registers (the same values in all: no
+    // barrier between it and the panel), the threads of the panel rows below it (the right-hand side's row
+    // included) compute them, kept column-major in `panel` as well, then the rank-6 update of the trailing lower
+    // triangle (rows over warps, columns over lanes: contiguous, conflict-free shared-memory reads). Two barriers.
     const int warp = tid >> 5, lane = tid & 31, warps = blockDim.x >> 5;
     for (int c0 = 0; c0 < N; c0 += 6) {
       double L[6][6], inverse[6];
@@ -734,7 +736,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
           L[r][c] = v * inverse[c];
         }
       }
-      for (int i = c0 + 6 + tid; i < N; i += blockDim.x) {
+      for (int i = c0 + 6 + tid; i < rows; i += blockDim.x) {
         double l[6];
 #pragma unroll
         for (int c = 0; c < 6; ++c) {
@@ -743,7 +745,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
           for (int t = 0; t < c; ++t) v -= l[t] * L[c][t];
           l[c] = v * inverse[c];
           M[i * ld + c0 + c] = l[c];
-          panel[c * N + i] = l[c];
+          panel[c * rows + i] = l[c];
         }
       }
       __syncthreads();
@@ -755,25 +757,21 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
           for (int c = 0; c <= r; ++c) M[(c0 + r) * ld + c0 + c] = L[r][c];
         }
       }
-      for (int i = c0 + 6 + warp; i < N; i += warps) {
+      for (int i = c0 + 6 + warp; i < rows; i += warps) {
         double l[6];
-        for (int t = 0; t < 6; ++t) l[t] = panel[t * N + i];
-        for (int k = c0 + 6 + lane; k <= i; k += 32) {
+        for (int t = 0; t < 6; ++t) l[t] = panel[t * rows + i];
+        const int last = i < N ? i : N - 1;  // the right-hand side's row has no diagonal entry
+        for (int k = c0 + 6 + lane; k <= last; k += 32) {
           double v = M[i * ld + k];
-          for (int t = 0; t < 6; ++t) v -= l[t] * panel[t * N + k];
+          for (int t = 0; t < 6; ++t) v -= l[t] * panel[t * rows + k];
           M[i * ld + k] = v;
         }
       }
       __syncthreads();
     }
-    if (tid < 32) {  // forward and back substitution by one warp
-      for (int j = 0; j < N; ++j) {
-        const double y = rhs[j] * inverse_diagonal[j];
-        __syncwarp();
-        for (int i = j + 1 + tid; i < N; i += 32) rhs[i] -= M[i * ld + j] * y;
-        if (tid == 0) rhs[j] = y;
-        __syncwarp();
-      }
+    if (tid < 32) {  // back substitution L^T x = y by one warp (y: the factored right-hand side's row)
+      for (int k = tid; k < N; k += 32) rhs[k] = M[N * ld + k];
+      __syncwarp();
       for (int j = N - 1; j >= 0; --j) {
         const double x = rhs[j] * inverse_diagonal[j];
         __syncwarp();
@@ -995,11 +993,11 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     q.control = reinterpret_cast<MotionLabelControl*>(device + motion_bytes);
     q.twists = reinterpret_cast<double*>(device + motion_bytes + control_bytes);
     q.state = reinterpret_cast<IrlsState*>(device + motion_bytes + control_bytes + twist_bytes);
-    const std::size_t matrix_bytes = std::size_t(6 * n) * std::size_t(6 * n + 1) * sizeof(double);
-    const std::size_t panel_bytes = std::size_t(6 * n) * 6 * sizeof(double);
+    const std::size_t matrix_bytes = std::size_t(6 * n + 1) * std::size_t(6 * n + 1) * sizeof(double);
+    const std::size_t panel_bytes = std::size_t(6 * n + 1) * 6 * sizeof(double);
     q.matrix_in_shared = matrix_bytes + panel_bytes + step_static_shared_ <= max_shared_bytes_;
     if (!q.matrix_in_shared) {
-      step_matrix_.reserve(std::size_t(6 * n) * std::size_t(6 * n + 1));
+      step_matrix_.reserve(std::size_t(6 * n + 1) * std::size_t(6 * n + 1));
       q.matrix = step_matrix_.get();
     }
     const std::size_t step_shared = (q.matrix_in_shared ? matrix_bytes : 0) + panel_bytes;
