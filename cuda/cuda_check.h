@@ -114,5 +114,18 @@ struct StreamHolder {
   StreamHolder& operator=(const StreamHolder&) = delete;
 };
 
+/// Owns one CUDA event without timing (marks when a copy out of a staging buffer has finished); destroyed without
+/// throwing.
+struct EventHolder {
+  cudaEvent_t event = nullptr;
+  bool recorded = false;
+  EventHolder() { MCFLOW_CUDA_CHECK(cudaEventCreateWithFlags(&event, cudaEventDisableTiming)); }
+  ~EventHolder() {
+    if (event) cudaEventDestroy(event);
+  }
+  EventHolder(const EventHolder&) = delete;
+  EventHolder& operator=(const EventHolder&) = delete;
+};
+
 }  // namespace cuda_detail
 }  // namespace mc_flow

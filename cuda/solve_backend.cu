@@ -235,7 +235,6 @@ class CudaSolveBackend final : public SolveBackend {
     warped_z_.reserve(p);
     cuda_detail::launchOcclusion(L, labels(), count_, motions_.get(), config, counts_.get(), targets_.get(),
                                  warped_z_.get(), occlusion_.get(), stream_.stream);
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));  // the motions' staging buffer is reused next
   }
 
   LabelStepStats labelStep(const std::vector<Vector6d>& twists, bool use_occlusion, int iterations, double tolerance,
@@ -508,11 +507,16 @@ class CudaSolveBackend final : public SolveBackend {
   // The twists and their transforms (cuda_detail::packMotions) into motions_.
   void uploadMotions(const std::vector<Vector6d>& twists) {
     const std::size_t n = twists.size();
+    // The staging buffer is rewritten only once the previous upload from it has finished (usually long ago: no
+    // synchronisation of the whole stream after an upload).
+    if (motions_uploaded_.recorded) MCFLOW_CUDA_CHECK(cudaEventSynchronize(motions_uploaded_.event));
     double* staged = staged_motions_.reserve(n * 18);
     cuda_detail::packMotions(twists, staged);
     motions_.reserve(std::max<std::size_t>(n * 18, 1));
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(motions_.get(), staged, n * 18 * sizeof(double), cudaMemcpyHostToDevice,
                                       stream_.stream));
+    MCFLOW_CUDA_CHECK(cudaEventRecord(motions_uploaded_.event, stream_.stream));
+    motions_uploaded_.recorded = true;
   }
 
   void zeroDual(std::size_t p, int count) {
@@ -553,6 +557,7 @@ class CudaSolveBackend final : public SolveBackend {
   PinnedBuffer<unsigned long long> staged_counts_;
   PinnedBuffer<std::uint8_t> staged_bytes_;
   PinnedBuffer<double> staged_motions_;
+  cuda_detail::EventHolder motions_uploaded_;  // the last upload from staged_motions_ has finished
   PinnedBuffer<float> staged_frames_;
   Intrinsics K_;
   std::vector<int> valid_counts_;
