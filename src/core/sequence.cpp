@@ -182,6 +182,7 @@ SequenceStep SequencePipeline::push(StreamFrame input) {
   }
   pair_first_ = std::move(previous_frame_);
   previous_frame_ = std::make_unique<PreparedFrame>(std::move(frame));
+  if (last_result_) solver_->recycle(std::move(*last_result_));  // its image memory serves the next pair
   last_result_ = std::make_unique<Result>(std::move(result));
   next_id_ = std::max(next_id_, last_result_->next_id);
   updateTracks(*last_result_);

@@ -91,6 +91,7 @@ struct Solver::Impl {
   Config config;
   std::unique_ptr<SolveBackend> backend;
   std::string backend_note;
+  Result spare;  // a finished result (Solver::recycle) whose image memory the next solve's outputs reuse
 
   template <typename... Args>
   void progress(const char* format, Args... args) const {
@@ -104,7 +105,7 @@ struct Solver::Impl {
   // Checks the input, picks the levels and has the backend build both pyramids.
   Prepared prepare(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K);
   // A result with the sizes, levels and backend of a solve filled in.
-  Result emptyResult(const Prepared& p, const Intrinsics& K) const;
+  Result emptyResult(const Prepared& p, const Intrinsics& K);
   Start coldStart(const Prepared& p, Result& result);
   Start warmStart(const Prepared& p, CarriedLabels carried, const Result& previous, Result& result);
   // Algorithm 1 from `start`, the final label step and the outputs (segments numbered 1..m).
@@ -127,6 +128,8 @@ Solver::Solver(const Config& config, std::unique_ptr<SolveBackend> backend, std:
 }
 
 Solver::~Solver() = default;
+
+void Solver::recycle(Result&& finished) { impl_->spare = std::move(finished); }
 
 const Config& Solver::config() const { return impl_->config; }
 std::string Solver::backendName() const { return toString(impl_->backend->kind()); }
@@ -168,8 +171,22 @@ Prepared Solver::Impl::prepare(const RgbdFrame& frame1, const RgbdFrame& frame2,
   return p;
 }
 
-Result Solver::Impl::emptyResult(const Prepared& p, const Intrinsics& K) const {
+Result Solver::Impl::emptyResult(const Prepared& p, const Intrinsics& K) {
   Result result;
+  // The output images' memory of a recycled result (their contents are overwritten by the outputs stage).
+  result.soft_labels.data.swap(spare.soft_labels.data);
+  result.labels.data.swap(spare.labels.data);
+  result.occlusion.data.swap(spare.occlusion.data);
+  result.scene_flow.data.swap(spare.scene_flow.data);
+  result.optical_flow.data.swap(spare.optical_flow.data);
+  result.moved_depth.data.swap(spare.moved_depth.data);
+  // Empty but with their capacity: a consistent 0x0 image until the outputs stage fills it.
+  result.soft_labels.data.clear();
+  result.labels.data.clear();
+  result.occlusion.data.clear();
+  result.scene_flow.data.clear();
+  result.optical_flow.data.clear();
+  result.moved_depth.data.clear();
   result.width = p.width;
   result.height = p.height;
   result.intrinsics = K;

@@ -94,6 +94,7 @@ StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const Rgbd
   for (int rep = 0; rep < repeat; ++rep) {
     const std::clock_t cpu_start = std::clock();
     const std::uint64_t launches_before = cudaCounters().kernel_launches;
+    solver.recycle(std::move(r));  // as a stream does: the previous result's image memory is reused
     r = solver.solve(frame1, frame2, K);
     cpu.push_back(1000.0 * double(std::clock() - cpu_start) / CLOCKS_PER_SEC);
     launches.push_back(double(cudaCounters().kernel_launches - launches_before));

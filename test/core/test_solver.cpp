@@ -1,6 +1,9 @@
 // End-to-end tests of the solver on the project's synthetic scenes (known motions, occlusions, parts).
 #include <gtest/gtest.h>
 
+#include <cstring>
+#include <vector>
+
 #include <cmath>
 #include <cstdio>
 #include <algorithm>
@@ -287,4 +290,45 @@ TEST(Solver, DeterministicForAGivenSeed) {
   ASSERT_EQ(a.segments.size(), b.segments.size());
   for (std::size_t i = 0; i < a.segments.size(); ++i) EXPECT_EQ(a.segments[i].twist, b.segments[i].twist);
   EXPECT_EQ(a.soft_labels.data, b.soft_labels.data);
+}
+
+// Bit-for-bit equality of two buffers (NaN where depth is invalid compares equal to itself here).
+template <typename T>
+bool sameBits(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+// Recycling a finished result changes nothing in the next solve's result, whatever its size (the CUDA backend's
+// reuse of the memory itself: test_solve_backend_cuda.cpp, RecycledResultMemoryIsReused).
+TEST(Solver, RecyclingAResultChangesNothing) {
+  SyntheticSceneOptions options;
+  options.width = 96;
+  options.height = 72;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Config config;
+  config.backend = Backend::Cpu;
+  Solver plain(config), recycling(config);
+  const Result expected = plain.solve(pair.frame1, pair.frame2, pair.intrinsics);
+
+  Result first = recycling.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  recycling.recycle(std::move(first));
+  const Result second = recycling.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  EXPECT_TRUE(sameBits(second.scene_flow.data, expected.scene_flow.data)) << "scene_flow";
+  EXPECT_TRUE(sameBits(second.optical_flow.data, expected.optical_flow.data)) << "optical_flow";
+  EXPECT_TRUE(sameBits(second.moved_depth.data, expected.moved_depth.data)) << "moved_depth";
+  EXPECT_TRUE(sameBits(second.labels.data, expected.labels.data)) << "labels";
+  EXPECT_TRUE(sameBits(second.occlusion.data, expected.occlusion.data)) << "occlusion";
+  EXPECT_TRUE(sameBits(second.soft_labels.data, expected.soft_labels.data)) << "soft_labels";
+  EXPECT_EQ(second.scene_flow.width, expected.scene_flow.width);
+  EXPECT_EQ(second.soft_labels.count, expected.soft_labels.count);
+
+  // A smaller recycled result: the next solve grows it and is still the same.
+  SyntheticSceneOptions small = options;
+  small.width = 48;
+  small.height = 36;
+  const SyntheticPair little = renderSyntheticPair(small);
+  recycling.recycle(recycling.solve(little.frame1, little.frame2, little.intrinsics));
+  const Result third = recycling.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  EXPECT_TRUE(sameBits(third.scene_flow.data, expected.scene_flow.data)) << "scene_flow";
+  EXPECT_TRUE(sameBits(third.labels.data, expected.labels.data)) << "labels";
 }

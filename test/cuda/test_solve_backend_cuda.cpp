@@ -307,6 +307,41 @@ TEST(CudaSolveBackend, WorkspaceReuseGivesTheFreshResult) {
     EXPECT_EQ((first.segments[i].twist - again.segments[i].twist).norm(), 0.0) << "segment " << i;
 }
 
+// Bit-for-bit equality of two buffers (NaN where depth is invalid compares equal to itself here).
+template <typename T>
+bool sameBits(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+// Solver::recycle: the next solve fills its output images into the recycled result's memory (no fresh allocation,
+// no page faults) and gives the same result bit for bit.
+TEST(CudaSolveBackend, RecycledResultMemoryIsReused) {
+  SKIP_WITHOUT_GPU();
+  Config config;
+  config.backend = Backend::Cuda;
+  SyntheticSceneOptions options;
+  options.width = 160;
+  options.height = 120;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Solver plain(config), recycling(config);
+  const Result expected = plain.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  Result first = recycling.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  const float* scene = first.scene_flow.data.data();
+  const float* soft = first.soft_labels.data.data();
+  const int* ids = first.labels.data.data();
+  recycling.recycle(std::move(first));
+  const Result second = recycling.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  EXPECT_EQ(second.scene_flow.data.data(), scene);
+  EXPECT_EQ(second.soft_labels.data.data(), soft);
+  EXPECT_EQ(second.labels.data.data(), ids);
+  EXPECT_TRUE(sameBits(second.scene_flow.data, expected.scene_flow.data)) << "scene_flow";
+  EXPECT_TRUE(sameBits(second.optical_flow.data, expected.optical_flow.data)) << "optical_flow";
+  EXPECT_TRUE(sameBits(second.moved_depth.data, expected.moved_depth.data)) << "moved_depth";
+  EXPECT_TRUE(sameBits(second.soft_labels.data, expected.soft_labels.data)) << "soft_labels";
+  EXPECT_TRUE(sameBits(second.labels.data, expected.labels.data)) << "labels";
+  EXPECT_TRUE(sameBits(second.occlusion.data, expected.occlusion.data)) << "occlusion";
+}
+
 // Config::cuda_device: a device that does not exist is named in the error (cuda), or sends auto to the CPU with
 // the reason in the note; device 0 is used when asked for.
 TEST(CudaSolveBackend, CudaDeviceSelection) {
