@@ -546,8 +546,9 @@ __device__ __forceinline__ void dampedLabelBlock(const double* upper, double dam
 __device__ void solveSmall(double M[36], const double b[6], double x[6]) {
   for (int j = 0; j < 6; ++j) {
     double d = M[j * 6 + j];
+    const double floor = 1e-12 * d;  // as the groups' pivot floor
     for (int k = 0; k < j; ++k) d -= M[j * 6 + k] * M[j * 6 + k];
-    d = sqrt(d);
+    d = sqrt(d > floor ? d : floor);
     M[j * 6 + j] = d;
     for (int i = j + 1; i < 6; ++i) {
       double v = M[i * 6 + j];
@@ -706,7 +707,13 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
       const int i = group[k];
       const double* label = q.sums + i * kLabelStride;
       dampedLabelBlock(label, q.control[i].damping, M, ld, 6 * k);
-      for (int c = 0; c < 6; ++c) M[N * ld + 6 * k + c] = -label[kUpper + c];
+      for (int c = 0; c < 6; ++c) {
+        M[N * ld + 6 * k + c] = -label[kUpper + c];
+        // Pivot floor (held here until the factorization replaces it by the pivot's reciprocal): rounding can leave
+        // a matrix without damping (motion_damping 0) barely indefinite; the host's pivoted LDLT still gives a step,
+        // an unpivoted Cholesky would give NaN.
+        inverse_diagonal[6 * k + c] = 1e-12 * M[(6 * k + c) * ld + 6 * k + c];
+      }
     }
     __syncthreads();
     // Per block of 6 columns: every thread factors the 6x6 diagonal block in registers (the same values in all: no
@@ -715,16 +722,19 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     // triangle (rows over warps, columns over lanes: contiguous, conflict-free shared-memory reads). Two barriers.
     const int warp = tid >> 5, lane = tid & 31, warps = blockDim.x >> 5;
     for (int c0 = 0; c0 < N; c0 += 6) {
-      double L[6][6], inverse[6];
+      double L[6][6], inverse[6], floor[6];
 #pragma unroll
-      for (int r = 0; r < 6; ++r)
+      for (int r = 0; r < 6; ++r) {
+        floor[r] = inverse_diagonal[c0 + r];
 #pragma unroll
         for (int c = 0; c <= r; ++c) L[r][c] = M[(c0 + r) * ld + c0 + c];
+      }
 #pragma unroll
       for (int c = 0; c < 6; ++c) {
         double d = L[c][c];
 #pragma unroll
         for (int t = 0; t < c; ++t) d -= L[c][t] * L[c][t];
+        d = d > floor[c] ? d : floor[c];
         inverse[c] = rsqrt(d);  // one operation on the serial chain instead of a square root and a division
         L[c][c] = d * inverse[c];
 #pragma unroll
@@ -851,6 +861,13 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     cudaFuncAttributes step_attributes{};
     MCFLOW_CUDA_CHECK(cudaFuncGetAttributes(&step_attributes, irlsStep));
     step_static_shared_ = step_attributes.sharedSizeBytes;
+    // Both kernels may use all of the device's shared memory per block, set once: the attribute belongs to the kernel
+    // (one per device, shared by every accumulator), so raising it only as far as one instance needs could be undone
+    // by another, and without opting in, static plus dynamic shared memory must stay within 48 KiB.
+    MCFLOW_CUDA_CHECK(cudaFuncSetAttribute(accumulateNormalEquations, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                           int(max_shared_bytes_)));
+    MCFLOW_CUDA_CHECK(cudaFuncSetAttribute(irlsStep, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                           int(max_shared_bytes_ - step_static_shared_)));
     if (stream) {
       stream_ = stream;
     } else {
@@ -1002,10 +1019,6 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       q.matrix = step_matrix_.get();
     }
     const std::size_t step_shared = (q.matrix_in_shared ? matrix_bytes : 0) + panel_bytes;
-    if (step_shared > step_shared_allowed_) {
-      MCFLOW_CUDA_CHECK(cudaFuncSetAttribute(irlsStep, cudaFuncAttributeMaxDynamicSharedMemorySize, int(step_shared)));
-      step_shared_allowed_ = step_shared;
-    }
     // Every iteration is queued at once: once the loop stops, the rest return at once (they read q.state->done).
     for (int iteration = 0; iteration < iterations; ++iteration) {
       enqueueSums(layout, &q.state->done, q.motions);
@@ -1113,11 +1126,6 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       throw BackendError("CUDA motion step: " + std::to_string(n) + " motion labels need " +
                          std::to_string(shared_bytes) + " bytes of shared memory, the device allows " +
                          std::to_string(max_shared_bytes_));
-    if (shared_bytes > shared_bytes_allowed_) {
-      MCFLOW_CUDA_CHECK(cudaFuncSetAttribute(accumulateNormalEquations, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                             int(shared_bytes)));
-      shared_bytes_allowed_ = shared_bytes;
-    }
     p.sum_regions = regions;
     MCFLOW_CUDA_CHECK(
         cudaMemsetAsync(chunk_labels_.get(), 0, l.pair_chunks * kLabelMaskWords * sizeof(unsigned long long), s));
@@ -1191,14 +1199,14 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   DeviceBuffer<LabelMotion> motions_;
   DeviceBuffer<double> sums_, partials_, pair_partials_;
   DeviceBuffer<unsigned long long> chunk_labels_;
-  std::size_t max_shared_bytes_ = 48 * 1024, shared_bytes_allowed_ = 48 * 1024;
+  std::size_t max_shared_bytes_ = 48 * 1024;  // per block, opted in
   PinnedBuffer<LabelMotion> host_motions_;
   PinnedBuffer<double> host_sums_;
   // The device IRLS loop: its motions, step control, twists and state in one buffer, staged in one.
   PinnedBuffer<unsigned char> level_staging_;
   DeviceBuffer<unsigned char> level_device_;
   DeviceBuffer<double> step_matrix_;  // a group's matrix where it does not fit in shared memory
-  std::size_t step_static_shared_ = 0, step_shared_allowed_ = 48 * 1024;
+  std::size_t step_static_shared_ = 0;
 };
 
 }  // namespace

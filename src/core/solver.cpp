@@ -129,7 +129,10 @@ Solver::Solver(const Config& config, std::unique_ptr<SolveBackend> backend, std:
 
 Solver::~Solver() = default;
 
-void Solver::recycle(Result&& finished) { impl_->spare = std::move(finished); }
+void Solver::recycle(Result&& finished) {
+  impl_->spare = std::move(finished);
+  finished = Result();  // not a half-moved result: images with sizes but no data
+}
 
 const Config& Solver::config() const { return impl_->config; }
 std::string Solver::backendName() const { return toString(impl_->backend->kind()); }

@@ -1,9 +1,6 @@
 // End-to-end tests of the solver on the project's synthetic scenes (known motions, occlusions, parts).
 #include <gtest/gtest.h>
 
-#include <cstring>
-#include <vector>
-
 #include <cmath>
 #include <cstdio>
 #include <algorithm>
@@ -13,6 +10,7 @@
 #include "mc_flow/testing/metrics.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/testing/synthetic_scene.h"
+#include "same_outputs.h"
 #include "test_helpers.h"
 
 using namespace mc_flow;
@@ -292,12 +290,6 @@ TEST(Solver, DeterministicForAGivenSeed) {
   EXPECT_EQ(a.soft_labels.data, b.soft_labels.data);
 }
 
-// Bit-for-bit equality of two buffers (NaN where depth is invalid compares equal to itself here).
-template <typename T>
-bool sameBits(const std::vector<T>& a, const std::vector<T>& b) {
-  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
-}
-
 // Recycling a finished result changes nothing in the next solve's result, whatever its size (the CUDA backend's
 // reuse of the memory itself: test_solve_backend_cuda.cpp, RecycledResultMemoryIsReused).
 TEST(Solver, RecyclingAResultChangesNothing) {
@@ -313,14 +305,7 @@ TEST(Solver, RecyclingAResultChangesNothing) {
   Result first = recycling.solve(pair.frame1, pair.frame2, pair.intrinsics);
   recycling.recycle(std::move(first));
   const Result second = recycling.solve(pair.frame1, pair.frame2, pair.intrinsics);
-  EXPECT_TRUE(sameBits(second.scene_flow.data, expected.scene_flow.data)) << "scene_flow";
-  EXPECT_TRUE(sameBits(second.optical_flow.data, expected.optical_flow.data)) << "optical_flow";
-  EXPECT_TRUE(sameBits(second.moved_depth.data, expected.moved_depth.data)) << "moved_depth";
-  EXPECT_TRUE(sameBits(second.labels.data, expected.labels.data)) << "labels";
-  EXPECT_TRUE(sameBits(second.occlusion.data, expected.occlusion.data)) << "occlusion";
-  EXPECT_TRUE(sameBits(second.soft_labels.data, expected.soft_labels.data)) << "soft_labels";
-  EXPECT_EQ(second.scene_flow.width, expected.scene_flow.width);
-  EXPECT_EQ(second.soft_labels.count, expected.soft_labels.count);
+  test::expectSameOutputImages(second, expected);
 
   // A smaller recycled result: the next solve grows it and is still the same.
   SyntheticSceneOptions small = options;
@@ -329,6 +314,5 @@ TEST(Solver, RecyclingAResultChangesNothing) {
   const SyntheticPair little = renderSyntheticPair(small);
   recycling.recycle(recycling.solve(little.frame1, little.frame2, little.intrinsics));
   const Result third = recycling.solve(pair.frame1, pair.frame2, pair.intrinsics);
-  EXPECT_TRUE(sameBits(third.scene_flow.data, expected.scene_flow.data)) << "scene_flow";
-  EXPECT_TRUE(sameBits(third.labels.data, expected.labels.data)) << "labels";
+  test::expectSameOutputImages(third, expected);
 }

@@ -370,12 +370,12 @@ TEST(CudaMotionAccumulator, CoarseToFineTwistsMatchCpu) {
 
 // The IRLS loop runs on the device (iterateLevel): the same step control and stops as the host loop, with a
 // Cholesky of each group of coupled labels instead of the host's LDLT. Blended labels couple every label with
-// others: 8 labels put the group's matrix (48x48) in shared memory, 30 labels (180x180, 259 KB) in global memory.
+// others: 8 and 10 labels put the group's matrix in shared memory, 30 labels (181x181, 262 KB) in global memory.
 TEST(CudaMotionAccumulator, DeviceLoopMatchesTheHostLoopForCoupledLabels) {
   SKIP_WITHOUT_GPU();
   const Scene s = makeScene(320, 240, 1, 1);
   Config config;
-  for (const int motion_labels : {8, 30}) {
+  for (const int motion_labels : {10, 8, 30}) {  // 10 first: 33 KB of matrix beside 21 KB of static shared memory
     const SoftLabels u = makeLabels(s.pair, motion_labels, LabelKind::Blended, 5u);
     std::vector<Vector6d> twists_cpu = makeTwists(s.pair, motion_labels, TwistKind::Truth, 3u);
     for (Vector6d& xi : twists_cpu) xi(0) += 0.01;  // 1 cm off: something to estimate
@@ -402,6 +402,30 @@ TEST(CudaMotionAccumulator, DeviceLoopMatchesTheHostLoopForCoupledLabels) {
     EXPECT_GT(largest_step, 1e-4) << "the labels did move";
     EXPECT_LE(largest_difference, kTwistTolerance) << motion_labels << " labels";
   }
+}
+
+// Without damping (motion_damping 0, which Config allows) only a 1e-9 ridge keeps a group's matrix definite; the
+// device's unpivoted Cholesky must still give a step (a pivot floor), as the host's pivoted LDLT does: the same stop
+// and iterations, finite twists and the same cost.
+TEST(CudaMotionAccumulator, DeviceLoopWithoutDampingStillSteps) {
+  SKIP_WITHOUT_GPU();
+  const Scene s = makeScene(320, 240, 1, 1);
+  Config config;
+  config.motion_damping = 0.0;
+  const int motion_labels = 8;
+  const SoftLabels u = makeLabels(s.pair, motion_labels, LabelKind::Blended, 9u);
+  std::vector<Vector6d> twists_cpu = makeTwists(s.pair, motion_labels, TwistKind::Truth, 3u);
+  for (Vector6d& xi : twists_cpu) xi(1) -= 0.01;
+  std::vector<Vector6d> twists_gpu = twists_cpu;
+  auto cpu = makeCpuMotionAccumulator();
+  auto gpu = makeCudaMotionAccumulator();
+  const MotionLevelStats a = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_cpu, config, cpu.get());
+  const MotionLevelStats b = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_gpu, config, gpu.get());
+  EXPECT_NE(b.stop, MotionStop::SolveFailed);
+  EXPECT_EQ(a.stop, b.stop) << toString(a.stop) << " / " << toString(b.stop);
+  EXPECT_EQ(a.iterations, b.iterations);
+  for (const Vector6d& xi : twists_gpu) EXPECT_TRUE(xi.allFinite());
+  EXPECT_NEAR(a.cost_after, b.cost_after, 1e-6 * a.cost_after);
 }
 
 // The whole solver on both backends: test_solve_backend_cuda.cpp, SolverMatchesCpuOnSyntheticScenes.

@@ -8,6 +8,7 @@
 // log1p), so u after a label step agrees to 1e-3 and the energy to a relative 1e-5.
 #include <gtest/gtest.h>
 
+#include "same_outputs.h"
 #include "skip_without_gpu.h"
 
 #include <algorithm>
@@ -307,12 +308,6 @@ TEST(CudaSolveBackend, WorkspaceReuseGivesTheFreshResult) {
     EXPECT_EQ((first.segments[i].twist - again.segments[i].twist).norm(), 0.0) << "segment " << i;
 }
 
-// Bit-for-bit equality of two buffers (NaN where depth is invalid compares equal to itself here).
-template <typename T>
-bool sameBits(const std::vector<T>& a, const std::vector<T>& b) {
-  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
-}
-
 // Solver::recycle: the next solve fills its output images into the recycled result's memory (no fresh allocation,
 // no page faults) and gives the same result bit for bit.
 TEST(CudaSolveBackend, RecycledResultMemoryIsReused) {
@@ -334,12 +329,7 @@ TEST(CudaSolveBackend, RecycledResultMemoryIsReused) {
   EXPECT_EQ(second.scene_flow.data.data(), scene);
   EXPECT_EQ(second.soft_labels.data.data(), soft);
   EXPECT_EQ(second.labels.data.data(), ids);
-  EXPECT_TRUE(sameBits(second.scene_flow.data, expected.scene_flow.data)) << "scene_flow";
-  EXPECT_TRUE(sameBits(second.optical_flow.data, expected.optical_flow.data)) << "optical_flow";
-  EXPECT_TRUE(sameBits(second.moved_depth.data, expected.moved_depth.data)) << "moved_depth";
-  EXPECT_TRUE(sameBits(second.soft_labels.data, expected.soft_labels.data)) << "soft_labels";
-  EXPECT_TRUE(sameBits(second.labels.data, expected.labels.data)) << "labels";
-  EXPECT_TRUE(sameBits(second.occlusion.data, expected.occlusion.data)) << "occlusion";
+  test::expectSameOutputImages(second, expected);
 }
 
 // Config::cuda_device: a device that does not exist is named in the error (cuda), or sends auto to the CPU with

@@ -120,7 +120,8 @@ class Solver {
 
   /// @brief Hands back a result the caller no longer needs: the next solve fills its output images into that
   /// result's memory instead of fresh allocations (at 1280x720 about 50 MB, whose first touch cost 5-20 ms of page
-  /// faults per pair). Optional; a stream hands back the result that the new one replaces.
+  /// faults per pair). Optional; a stream hands back the result that the new one replaces. `finished` is left empty.
+  /// Like solve(), not to be called while another thread uses this Solver.
   void recycle(Result&& finished);
 
   const Config& config() const;
