@@ -9,7 +9,6 @@
 #include <chrono>
 #include <cmath>
 #include <numeric>
-#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -278,23 +277,27 @@ int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen
   for (int a = 0; a < n; ++a)
     for (int b = a + 1; b < n; ++b)
       if (H.block<6, 6>(6 * a, 6 * b).cwiseAbs().maxCoeff() > 0.0) parent[std::size_t(root(b))] = root(a);
-  std::vector<std::vector<int>> groups(static_cast<std::size_t>(n));
-  for (int i = 0; i < n; ++i) groups[std::size_t(root(i))].push_back(i);
+  // The labels grouped by root (groups in the order of their roots, labels ascending within a group).
+  std::vector<int> order(static_cast<std::size_t>(n));
+  std::iota(order.begin(), order.end(), 0);
+  for (int i = 0; i < n; ++i) parent[std::size_t(i)] = root(i);
+  std::stable_sort(order.begin(), order.end(),
+                   [&parent](int a, int b) { return parent[std::size_t(a)] < parent[std::size_t(b)]; });
   delta.resize(6 * n);
   int largest = 0;
-  for (const std::vector<int>& group : groups) {
-    if (group.empty()) continue;
-    largest = std::max(largest, int(group.size()));
-    const int m = 6 * int(group.size());
+  for (std::size_t begin = 0, end = 0; begin < order.size(); begin = end) {
+    while (end < order.size() && parent[std::size_t(order[end])] == parent[std::size_t(order[begin])]) ++end;
+    const int* group = order.data() + begin;
+    const int labels = int(end - begin), m = 6 * labels;
+    largest = std::max(largest, labels);
     Eigen::MatrixXd A(m, m);
     Eigen::VectorXd b(m);
-    for (std::size_t r = 0; r < group.size(); ++r) {
-      b.segment<6>(6 * Eigen::Index(r)) = -g.segment<6>(6 * group[r]);
-      for (std::size_t c = 0; c < group.size(); ++c)
-        A.block<6, 6>(6 * Eigen::Index(r), 6 * Eigen::Index(c)) = H.block<6, 6>(6 * group[r], 6 * group[c]);
+    for (int r = 0; r < labels; ++r) {
+      b.segment<6>(6 * r) = -g.segment<6>(6 * group[r]);
+      for (int c = 0; c < labels; ++c) A.block<6, 6>(6 * r, 6 * c) = H.block<6, 6>(6 * group[r], 6 * group[c]);
     }
     const Eigen::VectorXd x = A.ldlt().solve(b);
-    for (std::size_t r = 0; r < group.size(); ++r) delta.segment<6>(6 * group[r]) = x.segment<6>(6 * Eigen::Index(r));
+    for (int r = 0; r < labels; ++r) delta.segment<6>(6 * group[r]) = x.segment<6>(6 * r);
   }
   return largest;
 }
