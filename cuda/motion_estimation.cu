@@ -509,7 +509,7 @@ struct StepParams {
   const double* sums = nullptr;  // per label kLabelStride values, then cost and pixels, then the pairs' kUpper each
   int n = 0, iteration = 0;
   bool last = false;  // the last iteration only checks the previous step
-  double min_label_pixels = 0, min_damping = 0, min_update = 0;
+  double min_label_pixels = 0, min_damping = 0, min_update = 0, min_coupling = 0;
   MotionLabelControl* control = nullptr;
   double* twists = nullptr;  // 6 per label: the current linearisation point
   LabelMotion* motions = nullptr;  // written for the next accumulation
@@ -524,19 +524,24 @@ __constant__ int kUpperCol[kUpper] = {0, 1, 2, 3, 4, 5, 1, 2, 3, 4, 5, 2, 3, 4, 
 
 __device__ __forceinline__ int pairIndex(int n, int a, int b) { return a * n - a * (a + 1) / 2 + (b - a - 1); }
 
+// Index of diagonal entry r of a 6x6 block's upper triangle (row-major).
+__constant__ int kUpperDiagonal[6] = {0, 6, 11, 15, 18, 20};
+
+// The damped diagonal of label i's block (upper triangle in `upper`), as the host loop damps it.
+__device__ __forceinline__ void dampedLabelDiagonal(const double* upper, double damping, double diagonal[6]) {
+  double block_max = upper[0];
+  for (int r = 1; r < 6; ++r) block_max = upper[kUpperDiagonal[r]] > block_max ? upper[kUpperDiagonal[r]] : block_max;
+  for (int r = 0; r < 6; ++r) diagonal[r] = dampedDiagonal(upper[kUpperDiagonal[r]], damping, block_max);
+}
+
 // Damped 6x6 block of label i (upper triangle in `upper`), written into M at (r0, c0) with leading dimension ld.
 __device__ __forceinline__ void dampedLabelBlock(const double* upper, double damping, double* M, int ld, int r0) {
-  double block_max = upper[0];
-  {
-    int k = 0;
-    for (int r = 0; r < 6; ++r)
-      for (int c = r; c < 6; ++c, ++k)
-        if (r == c && upper[k] > block_max) block_max = upper[k];
-  }
+  double diagonal[6];
+  dampedLabelDiagonal(upper, damping, diagonal);
   int k = 0;
   for (int r = 0; r < 6; ++r)
     for (int c = r; c < 6; ++c, ++k) {
-      const double v = r == c ? dampedDiagonal(upper[k], damping, block_max) : upper[k];
+      const double v = r == c ? diagonal[r] : upper[k];
       M[(r0 + r) * ld + r0 + c] = v;
       M[(r0 + c) * ld + r0 + r] = v;
     }
@@ -578,6 +583,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   __shared__ double delta[6 * kMaxMotionLabels];
   __shared__ double rhs[6 * kMaxMotionLabels];
   __shared__ double inverse_diagonal[6 * kMaxMotionLabels];  // of the group's Cholesky factor
+  __shared__ double damped_diagonal[6 * kMaxMotionLabels];   // of each label's block, for the coupling test
   __shared__ unsigned coupled[(kMaxMotionLabels * (kMaxMotionLabels - 1) / 2 + 31) / 32];
   __shared__ double largest_step[kStepThreads / 32];
   const int n = q.n, tid = threadIdx.x;
@@ -610,6 +616,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     const double* label = q.sums + i * kLabelStride;
     frozen[i] = controlMotionLabel(label[kLabelCost], label[kLabelPixels], q.min_label_pixels, q.min_damping,
                                    q.twists + 6 * i, q.control[i]);
+    dampedLabelDiagonal(label, q.control[i].damping, damped_diagonal + 6 * i);
   }
   __syncthreads();
   if (q.last) {  // the last iteration only checks the previous step
@@ -617,7 +624,8 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     return;
   }
 
-  // Groups of coupled labels (a frozen label's rows and columns are zero: it is coupled to none).
+  // Groups of coupled labels (a frozen label's rows and columns are zero: it is coupled to none; a coupling weaker
+  // than min_coupling is dropped, motionLabelsCoupled).
   for (int pair = tid; pair < pairs; pair += blockDim.x) {
     int a = 0, rest = pair;
     while (rest >= n - 1 - a) {
@@ -630,10 +638,29 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     int nonzero = 0;  // every value read (no short cut): 21 loads in flight at once
 #pragma unroll
     for (int k = 0; k < kUpper; ++k) nonzero |= block[k] != 0.0 ? 1 : 0;
-    if (nonzero) atomicOr(&coupled[pair / 32], 1u << (pair % 32));
+    double pair_diagonal[6];
+#pragma unroll
+    for (int r = 0; r < 6; ++r) pair_diagonal[r] = block[kUpperDiagonal[r]];
+    if (motionLabelsCoupled(pair_diagonal, nonzero != 0, damped_diagonal + 6 * a, damped_diagonal + 6 * b,
+                            q.min_coupling))
+      atomicOr(&coupled[pair / 32], 1u << (pair % 32));
   }
-  __syncthreads();
-  if (tid == 0) {
+  int any_coupled = 0;
+  for (int w = tid; w < (pairs + 31) / 32; w += blockDim.x) any_coupled |= coupled[w] != 0u;
+  if (!__syncthreads_or(any_coupled)) {
+    // No coupling kept (the common case with motion_min_coupling > 0): every label is its own group, set in parallel
+    // instead of by the serial union-find below.
+    for (int i = tid; i < n; i += blockDim.x) {
+      root[i] = i;
+      members[i] = i;
+      group_start[i] = i;
+    }
+    if (tid == 0) {
+      group_start[n] = n;
+      group_count = n;
+      state.largest_group = max(state.largest_group, 1);
+    }
+  } else if (tid == 0) {
     for (int i = 0; i < n; ++i) root[i] = i;
     for (int a = 0; a < n; ++a)
       for (int b = a + 1; b < n; ++b) {
@@ -696,7 +723,8 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     for (int e = tid; e < pair_values; e += blockDim.x) {
       const int ga = e / (m * kUpper), rest = e - ga * m * kUpper, gb = rest / kUpper, k = rest - gb * kUpper;
       if (ga >= gb) continue;
-      const double v = pair_sums[std::size_t(pairIndex(n, group[ga], group[gb])) * kUpper + k];
+      const int pair = pairIndex(n, group[ga], group[gb]);
+      const double v = (coupled[pair / 32] >> (pair % 32)) & 1u ? pair_sums[std::size_t(pair) * kUpper + k] : 0.0;
       const int r = kUpperRow[k], c = kUpperCol[k];
       M[(6 * ga + r) * ld + 6 * gb + c] = v;
       M[(6 * ga + c) * ld + 6 * gb + r] = v;
@@ -1007,6 +1035,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     q.min_label_pixels = config.motion_min_label_pixels;
     q.min_damping = config.motion_damping;
     q.min_update = config.motion_min_update;
+    q.min_coupling = config.motion_min_coupling;
     q.motions = reinterpret_cast<LabelMotion*>(device);
     q.control = reinterpret_cast<MotionLabelControl*>(device + motion_bytes);
     q.twists = reinterpret_cast<double*>(device + motion_bytes + control_bytes);

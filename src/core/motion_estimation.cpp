@@ -262,12 +262,21 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
   return estimateMotionsWith(*accumulator, twists, config);
 }
 
-int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen::VectorXd& delta) {
+int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen::VectorXd& delta,
+                       double min_coupling) {
   const int n = int(g.size() / 6);
   if (H.rows() != 6 * n || H.cols() != 6 * n || g.size() != 6 * n)
     throw InputError("solveCoupledBlocks: H is " + std::to_string(H.rows()) + "x" + std::to_string(H.cols()) +
                      " and g has " + std::to_string(g.size()) + " entries (expected 6n x 6n and 6n)");
-  // Groups of coupled labels: union-find over the non-zero off-diagonal blocks.
+  const Eigen::VectorXd diagonal = H.diagonal();
+  auto coupled = [&](int a, int b) {
+    const Eigen::Matrix<double, 6, 6> block = H.block<6, 6>(6 * a, 6 * b);
+    const Vector6d pair_diagonal = block.diagonal();
+    return motionLabelsCoupled(pair_diagonal.data(), block.cwiseAbs().maxCoeff() > 0.0, diagonal.data() + 6 * a,
+                               diagonal.data() + 6 * b, min_coupling);
+  };
+  std::vector<char> pair_coupled(static_cast<std::size_t>(n) * std::size_t(n), 0);
+  // Groups of coupled labels: union-find over the couplings kept.
   std::vector<int> parent(static_cast<std::size_t>(n));
   std::iota(parent.begin(), parent.end(), 0);
   auto root = [&parent](int i) {
@@ -276,7 +285,10 @@ int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen
   };
   for (int a = 0; a < n; ++a)
     for (int b = a + 1; b < n; ++b)
-      if (H.block<6, 6>(6 * a, 6 * b).cwiseAbs().maxCoeff() > 0.0) parent[std::size_t(root(b))] = root(a);
+      if (coupled(a, b)) {
+        pair_coupled[std::size_t(a * n + b)] = pair_coupled[std::size_t(b * n + a)] = 1;
+        parent[std::size_t(root(b))] = root(a);
+      }
   // The labels grouped by root (groups in the order of their roots, labels ascending within a group).
   std::vector<int> order(static_cast<std::size_t>(n));
   std::iota(order.begin(), order.end(), 0);
@@ -294,7 +306,12 @@ int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen
     Eigen::VectorXd b(m);
     for (int r = 0; r < labels; ++r) {
       b.segment<6>(6 * r) = -g.segment<6>(6 * group[r]);
-      for (int c = 0; c < labels; ++c) A.block<6, 6>(6 * r, 6 * c) = H.block<6, 6>(6 * group[r], 6 * group[c]);
+      for (int c = 0; c < labels; ++c) {
+        if (r == c || pair_coupled[std::size_t(group[r] * n + group[c])])
+          A.block<6, 6>(6 * r, 6 * c) = H.block<6, 6>(6 * group[r], 6 * group[c]);
+        else
+          A.block<6, 6>(6 * r, 6 * c).setZero();
+      }
     }
     const Eigen::VectorXd x = A.ldlt().solve(b);
     for (int r = 0; r < labels; ++r) delta.segment<6>(6 * group[r]) = x.segment<6>(6 * r);
@@ -361,7 +378,7 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
       for (int d = 6 * i; d < 6 * i + 6; ++d)
         total.H(d, d) = dampedDiagonal(total.H(d, d), control[std::size_t(i)].damping, block_max);
     }
-    stats.largest_block = std::max(stats.largest_block, solveCoupledBlocks(total.H, total.g, delta));
+    stats.largest_block = std::max(stats.largest_block, solveCoupledBlocks(total.H, total.g, delta, config.motion_min_coupling));
     if (!delta.allFinite()) {
       stats.stop = MotionStop::SolveFailed;
       break;

@@ -283,3 +283,50 @@ TEST(MotionNormalEquations, SolvingCoupledGroupsApartGivesTheWholeSolution) {
   // Sizes that do not fit are refused.
   EXPECT_THROW(solveCoupledBlocks(H, Eigen::VectorXd::Zero(6 * n - 1), delta), InputError);
 }
+
+// With a coupling threshold (Config::motion_min_coupling), a weak coupling is dropped from the step: the labels it
+// joined are solved apart, as if their off-diagonal block were zero, while strong couplings stay in the joint solve.
+TEST(MotionNormalEquations, WeakCouplingsAreDroppedFromTheStep) {
+  const int n = 4;
+  std::srand(11);
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(6 * n, 6 * n);
+  // Pixels that blend labels a and b with weights (wa, wb) add wa^2 A, wa wb A and wb^2 A to the blocks (A PSD);
+  // pixels of one label add A to its own block.
+  auto pixels = [&H](int a, int b, double wa, double wb) {
+    const Eigen::MatrixXd J = Eigen::MatrixXd::Random(6, 12);
+    const Eigen::MatrixXd A = J * J.transpose() + 0.1 * Eigen::MatrixXd::Identity(6, 6);
+    H.block<6, 6>(6 * a, 6 * a) += wa * wa * A;
+    H.block<6, 6>(6 * b, 6 * b) += wb * wb * A;
+    H.block<6, 6>(6 * a, 6 * b) += wa * wb * A;
+    H.block<6, 6>(6 * b, 6 * a) += wa * wb * A;
+  };
+  for (int i = 0; i < n; ++i) pixels(i, i, 1.0, 0.0);  // each label's own pixels
+  for (int i = 0; i < n; ++i) pixels(i, i, 0.0, 1.0);
+  pixels(0, 1, 0.5, 0.5);    // strong: as many blended pixels as own ones
+  pixels(1, 2, 0.02, 0.02);  // weak
+  pixels(2, 3, 0.5, 0.5);    // strong
+  const Eigen::VectorXd g = Eigen::VectorXd::Random(6 * n);
+  auto strength = [&H](int a, int b) {
+    double s = 0;
+    for (int r = 0; r < 6; ++r)
+      s = std::max(s, H(6 * a + r, 6 * b + r) / std::sqrt(H(6 * a + r, 6 * a + r) * H(6 * b + r, 6 * b + r)));
+    return s;
+  };
+  ASSERT_GT(strength(0, 1), 0.1);
+  ASSERT_GT(strength(2, 3), 0.1);
+  ASSERT_LT(strength(1, 2), 0.01);
+  Eigen::VectorXd delta;
+  EXPECT_EQ(solveCoupledBlocks(H, g, delta, 0.0), 4);  // every coupling: one group
+  EXPECT_LT((H * delta + g).norm(), 1e-9 * g.norm());
+  EXPECT_EQ(solveCoupledBlocks(H, g, delta, 0.1), 2);  // the weak one dropped: {0, 1} and {2, 3}
+  Eigen::MatrixXd kept = H;
+  kept.block<6, 6>(6, 12).setZero();
+  kept.block<6, 6>(12, 6).setZero();
+  EXPECT_LT((kept * delta + g).norm(), 1e-9 * g.norm());
+  EXPECT_GT((H * delta + g).norm(), 1e-6 * g.norm()) << "the dropped coupling should change the step";
+  EXPECT_EQ(solveCoupledBlocks(H, g, delta, 1.5), 1);  // above 1: every label apart
+  for (int i = 0; i < n; ++i) {
+    const Vector6d own = H.block<6, 6>(6 * i, 6 * i).ldlt().solve(-g.segment<6>(6 * i));
+    EXPECT_LT((delta.segment<6>(6 * i) - own).cwiseAbs().maxCoeff(), 1e-9 * own.cwiseAbs().maxCoeff()) << "label " << i;
+  }
+}

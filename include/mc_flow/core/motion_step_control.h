@@ -56,6 +56,21 @@ MCFLOW_HOST_DEVICE inline double dampedDiagonal(double h, double damping, double
   return h + (damping * h + 1e-9 * (block_max > 1e-12 ? block_max : 1e-12));
 }
 
+/// @brief Whether two labels' motions are solved jointly in a step. `pair_diagonal` is the diagonal of their
+/// off-diagonal block H_ab, `diagonal_a` / `diagonal_b` the damped diagonals of H_aa and H_bb. Blended pixels
+/// couple them with strength max_r |H_ab(r,r)| / sqrt(H_aa(r,r) H_bb(r,r)) (at most about 1: the three blocks sum
+/// the same positive semidefinite terms, weighted u_a u_b, u_a^2 and u_b^2); below `min_coupling` the coupling is
+/// dropped from the step. With `min_coupling` 0 any non-zero entry of H_ab (`any_entry`) couples them.
+MCFLOW_HOST_DEVICE inline bool motionLabelsCoupled(const double pair_diagonal[6], bool any_entry,
+                                                   const double diagonal_a[6], const double diagonal_b[6],
+                                                   double min_coupling) {
+  if (!any_entry) return false;
+  if (min_coupling <= 0.0) return true;
+  for (int r = 0; r < 6; ++r)
+    if (pair_diagonal[r] * pair_diagonal[r] >= min_coupling * min_coupling * diagonal_a[r] * diagonal_b[r]) return true;
+  return false;
+}
+
 /// @brief Scales a label's step into the trust region (metres / radians) and returns its largest entry.
 MCFLOW_HOST_DEVICE inline double limitMotionStep(double d[6]) {
   const double translation = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
