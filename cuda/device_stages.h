@@ -284,6 +284,16 @@ void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms
                      const std::uint8_t* occluded, const Config& config, float* data_cost,
                      std::uint8_t* outlier_only, cudaStream_t stream);
 
+// ---------------------------------------------------------------- K-means' assignment (kmeans.cu)
+/// @brief K-means centres as a kernel argument (Config::initial_labels is at most 64).
+struct KMeansCentres {
+  static constexpr int kMax = 64;
+  float xyz[3 * kMax];
+  int count = 0;
+};
+/// @brief Nearest centre (nearest_centre.h) of each valid point, -1 where the point is invalid.
+void launchNearestCentreLabels(const DeviceImage& points, const KMeansCentres& centres, int* hard, cudaStream_t stream);
+
 // ---------------------------------------------------------------- soft labels (soft_labels.cu)
 /// @brief `count` planes of one-hot labels from hard labels (-1 = outlier, the last plane); pixels without a
 /// valid point go to the outlier plane.

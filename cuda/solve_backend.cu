@@ -146,6 +146,26 @@ class CudaSolveBackend final : public SolveBackend {
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
   }
 
+  void initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres) override {
+    const DeviceLevel& L = levelAt(level);
+    if (centres.empty() || int(centres.size()) > cuda_detail::KMeansCentres::kMax)
+      throw InputError("initial labels from K-means: " + std::to_string(centres.size()) + " centres, expected 1.." +
+                       std::to_string(cuda_detail::KMeansCentres::kMax));
+    cuda_detail::KMeansCentres argument;
+    argument.count = int(centres.size());
+    for (std::size_t c = 0; c < centres.size(); ++c)
+      for (int k = 0; k < 3; ++k) argument.xyz[3 * c + std::size_t(k)] = centres[c](k);
+    const std::size_t p = std::size_t(L.width) * L.height;
+    hard_labels_.reserve(p);
+    cuda_detail::launchNearestCentreLabels(L.points1, argument, hard_labels_.get(), stream_.stream);
+    count_ = 0;  // nothing to keep when the buffers grow
+    level_ = level;
+    reserveLabels(plane(), int(centres.size()) + 1);
+    count_ = int(centres.size()) + 1;
+    cuda_detail::launchOneHotLabels(L.points1, hard_labels_.get(), count_, labels(), stream_.stream);
+    clearOcclusionAndDual();
+  }
+
   int labelLevel() const override { return level_; }
 
   void moveLabels(int level) override {

@@ -37,6 +37,10 @@ class FaultInjectingBackend final : public SolveBackend {
     strike("initialiseLabels");
     inner_->initialiseLabels(level, hard, motion_labels);
   }
+  void initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres) override {
+    strike("initialiseLabelsFromCentres");
+    inner_->initialiseLabelsFromCentres(level, centres);
+  }
   int labelLevel() const override { return inner_->labelLevel(); }
   void moveLabels(int level) override {
     strike("moveLabels");
@@ -114,9 +118,9 @@ class FaultInjectingBackend final : public SolveBackend {
 
 const std::vector<std::string>& backendFaultStages() {
   static const std::vector<std::string> stages{
-      "buildPyramids", "framePoints", "initialiseLabels", "moveLabels", "motionAccumulator", "updateOcclusion",
-      "labelStep",     "downloadLabels", "outputs",        "supports",   "remap",             "ownedMoments",
-      "trialCuts",     "applyCuts",      "costModel"};
+      "buildPyramids", "framePoints", "initialiseLabels", "initialiseLabelsFromCentres", "moveLabels",
+      "motionAccumulator", "updateOcclusion", "labelStep", "downloadLabels", "outputs", "supports", "remap",
+      "ownedMoments", "trialCuts", "applyCuts", "costModel"};
   return stages;
 }
 

@@ -6,6 +6,7 @@
 #include <random>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/nearest_centre.h"
 
 namespace mc_flow {
 
@@ -38,16 +39,8 @@ ValidPoints collectValidPoints(const ImageF& image) {
 }
 
 int nearestCentre(const Eigen::Vector3f& p, const std::vector<Eigen::Vector3f>& centres) {
-  int best = 0;
-  float best_d = std::numeric_limits<float>::infinity();
-  for (std::size_t c = 0; c < centres.size(); ++c) {
-    const float d = (p - centres[c]).squaredNorm();
-    if (d < best_d) {
-      best_d = d;
-      best = int(c);
-    }
-  }
-  return best;
+  static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "centres are read as x, y, z triples");
+  return nearestCentreIndex(p.x(), p.y(), p.z(), centres.front().data(), int(centres.size()));
 }
 
 void assignAll(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& centres,

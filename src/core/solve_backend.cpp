@@ -26,6 +26,11 @@ void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int 
                        ", outside [-1, " + std::to_string(motion_labels) + ")");
 }
 
+void SolveBackend::initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres) {
+  if (centres.empty()) throw InputError("initial labels from K-means: no centre given");
+  initialiseLabels(level, assignToNearestCentre(framePoints(level), centres), int(centres.size()));
+}
+
 namespace {
 
 // Nearest-pixel resampling of a mask to another pyramid level (pixel-centre aligned). Levels differ by a

@@ -278,8 +278,12 @@ Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
                           config.kmeans_tolerance, config.seed);
   Start start;
   start.motion_labels = std::max(1, int(kmeans.centres.size()));
-  start.hard = assignToNearestCentre(backend->framePoints(p.label_level), kmeans.centres);
-  backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
+  if (kmeans.centres.empty()) {  // no valid point at either level (prepare() refuses such a pair): all outliers
+    const ImageF& points = backend->framePoints(p.label_level);
+    backend->initialiseLabels(p.label_level, ImageI32(points.width, points.height, 1, -1), 1);
+  } else {
+    backend->initialiseLabelsFromCentres(p.label_level, kmeans.centres);
+  }
   // Every label starts from the dominant motion (one label over all valid pixels, coarse to fine down to the
   // label level): with a moving camera all labels then start near the truth, and a small segment that is
   // frozen at the coarse levels (too few pixels there) does not have to find a large motion from zero.

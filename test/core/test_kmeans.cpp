@@ -6,6 +6,7 @@
 #include <random>
 
 #include "mc_flow/core/kmeans.h"
+#include "mc_flow/core/nearest_centre.h"
 
 namespace mc_flow {
 namespace {
@@ -96,6 +97,15 @@ TEST(KMeans, AssignToNearestCentre) {
   const ImageI32 a = assignToNearestCentre(points, centres);
   EXPECT_EQ(a(0, 0), 1);
   EXPECT_EQ(a(1, 0), 0);
+}
+
+// The rule both backends share (nearest_centre.h): the lowest index wins a tie, and a single centre takes every point.
+TEST(KMeans, NearestCentreIndexBreaksTiesTowardsTheLowestIndex) {
+  const float centres[9] = {1.f, 0.f, 0.f, -1.f, 0.f, 0.f, 0.f, 0.f, 5.f};
+  EXPECT_EQ(nearestCentreIndex(0.f, 0.f, 0.f, centres, 3), 0);  // equidistant from centres 0 and 1
+  EXPECT_EQ(nearestCentreIndex(-0.1f, 0.f, 0.f, centres, 3), 1);
+  EXPECT_EQ(nearestCentreIndex(0.f, 0.f, 4.f, centres, 3), 2);
+  EXPECT_EQ(nearestCentreIndex(100.f, 100.f, 100.f, centres, 1), 0);
 }
 
 }  // namespace

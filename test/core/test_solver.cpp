@@ -8,6 +8,9 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/testing/metrics.h"
+#include "mc_flow/core/kmeans.h"
+#include "mc_flow/core/pyramid.h"
+#include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/testing/synthetic_scene.h"
 #include "same_outputs.h"
@@ -316,3 +319,32 @@ TEST(Solver, RecyclingAResultChangesNothing) {
   const Result third = recycling.solve(pair.frame1, pair.frame2, pair.intrinsics);
   test::expectSameOutputImages(third, expected);
 }
+
+namespace mc_flow {
+namespace {
+
+// The CPU backend's K-means initialisation from centres is the nearest-centre assignment of the level's points
+// handed to initialiseLabels (the CUDA backend's is compared with it in test_cuda); no centre is refused.
+TEST(SolveBackend, InitialLabelsFromCentresAreTheNearestCentreAssignment) {
+  SyntheticSceneOptions options;
+  options.width = 160;
+  options.height = 120;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Config config;
+  auto a = makeCpuSolveBackend();
+  auto b = makeCpuSolveBackend();
+  const int levels = pyramidLevelCount(160, 120, config.coarsest_min_width);
+  for (SolveBackend* backend : {a.get(), b.get()})
+    backend->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
+  const std::vector<Eigen::Vector3f> centres =
+      kmeansPoints(a->framePoints(2), 6, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed).centres;
+  ASSERT_GE(centres.size(), 3u);
+  a->initialiseLabelsFromCentres(1, centres);
+  b->initialiseLabels(1, assignToNearestCentre(b->framePoints(1), centres), int(centres.size()));
+  ASSERT_EQ(a->labelCount(), int(centres.size()) + 1);
+  EXPECT_EQ(a->downloadLabels().data, b->downloadLabels().data);
+  EXPECT_THROW(a->initialiseLabelsFromCentres(1, {}), InputError);
+}
+
+}  // namespace
+}  // namespace mc_flow

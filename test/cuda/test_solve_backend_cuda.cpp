@@ -142,10 +142,11 @@ void compareStages(int width, int height, int variant) {
   auto gpu = makeCudaSolveBackend();
   const int levels = s.p1.size();
   const int label_level = std::min(levels - 1, 1);
-  for (SolveBackend* b : {cpu.get(), gpu.get()}) {
+  for (SolveBackend* b : {cpu.get(), gpu.get()})
     b->buildPyramids(s.pair.frame1, s.pair.frame2, s.pair.intrinsics, levels, config);
-    b->initialiseLabels(label_level, assignToNearestCentre(s.p1[label_level].points, s.centres), int(s.centres.size()));
-  }
+  // The host's nearest-centre assignment against the device's (initialiseLabelsFromCentres, as a cold solve calls it).
+  cpu->initialiseLabels(label_level, assignToNearestCentre(s.p1[label_level].points, s.centres), int(s.centres.size()));
+  gpu->initialiseLabelsFromCentres(label_level, s.centres);
   EXPECT_EQ(cpu->validCounts(), gpu->validCounts());
   for (int level = 0; level < levels; ++level)
     EXPECT_TRUE(sameBits(cpu->framePoints(level), gpu->framePoints(level))) << "frame 1's points at level " << level;

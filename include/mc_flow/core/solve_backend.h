@@ -69,6 +69,11 @@ class SolveBackend : public LabelStore {
   /// `hard` holds a motion label in [0, motion_labels) per pixel, or -1 for the outlier label; pixels
   /// without depth go to the outlier label whatever `hard` says. Label count = motion_labels + 1.
   virtual void initialiseLabels(int level, const ImageI32& hard, int motion_labels) = 0;
+  /// @brief Hard initial labels at `level` from K-means' centres (at least one): each valid point takes its nearest
+  /// centre (nearest_centre.h), label count = centres + 1. This default is initialiseLabels of
+  /// assignToNearestCentre(framePoints(level), centres); the CUDA backend assigns on the device, without
+  /// downloading the level's points.
+  virtual void initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres);
   /// @brief Pyramid level the labels live at.
   virtual int labelLevel() const = 0;
   /// @brief Carries the labels to `level` (up: bilinear and renormalised; down: 2x2 means; the same level:
