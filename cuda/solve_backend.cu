@@ -93,14 +93,11 @@ class CudaSolveBackend final : public SolveBackend {
     // The inputs go up through one page-locked staging buffer, then every level is built on the device.
     const std::size_t plane = std::size_t(W) * H;
     float* staged = staged_frames_.reserve(plane * 4);
-    const std::vector<float>* inputs[4] = {&frame1.intensity.data, &frame1.depth.data, &frame2.intensity.data,
-                                           &frame2.depth.data};
+    stageInputFrames(frame1, frame2, staged);
     float* targets[4] = {pyramid1[0].intensity, pyramid1[0].depth, pyramid2[0].intensity, pyramid2[0].depth};
-    for (int i = 0; i < 4; ++i) {
-      std::copy_n(inputs[i]->data(), plane, staged + std::size_t(i) * plane);
+    for (int i = 0; i < 4; ++i)
       MCFLOW_CUDA_CHECK(cudaMemcpyAsync(targets[i], staged + std::size_t(i) * plane, plane * sizeof(float),
                                         cudaMemcpyHostToDevice, stream_.stream));
-    }
     valid_counts_device_.reserve(std::size_t(levels));
     cuda_detail::launchBuildPyramid(pyramid1, config, valid_counts_device_.get(), stream_.stream);
     cuda_detail::launchBuildPyramid(pyramid2, config, nullptr, stream_.stream);
@@ -334,7 +331,8 @@ class CudaSolveBackend final : public SolveBackend {
     scalar_.reserve(std::size_t(std::max(1, 4 * n)));
     cuda_detail::launchLabelCentroidSums(labels(), L.points1, n, partials_, scalar_.get(), s);
 
-    // One transfer down: every image into one page-locked buffer per type, then a single synchronisation.
+    // Every image down into one page-locked buffer per type, an event after each: the host copies an image into the
+    // Result as soon as it has arrived, while the next ones are on their way.
     const std::size_t label_values = p * std::size_t(count_);
     float* floats = staged_floats_.reserve(label_values + p * 6);
     float* const staged_labels = floats;
@@ -344,17 +342,20 @@ class CudaSolveBackend final : public SolveBackend {
     int* staged_ids = staged_ints_.reserve(p);
     std::uint8_t* staged_occlusion = staged_bytes_.reserve(p);
     double* staged_sums = staged_doubles_.reserve(std::size_t(std::max(1, 4 * n)));
+    int image = 0;
     auto down = [&](void* to, const void* from, std::size_t bytes) {
       MCFLOW_CUDA_CHECK(cudaMemcpyAsync(to, from, bytes, cudaMemcpyDeviceToHost, s));
+      MCFLOW_CUDA_CHECK(cudaEventRecord(image_downloaded_[image++].event, s));
     };
+    // In fillOutputImages' order of images.
     down(staged_labels, labels(), label_values * sizeof(float));
     down(staged_scene, scene_flow_.get(), p * 3 * sizeof(float));
     down(staged_optical, optical_flow_.get(), p * 2 * sizeof(float));
     down(staged_moved, moved_depth_.get(), p * sizeof(float));
     down(staged_ids, ids_.get(), p * sizeof(int));
     down(staged_occlusion, occlusion_.get(), p);
-    if (n > 0) down(staged_sums, scalar_.get(), std::size_t(4 * n) * sizeof(double));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    if (n > 0) MCFLOW_CUDA_CHECK(cudaMemcpyAsync(staged_sums, scalar_.get(), std::size_t(4 * n) * sizeof(double),
+                                                 cudaMemcpyDeviceToHost, s));
 
     StagedOutputs staged;
     staged.width = W;
@@ -366,7 +367,11 @@ class CudaSolveBackend final : public SolveBackend {
     staged.moved_depth = staged_moved;
     staged.labels = staged_ids;
     staged.occlusion = staged_occlusion;
+    cudaError_t waited[kOutputImages];
+    staged.wait_for_image = [this, &waited](int i) { waited[i] = cudaEventSynchronize(image_downloaded_[i].event); };
     fillOutputImages(staged, result);
+    for (const cudaError_t e : waited) MCFLOW_CUDA_CHECK(e);  // not inside the OpenMP threads: they must not throw
+    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));  // the label sums
     result.segments.assign(std::size_t(n), Segment());
     for (int i = 0; i < n; ++i) {
       Segment& segment = result.segments[std::size_t(i)];
@@ -577,6 +582,8 @@ class CudaSolveBackend final : public SolveBackend {
   PinnedBuffer<unsigned long long> staged_counts_;
   PinnedBuffer<std::uint8_t> staged_bytes_;
   PinnedBuffer<double> staged_motions_;
+  static constexpr int kOutputImages = 6;  // StagedOutputs' images
+  cuda_detail::EventHolder image_downloaded_[kOutputImages];  // each output image has reached its staging buffer
   cuda_detail::EventHolder motions_uploaded_;  // the last upload from staged_motions_ has finished
   PinnedBuffer<float> staged_frames_;
   Intrinsics K_;

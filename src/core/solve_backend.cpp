@@ -229,6 +229,7 @@ void fillOutputImages(const StagedOutputs& s, Result& result) {
   const int W = s.width, H = s.height;
   const std::size_t p = std::size_t(W) * H;
   auto fill = [&](int task) {
+    if (s.wait_for_image) s.wait_for_image(task);
     switch (task) {
       case 0:
         result.soft_labels.width = W, result.soft_labels.height = H, result.soft_labels.count = s.label_count;
@@ -262,6 +263,15 @@ void fillOutputImages(const StagedOutputs& s, Result& result) {
   const bool parallel = bytes >= (std::size_t(2) << 20);
 #pragma omp parallel for schedule(dynamic, 1) if (parallel)
   for (int task = 0; task < 6; ++task) fill(task);
+}
+
+void stageInputFrames(const RgbdFrame& frame1, const RgbdFrame& frame2, float* staged) {
+  const std::size_t plane = std::size_t(frame1.width()) * std::size_t(frame1.height());
+  const std::vector<float>* inputs[4] = {&frame1.intensity.data, &frame1.depth.data, &frame2.intensity.data,
+                                         &frame2.depth.data};
+  const bool parallel = plane * 4 * sizeof(float) >= (std::size_t(2) << 20);
+#pragma omp parallel for schedule(static, 1) num_threads(4) if (parallel)
+  for (int i = 0; i < 4; ++i) std::copy_n(inputs[i]->data(), plane, staged + std::size_t(i) * plane);
 }
 
 std::unique_ptr<SolveBackend> makeCpuSolveBackend() { return std::make_unique<CpuSolveBackend>(); }

@@ -346,5 +346,30 @@ TEST(SolveBackend, InitialLabelsFromCentresAreTheNearestCentreAssignment) {
   EXPECT_THROW(a->initialiseLabelsFromCentres(1, {}), InputError);
 }
 
+// The CUDA backend's upload buffer: the four planes in order, whether copied by one thread (small) or several.
+TEST(SolveBackend, StagedInputFramesHoldTheFourPlanesInOrder) {
+  for (const int width : {64, 640}) {
+    const int height = width * 3 / 4;
+    RgbdFrame a, b;
+    for (RgbdFrame* f : {&a, &b}) {
+      f->intensity = ImageF(width, height, 1);
+      f->depth = ImageF(width, height, 1);
+    }
+    const std::size_t plane = std::size_t(width) * height;
+    for (std::size_t k = 0; k < plane; ++k) {
+      a.intensity.data[k] = float(k % 1000) * 1e-3f;
+      a.depth.data[k] = 1.f + float(k % 7);
+      b.intensity.data[k] = float(k % 999) * 1e-3f;
+      b.depth.data[k] = 2.f + float(k % 5);
+    }
+    std::vector<float> staged(plane * 4, -1.f);
+    stageInputFrames(a, b, staged.data());
+    EXPECT_TRUE(std::equal(a.intensity.data.begin(), a.intensity.data.end(), staged.begin())) << width;
+    EXPECT_TRUE(std::equal(a.depth.data.begin(), a.depth.data.end(), staged.begin() + long(plane))) << width;
+    EXPECT_TRUE(std::equal(b.intensity.data.begin(), b.intensity.data.end(), staged.begin() + 2 * long(plane))) << width;
+    EXPECT_TRUE(std::equal(b.depth.data.begin(), b.depth.data.end(), staged.begin() + 3 * long(plane))) << width;
+  }
+}
+
 }  // namespace
 }  // namespace mc_flow

@@ -15,6 +15,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -126,11 +127,19 @@ struct StagedOutputs {
   const float* moved_depth = nullptr;
   const std::int32_t* labels = nullptr;
   const std::uint8_t* occlusion = nullptr;
+  /// Called before image `i` is read (0 soft labels, 1 scene flow, 2 optical flow, 3 moved depth, 4 labels,
+  /// 5 occlusion), so that copying an image that has arrived overlaps the transfer of the next ones; null when every
+  /// image is in host memory already. Runs on OpenMP threads: it must not throw.
+  std::function<void(int)> wait_for_image;
 };
 /// @brief Fills result's soft_labels, scene_flow, optical_flow, moved_depth, labels and occlusion from `staged`:
 /// each image allocated and copied in one pass, large images on several OpenMP threads (at 1280x720, ~50 MB
 /// allocated, zero-filled and copied on one thread took most of the CUDA outputs stage).
 void fillOutputImages(const StagedOutputs& staged, Result& result);
+/// @brief Copies both frames' intensity and depth planes (`width` x `height` floats each) into `staged` in the order
+/// frame1 intensity, frame1 depth, frame2 intensity, frame2 depth; several OpenMP threads from a few MB on (the CUDA
+/// backend's page-locked upload buffer: one thread spent 1.5-3 ms copying a 1280x720 pair).
+void stageInputFrames(const RgbdFrame& frame1, const RgbdFrame& frame2, float* staged);
 
 /// @brief Checks initial hard labels (size, values in [-1, motion_labels), motion_labels >= 1); throws
 /// InputError naming the value.
