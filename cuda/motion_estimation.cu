@@ -62,6 +62,7 @@ constexpr float kMinMass = 0.05f;       // pixels with less motion-label mass ar
 constexpr int kUpper = 21;
 constexpr int kLabelStride = kUpper + 6 + 2;
 constexpr int kPairChunkPixels = 4 * kThreads;  // pixels per block of accumulatePairs: 4 per thread
+constexpr long long kPairBlocks = 16384;         // accumulatePairs' grid: above this, several pairs per block
 constexpr int kLabelMaskWords = (kMaxMotionLabels + 63) / 64;
 constexpr int kLabelCost = kUpper + 6, kLabelPixels = kUpper + 7;
 
@@ -435,24 +436,10 @@ __global__ void reduceBlockPartials(const double* __restrict__ partials, int blo
 // of the level into partials[(pair * chunks + chunk) * kUpper + k]; addChunksKernel adds the chunks in order. (One
 // block per pair over a CUB-compacted list of the blended pixels was latency-bound: 42-65 us per call at 320x240,
 // ncu; the compaction itself took two more launches.)
-__global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p, int chunk_pixels,
-                                                            double* __restrict__ partials) {
-  if (p.skip && *p.skip) return;
-  __shared__ double warp_sums[kWarps][kUpper];
-  const int n = p.motion_labels;
-  int a = 0, pair = int(blockIdx.y);
-  while (pair >= n - 1 - a) {  // pair index -> (a, b), row-major over the upper triangle
-    pair -= n - 1 - a;
-    ++a;
-  }
-  const int b = a + 1 + pair;
-  const std::size_t plane = std::size_t(p.width) * p.height;
-  double* out = partials + (std::size_t(blockIdx.y) * gridDim.x + blockIdx.x) * kUpper;
-  const unsigned long long* mask = p.chunk_labels + std::size_t(blockIdx.x) * kLabelMaskWords;
-  if (!((mask[a / 64] >> (a % 64)) & 1ull) || !((mask[b / 64] >> (b % 64)) & 1ull)) {  // the pair never meets here
-    if (threadIdx.x < kUpper) out[threadIdx.x] = 0.0;
-    return;
-  }
+
+// The sums of one pair over one chunk (every thread of the block calls it: it has barriers).
+__device__ __forceinline__ void accumulatePairInChunk(const KernelParams& p, int chunk_pixels, std::size_t plane, int a,
+                                                      int b, double (*warp_sums)[kUpper], double* out) {
   double acc[kUpper];
 #pragma unroll
   for (int k = 0; k < kUpper; ++k) acc[k] = 0.0;
@@ -486,7 +473,35 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
     for (int w = 0; w < kWarps; ++w) s += warp_sums[w][threadIdx.x];
     out[threadIdx.x] = s;
   }
+  __syncthreads();  // warp_sums is read before the block's next pair overwrites it
 }
+
+// Block (chunk, y) takes the pairs y, y + gridDim.y, ...: one pair per block where chunks are few (coarse levels), a
+// few where they are many, so that a fine level's chunks x pairs blocks, nearly all of which find the pair absent
+// and exit, do not cost a launch wave each. The sums per (chunk, pair) are the same whatever the stride.
+__global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p, int chunk_pixels,
+                                                            double* __restrict__ partials) {
+  if (p.skip && *p.skip) return;
+  __shared__ double warp_sums[kWarps][kUpper];
+  const int n = p.motion_labels, pairs = n * (n - 1) / 2;
+  const std::size_t plane = std::size_t(p.width) * p.height;
+  const unsigned long long* mask = p.chunk_labels + std::size_t(blockIdx.x) * kLabelMaskWords;
+  for (int pair = int(blockIdx.y); pair < pairs; pair += int(gridDim.y)) {
+    int a = 0, rest = pair;
+    while (rest >= n - 1 - a) {  // pair index -> (a, b), row-major over the upper triangle
+      rest -= n - 1 - a;
+      ++a;
+    }
+    const int b = a + 1 + rest;
+    double* out = partials + (std::size_t(pair) * gridDim.x + blockIdx.x) * kUpper;
+    if (!((mask[a / 64] >> (a % 64)) & 1ull) || !((mask[b / 64] >> (b % 64)) & 1ull)) {  // the pair never meets here
+      if (threadIdx.x < kUpper) out[threadIdx.x] = 0.0;
+      continue;
+    }
+    accumulatePairInChunk(p, chunk_pixels, plane, a, b, warp_sums, out);
+  }
+}
+
 
 // ----------------------------------------------------------------- the IRLS loop on the device
 // One iteration's step control and solve after the sums (estimateMotionsWith's host loop, the same
@@ -1167,8 +1182,10 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
     if (l.pairs > 0) {
       const int chunks = int(l.pair_chunks);
-      accumulatePairs<<<dim3(unsigned(chunks), unsigned(l.pairs)), kThreads, 0, s>>>(p, kPairChunkPixels,
-                                                                                     pair_partials_.get());
+      // One pair per block up to kPairBlocks blocks (every 320x240 level), beyond that a few pairs per block.
+      const int pair_stride = int(std::min<long long>(l.pairs, std::max<long long>(1, kPairBlocks / chunks)));
+      accumulatePairs<<<dim3(unsigned(chunks), unsigned(pair_stride)), kThreads, 0, s>>>(p, kPairChunkPixels,
+                                                                                         pair_partials_.get());
       MCFLOW_CUDA_CHECK_LAUNCH("accumulatePairs");
       const unsigned add_blocks = unsigned((l.pairs * kUpper * 32 + kThreads - 1) / kThreads);
       cuda_detail::addChunksKernel<kUpper><<<add_blocks, kThreads, 0, s>>>(pair_partials_.get(), chunks, int(l.pairs),
