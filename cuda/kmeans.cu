@@ -24,7 +24,8 @@ __global__ void nearestCentreKernel(const DeviceImage points, const KMeansCentre
 
 }  // namespace
 
-void launchNearestCentreLabels(const DeviceImage& points, const KMeansCentres& centres, int* hard, cudaStream_t stream) {
+void launchNearestCentreLabels(const DeviceImage& points, const KMeansCentres& centres, int* hard,
+                               cudaStream_t stream) {
   const std::size_t plane = std::size_t(points.width) * points.height;
   if (plane == 0) return;
   nearestCentreKernel<<<unsigned((plane + kThreads - 1) / kThreads), kThreads, 0, stream>>>(points, centres, hard);

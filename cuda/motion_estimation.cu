@@ -562,33 +562,6 @@ __device__ __forceinline__ void dampedLabelBlock(const double* upper, double dam
     }
 }
 
-// Cholesky of the 6x6 SPD matrix M (row-major) and the solution of M x = b, by one thread.
-__device__ void solveSmall(double M[36], const double b[6], double x[6]) {
-  for (int j = 0; j < 6; ++j) {
-    double d = M[j * 6 + j];
-    const double floor = 1e-12 * d;  // as the groups' pivot floor
-    for (int k = 0; k < j; ++k) d -= M[j * 6 + k] * M[j * 6 + k];
-    d = sqrt(d > floor ? d : floor);
-    M[j * 6 + j] = d;
-    for (int i = j + 1; i < 6; ++i) {
-      double v = M[i * 6 + j];
-      for (int k = 0; k < j; ++k) v -= M[i * 6 + k] * M[j * 6 + k];
-      M[i * 6 + j] = v / d;
-    }
-  }
-  double y[6];
-  for (int i = 0; i < 6; ++i) {
-    double v = b[i];
-    for (int k = 0; k < i; ++k) v -= M[i * 6 + k] * y[k];
-    y[i] = v / M[i * 6 + i];
-  }
-  for (int i = 5; i >= 0; --i) {
-    double v = y[i];
-    for (int k = i + 1; k < 6; ++k) v -= M[k * 6 + i] * x[k];
-    x[i] = v / M[i * 6 + i];
-  }
-}
-
 __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   extern __shared__ double shared_matrix[];
   __shared__ int s_stop;
@@ -598,7 +571,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   __shared__ double delta[6 * kMaxMotionLabels];
   __shared__ double rhs[6 * kMaxMotionLabels];
   __shared__ double inverse_diagonal[6 * kMaxMotionLabels];  // of the group's Cholesky factor
-  __shared__ double damped_diagonal[6 * kMaxMotionLabels];   // of each label's block, for the coupling test
+  __shared__ double label_factor[21 * kMaxMotionLabels];     // Cholesky of each damped block, for the coupling test
   __shared__ unsigned coupled[(kMaxMotionLabels * (kMaxMotionLabels - 1) / 2 + 31) / 32];
   __shared__ double largest_step[kStepThreads / 32];
   const int n = q.n, tid = threadIdx.x;
@@ -631,7 +604,11 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     const double* label = q.sums + i * kLabelStride;
     frozen[i] = controlMotionLabel(label[kLabelCost], label[kLabelPixels], q.min_label_pixels, q.min_damping,
                                    q.twists + 6 * i, q.control[i]);
-    dampedLabelDiagonal(label, q.control[i].damping, damped_diagonal + 6 * i);
+    if (q.min_coupling > 0.0 && !frozen[i]) {
+      double A[36];
+      dampedLabelBlock(label, q.control[i].damping, A, 6, 0);
+      choleskyLower6(A, label_factor + 21 * i);
+    }
   }
   __syncthreads();
   if (q.last) {  // the last iteration only checks the previous step
@@ -640,7 +617,8 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   }
 
   // Groups of coupled labels (a frozen label's rows and columns are zero: it is coupled to none; a coupling weaker
-  // than min_coupling is dropped, motionLabelsCoupled).
+  // than min_coupling does not join two labels' groups, motionLabelsCoupled).
+  int any_coupled = 0;
   for (int pair = tid; pair < pairs; pair += blockDim.x) {
     int a = 0, rest = pair;
     while (rest >= n - 1 - a) {
@@ -653,16 +631,18 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     int nonzero = 0;  // every value read (no short cut): 21 loads in flight at once
 #pragma unroll
     for (int k = 0; k < kUpper; ++k) nonzero |= block[k] != 0.0 ? 1 : 0;
-    double pair_diagonal[6];
-#pragma unroll
-    for (int r = 0; r < 6; ++r) pair_diagonal[r] = block[kUpperDiagonal[r]];
-    if (motionLabelsCoupled(pair_diagonal, nonzero != 0, damped_diagonal + 6 * a, damped_diagonal + 6 * b,
-                            q.min_coupling))
+    double strength = 0.0;
+    if (nonzero && q.min_coupling > 0.0) {
+      double C[36];
+      for (int k = 0; k < kUpper; ++k) C[kUpperRow[k] * 6 + kUpperCol[k]] = C[kUpperCol[k] * 6 + kUpperRow[k]] = block[k];
+      strength = motionCouplingStrength(label_factor + 21 * a, C, label_factor + 21 * b);
+    }
+    if (motionLabelsCoupled(strength, nonzero != 0, q.min_coupling)) {
       atomicOr(&coupled[pair / 32], 1u << (pair % 32));
+      any_coupled = 1;
+    }
   }
-  int any_coupled = 0;
-  for (int w = tid; w < (pairs + 31) / 32; w += blockDim.x) any_coupled |= coupled[w] != 0u;
-  if (!__syncthreads_or(any_coupled)) {
+  if (!__syncthreads_or(any_coupled)) {  // also the barrier after the atomicOr's
     // No coupling kept (the common case with motion_min_coupling > 0): every label is its own group, set in parallel
     // instead of by the serial union-find below.
     for (int i = tid; i < n; i += blockDim.x) {
@@ -713,10 +693,11 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     const double* label = q.sums + i * kLabelStride;
     double x[6] = {0, 0, 0, 0, 0, 0};
     if (!frozen[i]) {
-      double M[36], b[6];
+      double M[36], L[21], b[6];
       dampedLabelBlock(label, q.control[i].damping, M, 6, 0);
+      choleskyLower6(M, L);
       for (int k = 0; k < 6; ++k) b[k] = -label[kUpper + k];
-      solveSmall(M, b, x);
+      choleskySolve6(L, b, x);
     }
     for (int k = 0; k < 6; ++k) delta[6 * i + k] = x[k];
   }
@@ -738,8 +719,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     for (int e = tid; e < pair_values; e += blockDim.x) {
       const int ga = e / (m * kUpper), rest = e - ga * m * kUpper, gb = rest / kUpper, k = rest - gb * kUpper;
       if (ga >= gb) continue;
-      const int pair = pairIndex(n, group[ga], group[gb]);
-      const double v = (coupled[pair / 32] >> (pair % 32)) & 1u ? pair_sums[std::size_t(pair) * kUpper + k] : 0.0;
+      const double v = pair_sums[std::size_t(pairIndex(n, group[ga], group[gb])) * kUpper + k];
       const int r = kUpperRow[k], c = kUpperCol[k];
       M[(6 * ga + r) * ld + 6 * gb + c] = v;
       M[(6 * ga + c) * ld + 6 * gb + r] = v;
@@ -1182,7 +1162,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
     if (l.pairs > 0) {
       const int chunks = int(l.pair_chunks);
-      // One pair per block up to kPairBlocks blocks (every 320x240 level), beyond that a few pairs per block.
+      // One pair per block up to kPairBlocks blocks (a 320x240 level with up to 21 labels), beyond that several.
       const int pair_stride = int(std::min<long long>(l.pairs, std::max<long long>(1, kPairBlocks / chunks)));
       accumulatePairs<<<dim3(unsigned(chunks), unsigned(pair_stride)), kThreads, 0, s>>>(p, kPairChunkPixels,
                                                                                          pair_partials_.get());

@@ -133,37 +133,28 @@ class CudaSolveBackend final : public SolveBackend {
     hard_labels_.reserve(p);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(hard_labels_.get(), staged, p * sizeof(int), cudaMemcpyHostToDevice,
                                       stream_.stream));
-    count_ = 0;  // nothing to keep when the buffers grow
-    level_ = level;
-    reserveLabels(plane(), motion_labels + 1);
-    count_ = motion_labels + 1;
-    cuda_detail::launchOneHotLabels(L.points1, hard_labels_.get(), count_, labels(), stream_.stream);
-    clearOcclusionAndDual();
+    labelsFromHardLabels(level, motion_labels);
     // The staging buffer is reused by the next small transfer: wait for this one.
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
   }
 
   void initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres) override {
+    // More centres than a kernel argument holds (Config caps initial_labels at its size): the host's assignment.
+    if (int(centres.size()) > cuda_detail::KMeansCentres::kMax)
+      return SolveBackend::initialiseLabelsFromCentres(level, centres);
+    if (centres.empty()) throw InputError("initial labels from K-means: no centre given");
     const DeviceLevel& L = levelAt(level);
-    if (centres.empty() || int(centres.size()) > cuda_detail::KMeansCentres::kMax)
-      throw InputError("initial labels from K-means: " + std::to_string(centres.size()) + " centres, expected 1.." +
-                       std::to_string(cuda_detail::KMeansCentres::kMax));
     cuda_detail::KMeansCentres argument;
     argument.count = int(centres.size());
     for (std::size_t c = 0; c < centres.size(); ++c)
       for (int k = 0; k < 3; ++k) argument.xyz[3 * c + std::size_t(k)] = centres[c](k);
-    const std::size_t p = std::size_t(L.width) * L.height;
-    hard_labels_.reserve(p);
+    hard_labels_.reserve(std::size_t(L.width) * L.height);
     cuda_detail::launchNearestCentreLabels(L.points1, argument, hard_labels_.get(), stream_.stream);
-    count_ = 0;  // nothing to keep when the buffers grow
-    level_ = level;
-    reserveLabels(plane(), int(centres.size()) + 1);
-    count_ = int(centres.size()) + 1;
-    cuda_detail::launchOneHotLabels(L.points1, hard_labels_.get(), count_, labels(), stream_.stream);
-    clearOcclusionAndDual();
+    labelsFromHardLabels(level, int(centres.size()));
   }
 
   int labelLevel() const override { return level_; }
+
 
   void moveLabels(int level) override {
     const DeviceLevel& to = levelAt(level);
@@ -367,8 +358,12 @@ class CudaSolveBackend final : public SolveBackend {
     staged.moved_depth = staged_moved;
     staged.labels = staged_ids;
     staged.occlusion = staged_occlusion;
-    cudaError_t waited[kOutputImages];
-    staged.wait_for_image = [this, &waited](int i) { waited[i] = cudaEventSynchronize(image_downloaded_[i].event); };
+    cudaError_t waited[kOutputImages] = {};
+    // On OpenMP threads, which may not have used this backend's device yet.
+    staged.wait_for_image = [this, &waited](int i) {
+      waited[i] = cudaSetDevice(device_);
+      if (waited[i] == cudaSuccess) waited[i] = cudaEventSynchronize(image_downloaded_[i].event);
+    };
     fillOutputImages(staged, result);
     for (const cudaError_t e : waited) MCFLOW_CUDA_CHECK(e);  // not inside the OpenMP threads: they must not throw
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));  // the label sums
@@ -564,6 +559,17 @@ class CudaSolveBackend final : public SolveBackend {
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(buffer.get(), host.data(), count * sizeof(T), cudaMemcpyHostToDevice,
                                       stream_.stream));
   }
+
+  // One-hot labels at `level` from hard_labels_ (motion_labels + 1 planes); clears the occlusion and the dual.
+  void labelsFromHardLabels(int level, int motion_labels) {
+    count_ = 0;  // nothing to keep when the buffers grow
+    level_ = level;
+    reserveLabels(plane(), motion_labels + 1);
+    count_ = motion_labels + 1;
+    cuda_detail::launchOneHotLabels(levelAt(level).points1, hard_labels_.get(), count_, labels(), stream_.stream);
+    clearOcclusionAndDual();
+  }
+
   template <typename T>
   void download(T* host, const T* device, std::size_t count, PinnedBuffer<T>& staging) {
     T* staged = staging.reserve(count);

@@ -40,11 +40,16 @@ void RgbdFrame::validate(const std::string& name) const {
   if (intensity.data.size() != intensity.pixelCount() || depth.data.size() != depth.pixelCount())
     throw InputError(name + ": image buffer size does not match its width x height");
 
-  for (int y = 0; y < intensity.height; ++y)
-    for (int x = 0; x < intensity.width; ++x)
-      if (!std::isfinite(intensity(x, y)))
-        throw InputError(name + ": intensity at pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is " +
-                         number(intensity(x, y)) + " (must be finite)");
+  // A branch-free pass first (it vectorises, a loop that stops at the first bad value does not); only a frame that
+  // fails it is searched for the pixel to name.
+  bool all_finite = true;
+  for (const float v : intensity.data) all_finite &= std::isfinite(v);
+  if (!all_finite)
+    for (int y = 0; y < intensity.height; ++y)
+      for (int x = 0; x < intensity.width; ++x)
+        if (!std::isfinite(intensity(x, y)))
+          throw InputError(name + ": intensity at pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is " +
+                           number(intensity(x, y)) + " (must be finite)");
 
   for (const float z : depth.data)
     if (isValidDepth(z)) return;

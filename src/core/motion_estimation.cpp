@@ -6,6 +6,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <numeric>
@@ -268,15 +269,23 @@ int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen
   if (H.rows() != 6 * n || H.cols() != 6 * n || g.size() != 6 * n)
     throw InputError("solveCoupledBlocks: H is " + std::to_string(H.rows()) + "x" + std::to_string(H.cols()) +
                      " and g has " + std::to_string(g.size()) + " entries (expected 6n x 6n and 6n)");
-  const Eigen::VectorXd diagonal = H.diagonal();
+  using Block = Eigen::Matrix<double, 6, 6, Eigen::RowMajor>;
+  std::vector<std::array<double, 21>> factor(static_cast<std::size_t>(n));  // of each damped diagonal block
+  if (min_coupling > 0.0)
+    for (int i = 0; i < n; ++i) {
+      const Block A = H.block<6, 6>(6 * i, 6 * i);
+      choleskyLower6(A.data(), factor[std::size_t(i)].data());
+    }
   auto coupled = [&](int a, int b) {
-    const Eigen::Matrix<double, 6, 6> block = H.block<6, 6>(6 * a, 6 * b);
-    const Vector6d pair_diagonal = block.diagonal();
-    return motionLabelsCoupled(pair_diagonal.data(), block.cwiseAbs().maxCoeff() > 0.0, diagonal.data() + 6 * a,
-                               diagonal.data() + 6 * b, min_coupling);
+    const Block pair = H.block<6, 6>(6 * a, 6 * b);
+    const bool any_entry = pair.cwiseAbs().maxCoeff() > 0.0;
+    const double strength = any_entry && min_coupling > 0.0
+                                ? motionCouplingStrength(factor[std::size_t(a)].data(), pair.data(),
+                                                         factor[std::size_t(b)].data())
+                                : 0.0;
+    return motionLabelsCoupled(strength, any_entry, min_coupling);
   };
-  std::vector<char> pair_coupled(static_cast<std::size_t>(n) * std::size_t(n), 0);
-  // Groups of coupled labels: union-find over the couplings kept.
+  // Groups of coupled labels: union-find over the couplings at least min_coupling strong.
   std::vector<int> parent(static_cast<std::size_t>(n));
   std::iota(parent.begin(), parent.end(), 0);
   auto root = [&parent](int i) {
@@ -285,10 +294,7 @@ int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen
   };
   for (int a = 0; a < n; ++a)
     for (int b = a + 1; b < n; ++b)
-      if (coupled(a, b)) {
-        pair_coupled[std::size_t(a * n + b)] = pair_coupled[std::size_t(b * n + a)] = 1;
-        parent[std::size_t(root(b))] = root(a);
-      }
+      if (coupled(a, b)) parent[std::size_t(root(b))] = root(a);
   // The labels grouped by root (groups in the order of their roots, labels ascending within a group).
   std::vector<int> order(static_cast<std::size_t>(n));
   std::iota(order.begin(), order.end(), 0);
@@ -306,12 +312,7 @@ int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen
     Eigen::VectorXd b(m);
     for (int r = 0; r < labels; ++r) {
       b.segment<6>(6 * r) = -g.segment<6>(6 * group[r]);
-      for (int c = 0; c < labels; ++c) {
-        if (r == c || pair_coupled[std::size_t(group[r] * n + group[c])])
-          A.block<6, 6>(6 * r, 6 * c) = H.block<6, 6>(6 * group[r], 6 * group[c]);
-        else
-          A.block<6, 6>(6 * r, 6 * c).setZero();
-      }
+      for (int c = 0; c < labels; ++c) A.block<6, 6>(6 * r, 6 * c) = H.block<6, 6>(6 * group[r], 6 * group[c]);
     }
     const Eigen::VectorXd x = A.ldlt().solve(b);
     for (int r = 0; r < labels; ++r) delta.segment<6>(6 * group[r]) = x.segment<6>(6 * r);
@@ -378,7 +379,8 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
       for (int d = 6 * i; d < 6 * i + 6; ++d)
         total.H(d, d) = dampedDiagonal(total.H(d, d), control[std::size_t(i)].damping, block_max);
     }
-    stats.largest_block = std::max(stats.largest_block, solveCoupledBlocks(total.H, total.g, delta, config.motion_min_coupling));
+    stats.largest_block =
+        std::max(stats.largest_block, solveCoupledBlocks(total.H, total.g, delta, config.motion_min_coupling));
     if (!delta.allFinite()) {
       stats.stop = MotionStop::SolveFailed;
       break;

@@ -11,6 +11,10 @@
 #include "mc_flow/core/occlusion.h"
 #include "mc_flow/core/scene_flow.h"
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
 namespace mc_flow {
 
 void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int height) {
@@ -270,7 +274,12 @@ void stageInputFrames(const RgbdFrame& frame1, const RgbdFrame& frame2, float* s
   const std::vector<float>* inputs[4] = {&frame1.intensity.data, &frame1.depth.data, &frame2.intensity.data,
                                          &frame2.depth.data};
   const bool parallel = plane * 4 * sizeof(float) >= (std::size_t(2) << 20);
-#pragma omp parallel for schedule(static, 1) num_threads(4) if (parallel)
+#ifdef _OPENMP
+  const int threads = std::min(4, omp_get_max_threads());  // within Config::threads (ThreadCountScope)
+#else
+  const int threads = 1;
+#endif
+#pragma omp parallel for schedule(static, 1) num_threads(threads) if (parallel)
   for (int i = 0; i < 4; ++i) std::copy_n(inputs[i]->data(), plane, staged + std::size_t(i) * plane);
 }
 

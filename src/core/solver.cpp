@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <future>
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/kmeans.h"
@@ -74,6 +75,9 @@ struct Start {
   int label_iterations = 1, label_iterations_final = 1;  // per label step inside the loop / the final one
   int first_motion_coarsest = 0;  // the first motion step's coarsest level
   bool first_motion_refines = false;  // the first motion step uses motion_iterations_refine
+  // The first motion step drops weak label couplings (motion_min_coupling): K-means' labels, whose seams are cuts
+  // through rigid parts; from the first label step on the labels' blends are its decisions, and every coupling counts.
+  bool first_motion_drops_weak_couplings = false;
 };
 
 }  // namespace
@@ -269,21 +273,16 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
 }
 
 Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
-  // K-means on 3D points at a coarse level (a few hundred points, on the host), assigned at the label level.
+  // K-means on 3D points at a coarse level (a few hundred to a few thousand points, on the host), assigned at the
+  // label level. It runs on a second host thread while the dominant motion below runs on the backend: independent
+  // work (the dominant motion takes every valid pixel as one label), so a GPU is busy while the host clusters.
   const auto t = Clock::now();
-  KMeansResult kmeans = kmeansPoints(backend->framePoints(p.kmeans_level), config.initial_labels,
-                                     config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
-  if (kmeans.centres.empty())
-    kmeans = kmeansPoints(backend->framePoints(p.label_level), config.initial_labels, config.kmeans_max_iterations,
-                          config.kmeans_tolerance, config.seed);
-  Start start;
-  start.motion_labels = std::max(1, int(kmeans.centres.size()));
-  if (kmeans.centres.empty()) {  // no valid point at either level (prepare() refuses such a pair): all outliers
-    const ImageF& points = backend->framePoints(p.label_level);
-    backend->initialiseLabels(p.label_level, ImageI32(points.width, points.height, 1, -1), 1);
-  } else {
-    backend->initialiseLabelsFromCentres(p.label_level, kmeans.centres);
-  }
+  const ImageF& kmeans_points = backend->framePoints(p.kmeans_level);  // fetched before the backend is in use
+  std::future<KMeansResult> clustering = std::async(std::launch::async, [&] {
+    const ThreadCountScope threads(config.threads);
+    return kmeansPoints(kmeans_points, config.initial_labels, config.kmeans_max_iterations, config.kmeans_tolerance,
+                        config.seed);
+  });
   // Every label starts from the dominant motion (one label over all valid pixels, coarse to fine down to the
   // label level): with a moving camera all labels then start near the truth, and a small segment that is
   // frozen at the coarse levels (too few pixels there) does not have to find a large motion from zero.
@@ -295,11 +294,24 @@ Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
       dominant = single[0];
     }
   }
+  KMeansResult kmeans = clustering.get();
+  if (kmeans.centres.empty())
+    kmeans = kmeansPoints(backend->framePoints(p.label_level), config.initial_labels, config.kmeans_max_iterations,
+                          config.kmeans_tolerance, config.seed);
+  Start start;
+  start.motion_labels = std::max(1, int(kmeans.centres.size()));
+  if (kmeans.centres.empty()) {  // no valid point at either level (prepare() refuses such a pair): all outliers
+    const ImageF& points = backend->framePoints(p.label_level);
+    backend->initialiseLabels(p.label_level, ImageI32(points.width, points.height, 1, -1), 1);
+  } else {
+    backend->initialiseLabelsFromCentres(p.label_level, kmeans.centres);
+  }
   start.twists.assign(std::size_t(start.motion_labels), dominant);
   start.outer_iterations = config.outer_iterations;
   start.label_iterations = config.label_iterations;
   start.label_iterations_final = config.label_iterations_final;
   start.first_motion_coarsest = p.levels - 1;
+  start.first_motion_drops_weak_couplings = true;
   result.timings.initialisation += elapsedMs(t);
   progress("pyramid %d levels, labels at level %d, %d initial labels (K-means)", p.levels, p.label_level,
            start.motion_labels);
@@ -373,6 +385,7 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
         k == 0 ? start.first_motion_coarsest : std::min(p.levels - 1, finest + config.motion_coarse_levels_after_first);
     Config motion_config = config;
     if (k > 0 || start.first_motion_refines) motion_config.motion_iterations_per_level = config.motion_iterations_refine;
+    if (k > 0 || !start.first_motion_drops_weak_couplings) motion_config.motion_min_coupling = 0.0;
     for (int level = coarsest; level >= finest; --level) {
       MotionLevelStats ms = estimateMotionsWith(
           labels.motionAccumulator(level, MotionLabels::Current, occlusions, config), twists, motion_config);

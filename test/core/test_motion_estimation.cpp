@@ -9,7 +9,10 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/motion_estimation.h"
+#include "mc_flow/core/motion_step_control.h"
 #include "mc_flow/core/pyramid.h"
+#include "coupled_labels.h"
+#include "mc_flow/testing/synthetic_scene.h"
 #include "test_helpers.h"
 
 using namespace mc_flow;
@@ -270,7 +273,7 @@ TEST(MotionNormalEquations, SolvingCoupledGroupsApartGivesTheWholeSolution) {
   for (int i = 0; i < n; ++i) H.block<6, 6>(6 * i, 6 * i) += Eigen::MatrixXd::Identity(6, 6);
   const Eigen::VectorXd g = Eigen::VectorXd::Random(6 * n);
   Eigen::VectorXd delta;
-  EXPECT_EQ(solveCoupledBlocks(H, g, delta), 3);
+  EXPECT_EQ(solveCoupledBlocks(H, g, delta, 0.0), 3);
   const Eigen::VectorXd whole = H.ldlt().solve(-g);
   ASSERT_EQ(delta.size(), whole.size());
   EXPECT_LT((delta - whole).cwiseAbs().maxCoeff(), 1e-9 * whole.cwiseAbs().maxCoeff());
@@ -278,14 +281,66 @@ TEST(MotionNormalEquations, SolvingCoupledGroupsApartGivesTheWholeSolution) {
 
   // One coupling between the groups joins them.
   couple(5, 2);
-  EXPECT_EQ(solveCoupledBlocks(H, g, delta), 5);
+  EXPECT_EQ(solveCoupledBlocks(H, g, delta, 0.0), 5);
   EXPECT_LT((H * delta + g).norm(), 1e-9 * g.norm());
   // Sizes that do not fit are refused.
-  EXPECT_THROW(solveCoupledBlocks(H, Eigen::VectorXd::Zero(6 * n - 1), delta), InputError);
+  EXPECT_THROW(solveCoupledBlocks(H, Eigen::VectorXd::Zero(6 * n - 1), delta, 0.0), InputError);
 }
 
-// With a coupling threshold (Config::motion_min_coupling), a weak coupling is dropped from the step: the labels it
-// joined are solved apart, as if their off-diagonal block were zero, while strong couplings stay in the joint solve.
+// The coupling strength sees a direction that a label's own pixels hardly constrain: with the same off-diagonal block,
+// a label whose block is weak along one direction is coupled far more strongly (canonical correlations, not ratios of
+// diagonal entries); an off-diagonal block that is the diagonal blocks' geometric mean (the pixels fully shared)
+// gives 1 per direction.
+TEST(MotionNormalEquations, CouplingStrengthIsTheCanonicalCorrelationOfTheSteps) {
+  using Block = Eigen::Matrix<double, 6, 6, Eigen::RowMajor>;
+  auto strength = [](const Block& A, const Block& C, const Block& B) {
+    double La[21], Lb[21];
+    choleskyLower6(A.data(), La);
+    choleskyLower6(B.data(), Lb);
+    return motionCouplingStrength(La, C.data(), Lb);
+  };
+  const Block I = Block::Identity();
+  EXPECT_NEAR(strength(I, 0.05 * I, I), 0.05 * std::sqrt(6.0), 1e-12);
+  EXPECT_NEAR(strength(4 * I, 4 * I, 4 * I), std::sqrt(6.0), 1e-12);
+  EXPECT_EQ(strength(I, Block::Zero(), I), 0.0);
+  // Mixed directions: a block weak along (1, 1, 0, 0, 0, 0)/sqrt(2) only, so no diagonal entry is small.
+  Eigen::Matrix<double, 6, 1> v = Eigen::Matrix<double, 6, 1>::Zero();
+  v(0) = v(1) = std::sqrt(0.5);
+  const Block weak_direction = I - 0.999 * v * v.transpose();
+  Block C = Block::Zero();
+  C.topLeftCorner<2, 2>() = 0.02 * v.head<2>() * v.head<2>().transpose();
+  const double diagonal_ratio = C(0, 0) / std::sqrt(weak_direction(0, 0) * I(0, 0));
+  EXPECT_LT(diagonal_ratio, 0.02);
+  EXPECT_GT(strength(weak_direction, C, I), 0.5) << "the weak direction's coupling must show";
+}
+
+// Groups split at weak couplings in a level's IRLS loop (the scene of the device test in test_cuda,
+// DeviceLoopSplitsGroupsAtWeakCouplingsAsTheHostLoopDoes): labels 0-1 and 1-2 blend half and half on wide strips, 0
+// and 2 on a few pixels (inside the group), 2 and 3 on a few pixels only. Every coupling kept: one group of four;
+// the default threshold: {0, 1, 2} and {3}.
+TEST(MotionNormalEquations, TheLevelLoopSplitsGroupsAtWeakCouplings) {
+  SyntheticSceneOptions options;
+  options.width = 320;
+  options.height = 240;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Config config;
+  const Pyramid p1 = buildPyramid(pair.frame1, pair.intrinsics, 1, config);
+  const Pyramid p2 = buildPyramid(pair.frame2, pair.intrinsics, 1, config);
+  const SoftLabels u = test::labelsWithWeakAndStrongCouplings(320, 240);
+  config.motion_iterations_per_level = 2;
+  for (const double min_coupling : {0.0, Config().motion_min_coupling}) {
+    config.motion_min_coupling = min_coupling;
+    std::vector<Vector6d> twists(4, Vector6d::Zero());
+    for (int i = 0; i < 4; ++i) twists[std::size_t(i)] << 0.004 * i, -0.006, 0.01, 0.002, -0.002 * i, 0.001;
+    auto accumulator = makeCpuMotionAccumulator();
+    const MotionLevelStats stats = estimateMotionsAtLevel(p1[0], p2[0], u, nullptr, twists, config, accumulator.get());
+    EXPECT_EQ(stats.largest_block, min_coupling == 0.0 ? 4 : 3) << "min_coupling " << min_coupling;
+  }
+}
+
+// With a coupling threshold (Config::motion_min_coupling), a weak coupling no longer joins two groups: the labels it
+// joined are solved apart, as if their off-diagonal block were zero, while strong couplings stay in the joint solve;
+// a weak coupling between two labels that strong ones put in one group stays in that group's matrix.
 TEST(MotionNormalEquations, WeakCouplingsAreDroppedFromTheStep) {
   const int n = 4;
   std::srand(11);
@@ -306,11 +361,13 @@ TEST(MotionNormalEquations, WeakCouplingsAreDroppedFromTheStep) {
   pixels(1, 2, 0.02, 0.02);  // weak
   pixels(2, 3, 0.5, 0.5);    // strong
   const Eigen::VectorXd g = Eigen::VectorXd::Random(6 * n);
-  auto strength = [&H](int a, int b) {
-    double s = 0;
-    for (int r = 0; r < 6; ++r)
-      s = std::max(s, H(6 * a + r, 6 * b + r) / std::sqrt(H(6 * a + r, 6 * a + r) * H(6 * b + r, 6 * b + r)));
-    return s;
+  auto strength = [&H](int a, int b) {  // motionCouplingStrength on the blocks, as solveCoupledBlocks computes it
+    using Block = Eigen::Matrix<double, 6, 6, Eigen::RowMajor>;
+    double La[21], Lb[21];
+    const Block A = H.block<6, 6>(6 * a, 6 * a), B = H.block<6, 6>(6 * b, 6 * b), C = H.block<6, 6>(6 * a, 6 * b);
+    choleskyLower6(A.data(), La);
+    choleskyLower6(B.data(), Lb);
+    return motionCouplingStrength(La, C.data(), Lb);
   };
   ASSERT_GT(strength(0, 1), 0.1);
   ASSERT_GT(strength(2, 3), 0.1);
@@ -327,6 +384,22 @@ TEST(MotionNormalEquations, WeakCouplingsAreDroppedFromTheStep) {
   EXPECT_EQ(solveCoupledBlocks(H, g, delta, 1.5), 1);  // above 1: every label apart
   for (int i = 0; i < n; ++i) {
     const Vector6d own = H.block<6, 6>(6 * i, 6 * i).ldlt().solve(-g.segment<6>(6 * i));
+    // The shared 6x6 Cholesky (the device's single-label solve) gives the same step.
+    using Block = Eigen::Matrix<double, 6, 6, Eigen::RowMajor>;
+    const Block A = H.block<6, 6>(6 * i, 6 * i);
+    double L[21], x[6], b[6];
+    choleskyLower6(A.data(), L);
+    for (int k = 0; k < 6; ++k) b[k] = -g(6 * i + k);
+    choleskySolve6(L, b, x);
+    EXPECT_LT((Eigen::Map<const Vector6d>(x) - own).cwiseAbs().maxCoeff(), 1e-9 * own.cwiseAbs().maxCoeff());
     EXPECT_LT((delta.segment<6>(6 * i) - own).cwiseAbs().maxCoeff(), 1e-9 * own.cwiseAbs().maxCoeff()) << "label " << i;
   }
+
+  // A weak coupling inside a group: 3 - 0 strong as well puts {0, 1, 2, 3} in one group (0-1, 2-3 and 3-0 strong),
+  // so 1-2 stays in its matrix and the step is the whole matrix's.
+  pixels(3, 0, 0.5, 0.5);
+  ASSERT_GT(strength(3, 0), 0.1);
+  ASSERT_LT(strength(1, 2), 0.01);
+  EXPECT_EQ(solveCoupledBlocks(H, g, delta, 0.1), 4);
+  EXPECT_LT((H * delta + g).norm(), 1e-9 * g.norm());
 }

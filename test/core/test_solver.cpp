@@ -1,17 +1,18 @@
 // End-to-end tests of the solver on the project's synthetic scenes (known motions, occlusions, parts).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <algorithm>
+#include <limits>
 #include <map>
 
 #include "mc_flow/core/error.h"
-#include "mc_flow/testing/metrics.h"
 #include "mc_flow/core/kmeans.h"
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/testing/metrics.h"
 #include "mc_flow/testing/synthetic_scene.h"
 #include "same_outputs.h"
 #include "test_helpers.h"
@@ -323,27 +324,65 @@ TEST(Solver, RecyclingAResultChangesNothing) {
 namespace mc_flow {
 namespace {
 
-// The CPU backend's K-means initialisation from centres is the nearest-centre assignment of the level's points
-// handed to initialiseLabels (the CUDA backend's is compared with it in test_cuda); no centre is refused.
-TEST(SolveBackend, InitialLabelsFromCentresAreTheNearestCentreAssignment) {
+// The CPU backend's K-means initialisation from centres: every valid point's one-hot label is its nearest centre
+// (checked here in double precision, independently of nearest_centre.h), invalid points go to the outlier label (the
+// CUDA backend's labels are compared with the CPU's in test_cuda); no centre is refused.
+TEST(SolveBackend, InitialLabelsFromCentresAreTheNearestCentres) {
   SyntheticSceneOptions options;
   options.width = 160;
   options.height = 120;
   const SyntheticPair pair = renderSyntheticPair(options);
   Config config;
-  auto a = makeCpuSolveBackend();
-  auto b = makeCpuSolveBackend();
-  const int levels = pyramidLevelCount(160, 120, config.coarsest_min_width);
-  for (SolveBackend* backend : {a.get(), b.get()})
-    backend->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
-  const std::vector<Eigen::Vector3f> centres =
-      kmeansPoints(a->framePoints(2), 6, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed).centres;
+  auto backend = makeCpuSolveBackend();
+  backend->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics,
+                         pyramidLevelCount(160, 120, config.coarsest_min_width), config);
+  const std::vector<Eigen::Vector3f> centres = kmeansPoints(backend->framePoints(2), 6, config.kmeans_max_iterations,
+                                                            config.kmeans_tolerance, config.seed).centres;
   ASSERT_GE(centres.size(), 3u);
-  a->initialiseLabelsFromCentres(1, centres);
-  b->initialiseLabels(1, assignToNearestCentre(b->framePoints(1), centres), int(centres.size()));
-  ASSERT_EQ(a->labelCount(), int(centres.size()) + 1);
-  EXPECT_EQ(a->downloadLabels().data, b->downloadLabels().data);
-  EXPECT_THROW(a->initialiseLabelsFromCentres(1, {}), InputError);
+  backend->initialiseLabelsFromCentres(1, centres);
+  const int count = int(centres.size()) + 1;
+  ASSERT_EQ(backend->labelCount(), count);
+  const SoftLabels u = backend->downloadLabels();
+  const ImageF& points = backend->framePoints(1);
+  int valid = 0, mismatches = 0;
+  for (int y = 0; y < points.height; ++y)
+    for (int x = 0; x < points.width; ++x) {
+      int expected = count - 1;  // the outlier label
+      if (std::isfinite(points(x, y, 2))) {
+        ++valid;
+        double best = std::numeric_limits<double>::infinity();
+        for (int c = 0; c + 1 < count; ++c) {
+          double d = 0;
+          for (int k = 0; k < 3; ++k) d += std::pow(double(points(x, y, k)) - double(centres[std::size_t(c)](k)), 2);
+          if (d < best) best = d, expected = c;
+        }
+      }
+      for (int i = 0; i < count; ++i) mismatches += u.at(i, x, y) != (i == expected ? 1.f : 0.f);
+    }
+  EXPECT_GT(valid, 1000);
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_THROW(backend->initialiseLabelsFromCentres(1, {}), InputError);
+}
+
+// motion_min_coupling drops weak couplings in the first motion step of a cold start only (K-means' labels): with a
+// threshold that no coupling reaches, every label of the first outer iteration is solved alone, and the later motion
+// steps, on the label step's blends, still solve coupled labels together.
+TEST(Solver, WeakCouplingsAreDroppedInTheFirstMotionStepOnly) {
+  SyntheticSceneOptions options;
+  options.width = 320;
+  options.height = 240;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Config config;
+  config.backend = Backend::Cpu;
+  config.motion_min_coupling = 3.0;  // above every coupling (at most sqrt(6))
+  const Result r = Solver(config).solve(pair.frame1, pair.frame2, pair.intrinsics);
+  ASSERT_GE(r.iterations.size(), 2u);
+  int first = 0, later = 0;
+  for (std::size_t k = 0; k < r.iterations.size(); ++k)
+    for (const MotionLevelStats& level : r.iterations[k].motion_levels)
+      (k == 0 ? first : later) = std::max(k == 0 ? first : later, level.largest_block);
+  EXPECT_EQ(first, 1);
+  EXPECT_GT(later, 1) << "later motion steps should solve blended labels together";
 }
 
 // The CUDA backend's upload buffer: the four planes in order, whether copied by one thread (small) or several.
@@ -366,7 +405,8 @@ TEST(SolveBackend, StagedInputFramesHoldTheFourPlanesInOrder) {
     stageInputFrames(a, b, staged.data());
     EXPECT_TRUE(std::equal(a.intensity.data.begin(), a.intensity.data.end(), staged.begin())) << width;
     EXPECT_TRUE(std::equal(a.depth.data.begin(), a.depth.data.end(), staged.begin() + long(plane))) << width;
-    EXPECT_TRUE(std::equal(b.intensity.data.begin(), b.intensity.data.end(), staged.begin() + 2 * long(plane))) << width;
+    EXPECT_TRUE(std::equal(b.intensity.data.begin(), b.intensity.data.end(), staged.begin() + 2 * long(plane)))
+        << width;
     EXPECT_TRUE(std::equal(b.depth.data.begin(), b.depth.data.end(), staged.begin() + 3 * long(plane))) << width;
   }
 }

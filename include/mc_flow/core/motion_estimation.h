@@ -88,13 +88,14 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
                                         const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator = nullptr);
 
-/// @brief Solves H delta = -g where H is 6n x 6n with 6x6 blocks per label pair (diagonal blocks damped): labels
-/// that share no pixel (an all-zero off-diagonal block), or whose coupling is weaker than `min_coupling`
-/// (`motionLabelsCoupled`, Config::motion_min_coupling), are solved apart, one LDLT per group of coupled labels, with
-/// the dropped couplings' blocks taken as zero. With `min_coupling` 0: the solution of the whole matrix up to rounding.
-/// Returns the size of the largest group in labels.
+/// @brief Solves H delta = -g where H is 6n x 6n with 6x6 blocks per label pair (diagonal blocks damped), one LDLT
+/// per group of labels: the groups are joined by the couplings at least `min_coupling` strong (`motionLabelsCoupled`,
+/// Config::motion_min_coupling), so labels that share no pixel or only weakly coupled ones are solved apart, the
+/// blocks between groups taken as zero; inside a group every block is kept (a principal submatrix stays positive
+/// semidefinite, a matrix with some inner blocks zeroed need not). With `min_coupling` 0: the solution of the whole
+/// matrix up to rounding. Returns the size of the largest group in labels.
 int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen::VectorXd& delta,
-                       double min_coupling = 0.0);
+                       double min_coupling);
 
 /// @brief The same IRLS with an accumulator already bound to a level (setLevel called, or a backend's
 /// device-resident one); `twists` holds one twist per motion label of that binding.

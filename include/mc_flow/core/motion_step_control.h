@@ -56,19 +56,76 @@ MCFLOW_HOST_DEVICE inline double dampedDiagonal(double h, double damping, double
   return h + (damping * h + 1e-9 * (block_max > 1e-12 ? block_max : 1e-12));
 }
 
-/// @brief Whether two labels' motions are solved jointly in a step. `pair_diagonal` is the diagonal of their
-/// off-diagonal block H_ab, `diagonal_a` / `diagonal_b` the damped diagonals of H_aa and H_bb. Blended pixels
-/// couple them with strength max_r |H_ab(r,r)| / sqrt(H_aa(r,r) H_bb(r,r)) (at most about 1: the three blocks sum
-/// the same positive semidefinite terms, weighted u_a u_b, u_a^2 and u_b^2); below `min_coupling` the coupling is
-/// dropped from the step. With `min_coupling` 0 any non-zero entry of H_ab (`any_entry`) couples them.
-MCFLOW_HOST_DEVICE inline bool motionLabelsCoupled(const double pair_diagonal[6], bool any_entry,
-                                                   const double diagonal_a[6], const double diagonal_b[6],
-                                                   double min_coupling) {
+/// @brief Packed lower triangle of a 6x6 matrix, row by row: the index of (r, c), c <= r.
+MCFLOW_HOST_DEVICE inline int lowerIndex6(int r, int c) { return r * (r + 1) / 2 + c; }
+
+/// @brief Cholesky factor L (packed lower, 21 values) of a symmetric 6x6 block `A` (row-major), A = L L^T. A pivot
+/// that rounding leaves at or below 1e-12 of its diagonal entry is raised to that floor (a nearly indefinite block
+/// without damping still gives a finite factor).
+MCFLOW_HOST_DEVICE inline void choleskyLower6(const double A[36], double L[21]) {
+  for (int j = 0; j < 6; ++j) {
+    double d = A[j * 6 + j];
+    const double floor = 1e-12 * d;
+    for (int k = 0; k < j; ++k) d -= L[lowerIndex6(j, k)] * L[lowerIndex6(j, k)];
+    d = std::sqrt(d > floor ? d : floor);
+    L[lowerIndex6(j, j)] = d;
+    for (int i = j + 1; i < 6; ++i) {
+      double v = A[i * 6 + j];
+      for (int k = 0; k < j; ++k) v -= L[lowerIndex6(i, k)] * L[lowerIndex6(j, k)];
+      L[lowerIndex6(i, j)] = v / d;
+    }
+  }
+}
+
+/// @brief Solves L L^T x = b with a factor from choleskyLower6.
+MCFLOW_HOST_DEVICE inline void choleskySolve6(const double L[21], const double b[6], double x[6]) {
+  double y[6];
+  for (int i = 0; i < 6; ++i) {
+    double v = b[i];
+    for (int k = 0; k < i; ++k) v -= L[lowerIndex6(i, k)] * y[k];
+    y[i] = v / L[lowerIndex6(i, i)];
+  }
+  for (int i = 5; i >= 0; --i) {
+    double v = y[i];
+    for (int k = i + 1; k < 6; ++k) v -= L[lowerIndex6(k, i)] * x[k];
+    x[i] = v / L[lowerIndex6(i, i)];
+  }
+}
+
+/// @brief How strongly blended pixels couple the steps of labels a and b: the Frobenius norm of
+/// L_a^-1 H_ab L_b^-T, where L_a L_a^T and L_b L_b^T are the damped diagonal blocks (choleskyLower6) and `pair` is the
+/// off-diagonal block H_ab (row-major). Its singular values are the canonical correlations of the two labels' steps,
+/// in every direction of the twists, not only along the axes: a direction that a label's own pixels hardly constrain
+/// and its blended pixels do shows up here (0: independent; the largest singular value is below 1 for a positive
+/// definite system, the norm at most sqrt(6)).
+MCFLOW_HOST_DEVICE inline double motionCouplingStrength(const double L_a[21], const double pair[36],
+                                                        const double L_b[21]) {
+  double X[36];  // L_a^-1 H_ab, column by column
+  for (int j = 0; j < 6; ++j)
+    for (int i = 0; i < 6; ++i) {
+      double v = pair[i * 6 + j];
+      for (int k = 0; k < i; ++k) v -= L_a[lowerIndex6(i, k)] * X[k * 6 + j];
+      X[i * 6 + j] = v / L_a[lowerIndex6(i, i)];
+    }
+  double sum = 0.0;
+  for (int i = 0; i < 6; ++i) {  // row i of X L_b^-T: L_b m = (row i of X)^T
+    double m[6];
+    for (int j = 0; j < 6; ++j) {
+      double v = X[i * 6 + j];
+      for (int k = 0; k < j; ++k) v -= L_b[lowerIndex6(j, k)] * m[k];
+      m[j] = v / L_b[lowerIndex6(j, j)];
+      sum += m[j] * m[j];
+    }
+  }
+  return std::sqrt(sum);
+}
+
+/// @brief Whether a coupling joins two labels' groups, whose motions are then solved jointly in a step: its strength
+/// (motionCouplingStrength) reaches `min_coupling`; below it, the coupling is dropped from the step unless other
+/// couplings put both labels in one group. With `min_coupling` 0 any non-zero entry of H_ab (`any_entry`) couples.
+MCFLOW_HOST_DEVICE inline bool motionLabelsCoupled(double strength, bool any_entry, double min_coupling) {
   if (!any_entry) return false;
-  if (min_coupling <= 0.0) return true;
-  for (int r = 0; r < 6; ++r)
-    if (pair_diagonal[r] * pair_diagonal[r] >= min_coupling * min_coupling * diagonal_a[r] * diagonal_b[r]) return true;
-  return false;
+  return min_coupling <= 0.0 || strength >= min_coupling;
 }
 
 /// @brief Scales a label's step into the trust region (metres / radians) and returns its largest entry.
