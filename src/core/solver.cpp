@@ -7,7 +7,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <future>
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/kmeans.h"
@@ -274,15 +273,11 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
 
 Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
   // K-means on 3D points at a coarse level (a few hundred to a few thousand points, on the host), assigned at the
-  // label level. It runs on a second host thread while the dominant motion below runs on the backend: independent
-  // work (the dominant motion takes every valid pixel as one label), so a GPU is busy while the host clusters.
+  // label level. (Running it on a second host thread, beside the dominant motion, was measured on the H100 machine
+  // and dropped: a new thread per pair with its own OpenMP threads made the initialisation slower, 2.5-56 ms.)
   const auto t = Clock::now();
-  const ImageF& kmeans_points = backend->framePoints(p.kmeans_level);  // fetched before the backend is in use
-  std::future<KMeansResult> clustering = std::async(std::launch::async, [&] {
-    const ThreadCountScope threads(config.threads);
-    return kmeansPoints(kmeans_points, config.initial_labels, config.kmeans_max_iterations, config.kmeans_tolerance,
-                        config.seed);
-  });
+  KMeansResult kmeans = kmeansPoints(backend->framePoints(p.kmeans_level), config.initial_labels,
+                                     config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
   // Every label starts from the dominant motion (one label over all valid pixels, coarse to fine down to the
   // label level): with a moving camera all labels then start near the truth, and a small segment that is
   // frozen at the coarse levels (too few pixels there) does not have to find a large motion from zero.
@@ -294,7 +289,6 @@ Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
       dominant = single[0];
     }
   }
-  KMeansResult kmeans = clustering.get();
   if (kmeans.centres.empty())
     kmeans = kmeansPoints(backend->framePoints(p.label_level), config.initial_labels, config.kmeans_max_iterations,
                           config.kmeans_tolerance, config.seed);
