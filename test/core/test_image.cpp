@@ -48,6 +48,11 @@ TEST(Image, FrameValidate) {
   RgbdFrame nan_intensity = f;
   nan_intensity.intensity(3, 2) = std::numeric_limits<float>::quiet_NaN();
   expectInputError([&] { nan_intensity.validate("frame2"); }, {"frame2", "(3, 2)"});
+  for (const float bad : {std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity()}) {
+    RgbdFrame infinite_intensity = f;
+    infinite_intensity.intensity(7, 5) = bad;  // the last pixel: the fast pass and the search both reach it
+    expectInputError([&] { infinite_intensity.validate("frame1"); }, {"frame1", "(7, 5)"});
+  }
 
   RgbdFrame no_depth = f;
   for (float& z : no_depth.depth.data) z = 0.f;
