@@ -65,9 +65,9 @@ struct Prepared {
   int levels = 0, finest = 0, label_level = 0, kmeans_level = 0, valid_label_level = 0;
 };
 
-// What Algorithm 1 starts from: hard labels at the label level, one twist per motion label.
+// What Algorithm 1 starts from: the backend's labels (set by coldStart or warmStart), one twist per motion label.
 struct Start {
-  ImageI32 hard;
+  ImageI32 hard;  // a warm start's carried labels at the label level (a cold start assigns on the backend)
   int motion_labels = 0;
   std::vector<Vector6d> twists;
   int outer_iterations = 1;
