@@ -319,10 +319,7 @@ TEST(MotionNormalEquations, CouplingStrengthIsTheCanonicalCorrelationOfTheSteps)
 // and 2 on a few pixels (inside the group), 2 and 3 on a few pixels only. Every coupling kept: one group of four;
 // the default threshold: {0, 1, 2} and {3}.
 TEST(MotionNormalEquations, TheLevelLoopSplitsGroupsAtWeakCouplings) {
-  SyntheticSceneOptions options;
-  options.width = 320;
-  options.height = 240;
-  const SyntheticPair pair = renderSyntheticPair(options);
+  const SyntheticPair pair = renderSyntheticPair(320, 240);
   Config config;
   const Pyramid p1 = buildPyramid(pair.frame1, pair.intrinsics, 1, config);
   const Pyramid p2 = buildPyramid(pair.frame2, pair.intrinsics, 1, config);

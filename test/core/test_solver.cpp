@@ -131,10 +131,7 @@ INSTANTIATE_TEST_SUITE_P(AllVariants, SolverOnSyntheticScenes,
                                             ::testing::Values(Regularizer::Quadratic, Regularizer::TotalVariation)));
 
 TEST(Solver, OutputsAreConsistent) {
-  SyntheticSceneOptions options;
-  options.width = 160;
-  options.height = 120;
-  const SyntheticPair pair = renderSyntheticPair(options);
+  const SyntheticPair pair = renderSyntheticPair(160, 120);
   Config config;
   config.backend = Backend::Cpu;
   Solver solver(config);
@@ -186,10 +183,7 @@ TEST(Solver, OutputsAreConsistent) {
 }
 
 TEST(Solver, StaticSceneGivesZeroMotion) {
-  SyntheticSceneOptions options;
-  options.width = 160;
-  options.height = 120;
-  const SyntheticPair pair = renderSyntheticPair(options);
+  const SyntheticPair pair = renderSyntheticPair(160, 120);
   Solver solver(Config{});
   const Result r = solver.solve(pair.frame1, pair.frame1, pair.intrinsics);
   for (const Segment& s : r.segments) EXPECT_LT(s.twist.cwiseAbs().maxCoeff(), 1e-6) << s.twist.transpose();
@@ -273,18 +267,12 @@ TEST(Solver, RejectsBadConfig) {
   EXPECT_THROW(Solver{c}, ConfigError);
   Config tooDeep;
   tooDeep.processing_level = 6;
-  SyntheticSceneOptions options;
-  options.width = 80;
-  options.height = 60;
-  const SyntheticPair pair = renderSyntheticPair(options);
+  const SyntheticPair pair = renderSyntheticPair(80, 60);
   EXPECT_THROW(Solver(tooDeep).solve(pair.frame1, pair.frame2, pair.intrinsics), ConfigError);
 }
 
 TEST(Solver, DeterministicForAGivenSeed) {
-  SyntheticSceneOptions options;
-  options.width = 160;
-  options.height = 120;
-  const SyntheticPair pair = renderSyntheticPair(options);
+  const SyntheticPair pair = renderSyntheticPair(160, 120);
   Config config;
   config.threads = 2;  // several threads: the parallel reductions must not depend on scheduling
   const Result a = Solver(config).solve(pair.frame1, pair.frame2, pair.intrinsics);
@@ -328,10 +316,7 @@ namespace {
 // (checked here in double precision, independently of nearest_centre.h), invalid points go to the outlier label (the
 // CUDA backend's labels are compared with the CPU's in test_cuda); no centre is refused.
 TEST(SolveBackend, InitialLabelsFromCentresAreTheNearestCentres) {
-  SyntheticSceneOptions options;
-  options.width = 160;
-  options.height = 120;
-  const SyntheticPair pair = renderSyntheticPair(options);
+  const SyntheticPair pair = renderSyntheticPair(160, 120);
   Config config;
   auto backend = makeCpuSolveBackend();
   backend->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics,
@@ -368,10 +353,7 @@ TEST(SolveBackend, InitialLabelsFromCentresAreTheNearestCentres) {
 // threshold that no coupling reaches, every label of the first outer iteration is solved alone, and the later motion
 // steps, on the label step's blends, still solve coupled labels together.
 TEST(Solver, WeakCouplingsAreDroppedInTheFirstMotionStepOnly) {
-  SyntheticSceneOptions options;
-  options.width = 320;
-  options.height = 240;
-  const SyntheticPair pair = renderSyntheticPair(options);
+  const SyntheticPair pair = renderSyntheticPair(320, 240);
   Config config;
   config.backend = Backend::Cpu;
   config.motion_min_coupling = 3.0;  // above every coupling (at most sqrt(6))

@@ -57,6 +57,13 @@ int syntheticVariantCount();
 
 /// @brief Renders the pair (first_frame, first_frame + 1) of a variant, with its ground truth.
 SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options);
+/// @brief The default scene (variant 0, no noise) at width x height.
+inline SyntheticPair renderSyntheticPair(int width, int height) {
+  SyntheticSceneOptions options;
+  options.width = width;
+  options.height = height;
+  return renderSyntheticPair(options);
+}
 
 /// @brief Renders frame `t` of a smoothly moving sequence (t = 0, 1, 2, ...): the colour, the frame and,
 /// when t > 0, nothing else. Consecutive frames t, t+1 form a pair with motion like renderSyntheticPair.
