@@ -283,6 +283,9 @@ void launchGeometricWeights(const DeviceLevel& level, double min_weight, float* 
 void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms, int motion_labels,
                      const std::uint8_t* occluded, const Config& config, float* data_cost,
                      std::uint8_t* outlier_only, cudaStream_t stream);
+/// @brief addSwitchingCost: `cost` added to every label but the carried one where carried >= 0 and not outlier-only.
+void launchAddSwitchingCost(const int* carried, float cost, std::size_t plane, int count,
+                            const std::uint8_t* outlier_only, float* data_cost, cudaStream_t stream);
 
 // ---------------------------------------------------------------- K-means' assignment (kmeans.cu)
 /// @brief K-means centres as a kernel argument (Config::initial_labels is at most 64).
@@ -309,6 +312,15 @@ void launchUpsampleLabels(const float* in, int width, int height, int count, flo
 /// @brief Nearest-pixel resampling of a mask between pyramid levels.
 void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint8_t* out, int out_width,
                         int out_height, cudaStream_t stream);
+void launchResampleMask(const int* in, int width, int height, int* out, int out_width, int out_height,
+                        cudaStream_t stream);
+/// @brief SolveBackend::holdCarriedLabels: the hard initial label where it is below `carried_labels` and the point
+/// is valid, else -1.
+void launchCarriedFromHard(const DeviceImage& points, const int* hard, int carried_labels, int* carried,
+                           cudaStream_t stream);
+/// @brief Carried labels through a remap (host `target`, count entries): target[c], or -1 where that is the outlier.
+void launchRemapCarried(int* carried, std::size_t plane, int count, const int* target, int new_count,
+                        cudaStream_t stream);
 /// @brief out plane j = sum of the in planes i with target[i] == j, in ascending i (target on the device).
 void launchRemapLabels(const float* in, std::size_t plane, int count, const int* target, int new_count, float* out,
                        cudaStream_t stream);

@@ -648,6 +648,27 @@ void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms
   MCFLOW_CUDA_CHECK_LAUNCH("dataCostsKernel");
 }
 
+namespace {
+
+__global__ void addSwitchingCostKernel(const int* __restrict__ carried, float cost, std::size_t plane, int count,
+                                       const std::uint8_t* __restrict__ outlier_only, float* __restrict__ data_cost) {
+  const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (idx >= plane) return;
+  const int own = carried[idx];
+  if (own < 0 || outlier_only[idx]) return;
+  for (int i = 0; i < count; ++i)
+    if (i != own) data_cost[std::size_t(i) * plane + idx] = __fadd_rn(data_cost[std::size_t(i) * plane + idx], cost);
+}
+
+}  // namespace
+
+void launchAddSwitchingCost(const int* carried, float cost, std::size_t plane, int count,
+                            const std::uint8_t* outlier_only, float* data_cost, cudaStream_t stream) {
+  addSwitchingCostKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(carried, cost, plane, count, outlier_only,
+                                                                           data_cost);
+  MCFLOW_CUDA_CHECK_LAUNCH("addSwitchingCostKernel");
+}
+
 }  // namespace cuda_detail
 
 }  // namespace mc_flow

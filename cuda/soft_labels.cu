@@ -92,8 +92,9 @@ __global__ void upsampleKernel(const float* __restrict__ in, int w, int h, int c
   if (scale == 0.f) out[std::size_t(count - 1) * out_plane + o] = 1.f;
 }
 
-__global__ void resampleMaskKernel(const std::uint8_t* __restrict__ in, int w, int h, std::uint8_t* __restrict__ out,
-                                   int ow, int oh, double scale) {
+template <typename T>
+__global__ void resampleMaskKernel(const T* __restrict__ in, int w, int h, T* __restrict__ out, int ow, int oh,
+                                   double scale) {
   const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
   if (x >= ow || y >= oh) return;
   const int sy = min(max(int(floor((y + 0.5) * scale)), 0), h - 1);
@@ -115,6 +116,27 @@ __global__ void remapKernel(const float* __restrict__ in, std::size_t plane, int
       if (table.target[i] == j) sum = __fadd_rn(sum, in[i * plane + idx]);
     out[j * plane + idx] = sum;
   }
+}
+
+// The carried label a pixel started in: its hard initial label where that is one of the carried ones and the point is
+// valid (the CPU backend's argmax of the one-hot labels), else -1.
+__global__ void carriedFromHardKernel(const DeviceImage points, const int* __restrict__ hard, int carried_labels,
+                                      int* __restrict__ carried) {
+  const std::size_t plane = std::size_t(points.width) * points.height;
+  const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (idx >= plane) return;
+  const int h = hard[idx];
+  carried[idx] = isfinite(points.data[idx * 3 + 2]) && h >= 0 && h < carried_labels ? h : -1;
+}
+
+__global__ void remapCarriedKernel(int* __restrict__ carried, std::size_t plane, const RemapTable table,
+                                   int new_count) {
+  const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (idx >= plane) return;
+  const int c = carried[idx];
+  if (c < 0) return;
+  const int t = table.target[c];
+  carried[idx] = t == new_count - 1 ? -1 : t;  // merged: the merged label; removed to the outlier label: none
 }
 
 // Pixel k's share of label `label`'s support: sum of u.
@@ -214,6 +236,31 @@ void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint
   resampleMaskKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(
       in, width, height, out, out_width, out_height, levelScale(width, out_width));
   MCFLOW_CUDA_CHECK_LAUNCH("resampleMaskKernel");
+}
+
+void launchResampleMask(const int* in, int width, int height, int* out, int out_width, int out_height,
+                        cudaStream_t stream) {
+  resampleMaskKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(
+      in, width, height, out, out_width, out_height, levelScale(width, out_width));
+  MCFLOW_CUDA_CHECK_LAUNCH("resampleMaskKernel");
+}
+
+void launchCarriedFromHard(const DeviceImage& points, const int* hard, int carried_labels, int* carried,
+                           cudaStream_t stream) {
+  const std::size_t plane = std::size_t(points.width) * points.height;
+  carriedFromHardKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(points, hard, carried_labels, carried);
+  MCFLOW_CUDA_CHECK_LAUNCH("carriedFromHardKernel");
+}
+
+void launchRemapCarried(int* carried, std::size_t plane, int count, const int* target, int new_count,
+                        cudaStream_t stream) {
+  if (count > kMaxRemapPlanes)
+    throw InputError("CUDA carried-label remap: " + std::to_string(count) + " planes, at most " +
+                     std::to_string(kMaxRemapPlanes));
+  RemapTable table{};
+  for (int i = 0; i < count; ++i) table.target[i] = target[i];
+  remapCarriedKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(carried, plane, table, new_count);
+  MCFLOW_CUDA_CHECK_LAUNCH("remapCarriedKernel");
 }
 
 void launchRemapLabels(const float* in, std::size_t plane, int count, const int* target, int new_count, float* out,

@@ -109,6 +109,7 @@ class CudaSolveBackend final : public SolveBackend {
     count_ = 0;
     level_ = 0;
     weights_level_ = -1;
+    carried_held_ = false;
   }
 
   const ImageF& framePoints(int level) override {
@@ -153,6 +154,16 @@ class CudaSolveBackend final : public SolveBackend {
     labelsFromHardLabels(level, int(centres.size()));
   }
 
+  void holdCarriedLabels(int carried_labels) override {
+    carried_held_ = false;
+    if (carried_labels <= 0 || count_ == 0) return;
+    const DeviceLevel& L = levels_[std::size_t(level_)];
+    carried_[carried_slot_].reserve(plane());
+    cuda_detail::launchCarriedFromHard(L.points1, hard_labels_.get(), std::min(carried_labels, count_ - 1), carried(),
+                                       stream_.stream);
+    carried_held_ = true;
+  }
+
   int labelLevel() const override { return level_; }
 
 
@@ -160,6 +171,12 @@ class CudaSolveBackend final : public SolveBackend {
     const DeviceLevel& to = levelAt(level);
     if (level != level_) {
       int w = levels_[std::size_t(level_)].width, h = levels_[std::size_t(level_)].height;
+      if (carried_held_) {
+        DeviceBuffer<int>& moved = carried_[1 - carried_slot_];
+        moved.reserve(std::size_t(to.width) * to.height);
+        cuda_detail::launchResampleMask(carried(), w, h, moved.get(), to.width, to.height, stream_.stream);
+        carried_slot_ = 1 - carried_slot_;
+      }
       reserveLabels(std::size_t(to.width) * to.height, count_);  // may move the labels to the other buffer
       if (level < level_) {
         cuda_detail::launchUpsampleLabels(labels(), w, h, count_, scratch(), to.width, to.height, stream_.stream);
@@ -267,6 +284,9 @@ class CudaSolveBackend final : public SolveBackend {
     outlier_only_.reserve(p);
     cuda_detail::launchDataCosts(L, transforms_.get(), int(n), use_occlusion ? occlusion_.get() : nullptr, config,
                                  data_cost_.get(), outlier_only_.get(), s);
+    if (carried_held_)
+      cuda_detail::launchAddSwitchingCost(carried(), float(config.warm_switch_cost), p, count_, outlier_only_.get(),
+                                          data_cost_.get(), s);
     const std::size_t values = p * std::size_t(count_);
     before_.reserve(values);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(before_.get(), labels(), values * sizeof(float), cudaMemcpyDeviceToDevice, s));
@@ -404,6 +424,7 @@ class CudaSolveBackend final : public SolveBackend {
     reserveLabels(p, std::max(count_, new_count));
     cuda_detail::launchRemapLabels(labels(), p, count_, target.data(), new_count, scratch(), stream_.stream);
     swapLabels();
+    if (carried_held_) cuda_detail::launchRemapCarried(carried(), p, count_, target.data(), new_count, stream_.stream);
     if (new_count != count_) zeroDual(p, new_count);
     count_ = new_count;
   }
@@ -567,6 +588,7 @@ class CudaSolveBackend final : public SolveBackend {
     reserveLabels(plane(), motion_labels + 1);
     count_ = motion_labels + 1;
     cuda_detail::launchOneHotLabels(levelAt(level).points1, hard_labels_.get(), count_, labels(), stream_.stream);
+    carried_held_ = false;
     clearOcclusionAndDual();
   }
 
@@ -607,6 +629,11 @@ class CudaSolveBackend final : public SolveBackend {
   DeviceBuffer<double> scalar_, partials_, motions_, cuts_;  // partials_: chunked sums' scratch
   DeviceBuffer<cuda_detail::DeviceTransform> transforms_;
   DeviceBuffer<int> counts_, hard_labels_;
+  // holdCarriedLabels: the carried label each pixel started in (-1: none), at level_; two buffers for moveLabels.
+  DeviceBuffer<int> carried_[2];
+  int carried_slot_ = 0;
+  bool carried_held_ = false;
+  int* carried() { return carried_[carried_slot_].get(); }
   DeviceBuffer<long long> targets_;
   DeviceBuffer<unsigned long long> moved_;
   int current_ = 0, count_ = 0, level_ = 0, weights_level_ = -1;

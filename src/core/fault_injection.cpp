@@ -41,6 +41,10 @@ class FaultInjectingBackend final : public SolveBackend {
     strike("initialiseLabelsFromCentres");
     inner_->initialiseLabelsFromCentres(level, centres);
   }
+  void holdCarriedLabels(int carried_labels) override {
+    strike("holdCarriedLabels");
+    inner_->holdCarriedLabels(carried_labels);
+  }
   int labelLevel() const override { return inner_->labelLevel(); }
   void moveLabels(int level) override {
     strike("moveLabels");
@@ -118,7 +122,7 @@ class FaultInjectingBackend final : public SolveBackend {
 
 const std::vector<std::string>& backendFaultStages() {
   static const std::vector<std::string> stages{
-      "buildPyramids", "framePoints", "initialiseLabels", "initialiseLabelsFromCentres", "moveLabels",
+      "buildPyramids", "framePoints", "initialiseLabels", "initialiseLabelsFromCentres", "holdCarriedLabels", "moveLabels",
       "motionAccumulator", "updateOcclusion", "labelStep", "downloadLabels", "outputs", "supports", "remap",
       "ownedMoments", "trialCuts", "applyCuts", "costModel"};
   return stages;

@@ -125,7 +125,7 @@ void validateRemap(const std::vector<int>& target, int old_count, int new_count)
 }
 
 AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twists, LabelCostModel& model,
-                                int valid_pixels, const Config& config, bool remove_small) {
+                                int valid_pixels, const Config& config, bool remove_small, std::vector<bool>* carried) {
   AdaptationStats stats;
   stats.smallest_refused_merge = std::numeric_limits<double>::infinity();
   const int n0 = labels.labelCount() - 1;
@@ -135,8 +135,16 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
                      std::to_string(model.curvature.size()) + " curvatures, " + std::to_string(model.gradient.size()) +
                      " gradients and " + std::to_string(model.cost.size()) + " costs for " + std::to_string(n0) +
                      " motion labels");
+  if (carried && int(carried->size()) != n0)
+    throw InputError("adaptLabelCount: " + std::to_string(carried->size()) + " carried flags for " +
+                     std::to_string(n0) + " motion labels");
   const double price = labelCost(config, valid_pixels);
   std::vector<double> support = labels.supports();
+  // Stream mode: two segments of the previous pair that merge change the smaller one's pixels' segment (and id).
+  auto switchingCost = [&](int a, int b) {
+    if (!carried || !(*carried)[std::size_t(a)] || !(*carried)[std::size_t(b)]) return 0.0;
+    return config.warm_switch_cost * std::min(support[std::size_t(a)], support[std::size_t(b)]);
+  };
   // group[i]: the current label of original label i (-1: removed to the outlier label). The labels
   // themselves change once, at the end, by one remap.
   std::vector<int> group(static_cast<std::size_t>(n0));
@@ -154,7 +162,8 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
     const double v = mergeCostIncrease(model.curvature[std::size_t(a)], model.curvature[std::size_t(b)],
                                        twists[std::size_t(a)], twists[std::size_t(b)]);
     const double pair_price = priceFor(price, model.cost[std::size_t(a)], model.cost[std::size_t(b)], config);
-    increase[std::size_t(a)][std::size_t(b)] = increase[std::size_t(b)][std::size_t(a)] = v - pair_price;
+    increase[std::size_t(a)][std::size_t(b)] = increase[std::size_t(b)][std::size_t(a)] =
+        v + switchingCost(a, b) - pair_price;
   };
   for (int a = 0; a < n0; ++a)
     for (int b = a + 1; b < n0; ++b) fill(a, b);
@@ -172,20 +181,26 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
     if (best_a < 0 || !(best < 0.0)) {
       stats.smallest_refused_merge =
           best_a < 0 ? best
-                     : best + priceFor(price, model.cost[std::size_t(best_a)], model.cost[std::size_t(best_b)], config);
+                     : best - switchingCost(best_a, best_b) +
+                           priceFor(price, model.cost[std::size_t(best_a)], model.cost[std::size_t(best_b)], config);
       break;
     }
     const int keep = support[std::size_t(best_a)] >= support[std::size_t(best_b)] ? best_a : best_b;
     const int drop = keep == best_a ? best_b : best_a;
+    const double data_increase = best - switchingCost(keep, drop);  // still less the price
     const Matrix6d H = model.curvature[std::size_t(keep)] + model.curvature[std::size_t(drop)];
     twists[std::size_t(keep)] = regularised(H).ldlt().solve(model.curvature[std::size_t(keep)] * twists[std::size_t(keep)] +
                                                             model.curvature[std::size_t(drop)] * twists[std::size_t(drop)]);
     model.curvature[std::size_t(keep)] = H;
     model.gradient[std::size_t(keep)] += model.gradient[std::size_t(drop)];
     // The union pays both costs and the predicted increase (best is the increase less the price).
-    model.cost[std::size_t(keep)] += model.cost[std::size_t(drop)] + best +
+    model.cost[std::size_t(keep)] += model.cost[std::size_t(drop)] + data_increase +
                                      priceFor(price, model.cost[std::size_t(keep)], model.cost[std::size_t(drop)], config);
     support[std::size_t(keep)] += support[std::size_t(drop)];
+    if (carried) {
+      (*carried)[std::size_t(keep)] = (*carried)[std::size_t(keep)] || (*carried)[std::size_t(drop)];
+      carried->erase(carried->begin() + drop);
+    }
     dropLabel(drop, keep);
     support.erase(support.begin() + drop);
     twists.erase(twists.begin() + drop);
@@ -211,6 +226,7 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
         model.curvature.erase(model.curvature.begin() + i);
         model.gradient.erase(model.gradient.begin() + i);
         model.cost.erase(model.cost.begin() + i);
+        if (carried) carried->erase(carried->begin() + i);
         ++stats.removed;
       }
     }

@@ -98,6 +98,21 @@ void computeDataCosts(const PyramidLevel& frame1, const PyramidLevel& frame2, co
   }
 }
 
+void addSwitchingCost(const ImageI32& carried, float cost, LabelProblem& problem) {
+  if (!carried.sameSize(problem.width, problem.height))
+    throw InputError("switching cost: carried labels of " + std::to_string(carried.width) + "x" +
+                     std::to_string(carried.height) + " for a " + std::to_string(problem.width) + "x" +
+                     std::to_string(problem.height) + " label problem");
+  const std::size_t plane = std::size_t(problem.width) * problem.height;
+#pragma omp parallel for schedule(static)
+  for (std::size_t idx = 0; idx < plane; ++idx) {
+    const int own = carried.data[idx];
+    if (own < 0 || problem.outlier_only.data[idx]) continue;
+    for (int i = 0; i < problem.count; ++i)
+      if (i != own) problem.data_cost[std::size_t(i) * plane + idx] += cost;
+  }
+}
+
 namespace {
 
 // Regulariser value of one pixel of one label given its weighted forward differences.

@@ -37,11 +37,12 @@ void SolveBackend::initialiseLabelsFromCentres(int level, const std::vector<Eige
 
 namespace {
 
-// Nearest-pixel resampling of a mask to another pyramid level (pixel-centre aligned). Levels differ by a
-// power of two (integer halving drops an odd last column/row), so the scale is 2^k, not the size ratio.
-ImageU8 resampleMask(const ImageU8& mask, int width, int height) {
+// Nearest-pixel resampling of a mask (or of carried labels) to another pyramid level (pixel-centre aligned). Levels
+// differ by a power of two (integer halving drops an odd last column/row), so the scale is 2^k, not the size ratio.
+template <typename T>
+Image<T> resampleMask(const Image<T>& mask, int width, int height) {
   if (mask.sameSize(width, height)) return mask;
-  ImageU8 out(width, height, 1, 0);
+  Image<T> out(width, height, 1, 0);
   const double scale = std::exp2(std::round(std::log2(double(mask.width) / double(width))));  // source px per target px
   for (int y = 0; y < height; ++y) {
     const int sy = std::clamp(int(std::floor((y + 0.5) * scale)), 0, mask.height - 1);
@@ -77,6 +78,7 @@ class CpuSolveBackend final : public SolveBackend {
     valid_counts_.clear();
     for (int l = 0; l < levels; ++l) valid_counts_.push_back(pyramid1_[l].validCount());
     u_ = SoftLabels();
+    carried_ = ImageI32();
     level_ = 0;
     occlusion_ = ImageU8();
     dual_ = LabelDual();
@@ -91,6 +93,7 @@ class CpuSolveBackend final : public SolveBackend {
       const int a = std::isfinite(L.points.data[k * 3 + 2]) ? hard.data[k] : -1;
       u_.plane(a >= 0 ? a : u_.outlier())[k] = 1.f;
     }
+    carried_ = ImageI32();
     level_ = level;
     occlusion_ = ImageU8(L.points.width, L.points.height, 1, 0);
     dual_ = LabelDual();
@@ -99,9 +102,20 @@ class CpuSolveBackend final : public SolveBackend {
   const ImageF& framePoints(int level) override { return levelOf(pyramid1_, level).points; }
   const std::vector<int>& validCounts() const override { return valid_counts_; }
 
+  void holdCarriedLabels(int carried_labels) override {
+    carried_ = ImageI32();
+    if (carried_labels <= 0) return;
+    const ImageI32 initial = u_.argmax();
+    carried_ = ImageI32(u_.width, u_.height, 1, -1);
+    for (std::size_t k = 0; k < initial.data.size(); ++k)
+      if (initial.data[k] < std::min(carried_labels, u_.count - 1)) carried_.data[k] = initial.data[k];
+  }
+
   int labelLevel() const override { return level_; }
 
   void moveLabels(int level) override {
+    if (!carried_.data.empty())
+      carried_ = resampleMask(carried_, pyramid1_[level].points.width, pyramid1_[level].points.height);
     u_ = labelsAtLevel(u_, level_, level, pyramid1_);
     level_ = level;
     occlusion_ = ImageU8(u_.width, u_.height, 1, 0);
@@ -136,6 +150,7 @@ class CpuSolveBackend final : public SolveBackend {
       weights_level_ = level_;
     }
     computeDataCosts(L, pyramid2_[level_], twists, use_occlusion ? &occlusion_ : nullptr, config, problem_);
+    if (!carried_.data.empty()) addSwitchingCost(carried_, float(config.warm_switch_cost), problem_);
     const SoftLabels before = u_;
     const LabelStats ls = optimizer_->optimize(problem_, u_, dual_, iterations, tolerance);
     LabelStepStats out;
@@ -187,6 +202,8 @@ class CpuSolveBackend final : public SolveBackend {
   void remap(const std::vector<int>& target, int new_count) override {
     const int old_count = u_.count;
     store().remap(target, new_count);
+    for (std::int32_t& c : carried_.data)  // a merged label's pixels start in the merged label; removed: none
+      if (c >= 0) c = target[std::size_t(c)] == new_count - 1 ? -1 : target[std::size_t(c)];
     if (new_count != old_count) dual_ = LabelDual();
   }
   std::vector<LabelMoments> ownedMoments() override { return store().ownedMoments(); }
@@ -207,6 +224,7 @@ class CpuSolveBackend final : public SolveBackend {
     return HostLabelStore(u_, pyramid1_[level_], pyramid2_[level_], &occlusion_, accumulator_.get());
   }
 
+  ImageI32 carried_;  // holdCarriedLabels: the carried label each pixel started in (-1: none), at level_
   std::unique_ptr<MotionAccumulator> accumulator_;
   std::unique_ptr<LabelOptimizer> optimizer_;
   static const PyramidLevel& levelOf(const Pyramid& pyramid, int level) {

@@ -70,6 +70,7 @@ struct Start {
   ImageI32 hard;  // a warm start's carried labels at the label level (a cold start assigns on the backend)
   int motion_labels = 0;
   std::vector<Vector6d> twists;
+  int carried_labels = 0;  // labels 0..carried_labels-1 are the previous pair's segments (a warm start)
   int outer_iterations = 1;
   int label_iterations = 1, label_iterations_final = 1;  // per label step inside the loop / the final one
   int first_motion_coarsest = 0;  // the first motion step's coarsest level
@@ -348,7 +349,9 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
     for (std::size_t c = 0; c < kmeans.centres.size(); ++c) start.twists.push_back(widest);
   }
   start.motion_labels = int(start.twists.size());
+  start.carried_labels = int(carried.ids.size());
   backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
+  backend->holdCarriedLabels(start.carried_labels);
   start.outer_iterations = config.warm_outer_iterations;
   start.label_iterations = config.warm_label_iterations;
   start.label_iterations_final = config.warm_label_iterations_final;
@@ -365,6 +368,10 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
   const bool occlusions = config.detect_occlusions;
   const int finest = p.finest;
   std::vector<Vector6d>& twists = start.twists;
+  // Which labels descend from the previous pair's segments (merging two of them pays warm_switch_cost).
+  std::vector<bool> carried(twists.size(), false);
+  std::fill_n(carried.begin(), std::min<std::size_t>(carried.size(), std::size_t(start.carried_labels)), true);
+  std::vector<bool>* carried_or_null = start.carried_labels > 0 ? &carried : nullptr;
   auto t = Clock::now();
 
   // ---- Algorithm 1
@@ -393,7 +400,7 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     // result is the same as merging one step later, but the label step then runs on a few labels, not 20.
     t = Clock::now();
     LabelCostModel early_model = labels.costModel(twists, occlusions, config);
-    const AdaptationStats early = adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false);
+    const AdaptationStats early = adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false, carried_or_null);
     stats.merged += early.merged;
     result.timings.adaptation += elapsedMs(t);
 
@@ -413,12 +420,13 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     // 3. update n: merges and removals on the energy, then (while a motion step follows) splits
     t = Clock::now();
     LabelCostModel model = labels.costModel(twists, occlusions, config);
-    const AdaptationStats as = adaptLabelCount(labels, twists, model, p.valid_label_level, config, true);
+    const AdaptationStats as = adaptLabelCount(labels, twists, model, p.valid_label_level, config, true, carried_or_null);
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.smallest_refused_merge = as.smallest_refused_merge;
     if (k + 1 < start.outer_iterations) {
       stats.split = proposeSplits(labels, twists, occlusions, p.valid_label_level, config).split;
+      carried.resize(twists.size(), false);  // split-off halves are new segments
     }
     stats.labels_after = labels.labelCount() - 1;
     result.timings.adaptation += elapsedMs(t);

@@ -6,7 +6,7 @@
 // warm starts fell back to a cold solve.
 //
 //   mcflow_bench_stream [--frames 30] [--variants 0,1,2] [--width 320] [--height 240] [--backend auto|cpu|cuda]
-//                       [--noise] [--ids] [--set name=value ...]
+//                       [--modes cold,warm] [--noise] [--ids] [--set name=value ...]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -28,6 +28,7 @@ namespace {
 struct Options {
   int frames = 30, width = 320, height = 240;
   std::vector<int> variants{0, 1, 2};
+  std::vector<bool> warm_modes{false, true};
   bool noise = false;
   bool print_ids = false;  // per pair, the majority id of each true part (stderr)
   Config config;
@@ -126,6 +127,7 @@ int main(int argc, char** argv) {
                     {"width", true, "image width (default 320)"},
                     {"height", true, "image height (default 240)"},
                     {"backend", true, "auto | cpu | cuda"},
+                    {"modes", true, "comma-separated: cold, warm (default both)"},
                     {"noise", false, "Kinect-like intensity and depth noise"},
                     {"ids", false, "print each pair's majority id per true part on stderr"}});
   try {
@@ -139,6 +141,11 @@ int main(int argc, char** argv) {
     opt.height = line.integer("height", 240, 16, 8192);
     opt.variants.clear();
     for (const std::string& v : line.list("variants", "0,1,2")) opt.variants.push_back(std::stoi(v));
+    opt.warm_modes.clear();
+    for (const std::string& m : line.list("modes", "cold,warm")) {
+      if (m != "cold" && m != "warm") throw ConfigError("--modes: '" + m + "' is neither cold nor warm");
+      opt.warm_modes.push_back(m == "warm");
+    }
     if (line.has("backend")) opt.config.backend = parseBackend(line.text("backend", "auto"));
     opt.noise = line.has("noise");
     opt.print_ids = line.has("ids");
@@ -166,7 +173,7 @@ int main(int argc, char** argv) {
       }
       pairs.push_back(renderSyntheticPair(so));
     }
-    for (const bool warm : {false, true}) {
+    for (const bool warm : opt.warm_modes) {
       Config config = opt.config;
       config.warm_start = warm;
       const ModeStats st = runSequence(pairs, config, opt.print_ids);

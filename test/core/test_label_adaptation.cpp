@@ -122,6 +122,51 @@ TEST(LabelAdaptation, MergesWhenSharingAMotionCostsLessThanALabel) {
 // label_cost_relative: where the labels already pay a large data cost (model errors everywhere), a merge that raises
 // it by less than that share is taken although it exceeds the absolute price; a small label is never priced by the
 // large one it would join (at most half its own cost).
+// Stream mode: merging two labels carried from the previous pair also changes the segment of the smaller one's pixels,
+// at warm_switch_cost each; a label that is new in this pair (not carried) merges on the data alone.
+TEST(LabelAdaptation, MergingTwoCarriedLabelsPaysTheSwitchingCostOfTheSmallerOne) {
+  Vector6d a = Vector6d::Zero(), b = Vector6d::Zero(), c = Vector6d::Zero();
+  a(0) = 0.020;
+  b(0) = 0.020;  // the same motion as a: no data-cost increase
+  c(0) = -0.03;  // far from both
+  Config config;
+  config.label_cost = 0.02;  // x 300 valid pixels = 6
+  config.warm_switch_cost = 0.1;  // x 100 pixels of the smaller label = 10 > 6
+  auto run = [&](std::vector<bool> carried, std::vector<bool>* kept) {
+    SoftLabels u;
+    ImageF points;
+    makeBands(u, points);
+    std::vector<Vector6d> twists{a, b, c};
+    LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
+    const PyramidLevel unused;
+    HostLabelStore store(u, unused, unused, nullptr);
+    const AdaptationStats st = adaptLabelCount(store, twists, model, 300, config, true, &carried);
+    EXPECT_EQ(carried.size(), twists.size());
+    EXPECT_EQ(u.count, int(twists.size()) + 1);
+    if (kept) *kept = carried;
+    return st;
+  };
+  std::vector<bool> kept;
+  const AdaptationStats refused = run({true, true, true}, &kept);
+  EXPECT_EQ(refused.merged, 0);
+  EXPECT_NEAR(refused.smallest_refused_merge, 0.0, 1e-6);  // the data-cost increase, without the switching cost
+  const AdaptationStats one_new = run({true, false, true}, &kept);
+  EXPECT_EQ(one_new.merged, 1);
+  EXPECT_EQ(kept, (std::vector<bool>{true, true}));  // the merged label is carried
+  config.warm_switch_cost = 0.05;  // x 100 = 5 < 6: the pair pays less than a label
+  EXPECT_EQ(run({true, true, true}, nullptr).merged, 1);
+  // Flags that do not match the labels are refused.
+  SoftLabels u;
+  ImageF points;
+  makeBands(u, points);
+  std::vector<Vector6d> twists{a, b, c};
+  LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
+  const PyramidLevel unused;
+  HostLabelStore store(u, unused, unused, nullptr);
+  std::vector<bool> wrong{true, true};
+  EXPECT_THROW(adaptLabelCount(store, twists, model, 300, config, true, &wrong), InputError);
+}
+
 TEST(LabelAdaptation, RelativePriceMergesWhereTheLabelsPayALotButNotASmallPartIntoTheBackground) {
   auto run = [](double relative, double cost_a, double cost_b) {
     SoftLabels u;

@@ -216,6 +216,28 @@ TEST(LabelOptimization, DataTermAloneGivesArgminLabel) {
   }
 }
 
+TEST(LabelOptimization, SwitchingCostRaisesEveryLabelButTheCarriedOne) {
+  LabelProblem p = makeProblem(4, 2, 3, Regularizer::Quadratic, 1.0, 5);
+  p.outlier_only(3, 1) = 1;
+  const std::vector<float> before = p.data_cost;
+  ImageI32 carried(4, 2, 1, -1);
+  carried(0, 0) = 0;
+  carried(1, 0) = 1;
+  carried(2, 0) = 2;  // the outlier label: a pixel carried as an outlier keeps it cheaply too
+  carried(3, 1) = 0;  // no depth: only the outlier label is feasible there, nothing to add
+  addSwitchingCost(carried, 0.25f, p);
+  const std::size_t plane = 8;
+  for (int y = 0; y < 2; ++y)
+    for (int x = 0; x < 4; ++x)
+      for (int i = 0; i < 3; ++i) {
+        const std::size_t k = std::size_t(y) * 4 + std::size_t(x), at = std::size_t(i) * plane + k;
+        const int own = carried(x, y);
+        const bool raised = own >= 0 && i != own && !p.outlier_only.data[k];
+        EXPECT_EQ(p.data_cost[at], raised ? before[at] + 0.25f : before[at]) << "pixel " << x << "," << y << " label " << i;
+      }
+  EXPECT_THROW(addSwitchingCost(ImageI32(3, 2, 1, -1), 0.25f, p), InputError);
+}
+
 TEST(LabelOptimization, BackendSelection) {
   std::string note;
   EXPECT_NO_THROW(makeLabelOptimizer(Backend::Cpu, &note));

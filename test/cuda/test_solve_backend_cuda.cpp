@@ -133,9 +133,12 @@ void expectSameEquations(SolveBackend& cpu, SolveBackend& gpu, int level, Motion
 }
 
 // The whole sequence of stage calls a solve makes, on both backends, compared after each.
-void compareStages(int width, int height, int variant) {
+// With `carried_labels` > 0 the first labels are held as carried from a previous pair (a warm start): every label step
+// adds the switching cost, and the carried labels follow the remap and the moves between levels.
+void compareStages(int width, int height, int variant, int carried_labels = 0) {
   const Scene s = makeScene(width, height, variant);
-  SCOPED_TRACE(std::to_string(width) + "x" + std::to_string(height) + " variant " + std::to_string(variant));
+  SCOPED_TRACE(std::to_string(width) + "x" + std::to_string(height) + " variant " + std::to_string(variant) +
+               ", carried labels " + std::to_string(carried_labels));
   ASSERT_GE(s.centres.size(), 3u);
   Config config;
   auto cpu = makeCpuSolveBackend();
@@ -152,6 +155,10 @@ void compareStages(int width, int height, int variant) {
     EXPECT_TRUE(sameBits(cpu->framePoints(level), gpu->framePoints(level))) << "frame 1's points at level " << level;
   ASSERT_EQ(cpu->labelCount(), gpu->labelCount());
   EXPECT_EQ(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 0.0) << "initial hard labels";
+  if (carried_labels > 0) {
+    config.warm_switch_cost = 0.2;
+    for (SolveBackend* b : {cpu.get(), gpu.get()}) b->holdCarriedLabels(carried_labels);
+  }
 
   const int n = cpu->labelCount() - 1;
   std::vector<Vector6d> twists;
@@ -264,6 +271,16 @@ TEST(CudaSolveBackend, StagesMatchCpuAt160x120Variant2) {
 TEST(CudaSolveBackend, StagesMatchCpuAt64x57) {
   SKIP_WITHOUT_GPU();
   compareStages(64, 57, 1);
+}
+
+TEST(CudaSolveBackend, StagesWithCarriedLabelsMatchCpuAt317x239) {
+  SKIP_WITHOUT_GPU();
+  compareStages(317, 239, 0, 3);
+}
+
+TEST(CudaSolveBackend, StagesWithCarriedLabelsMatchCpuAt64x57) {
+  SKIP_WITHOUT_GPU();
+  compareStages(64, 57, 1, 2);
 }
 
 TEST(CudaSolveBackend, RejectsInconsistentCalls) {

@@ -108,8 +108,13 @@ double labelCost(const Config& config, int valid_pixels);
 /// n x n table is updated, not recomputed. Then, when `remove_small`, labels with support below
 /// min_support_fraction * valid_pixels go to the outlier label. The labels change once, by one remap.
 /// Keeps the labels, twists and model consistent.
+///
+/// `carried` (stream mode; null: a pair on its own): per motion label, whether it descends from a segment carried
+/// from the previous pair. Merging two carried labels also pays warm_switch_cost per unit of the smaller label's
+/// support (the pixels whose segment would change); the merged label is carried. Kept in step with the labels.
 AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twists, LabelCostModel& model,
-                                int valid_pixels, const Config& config, bool remove_small = true);
+                                int valid_pixels, const Config& config, bool remove_small = true,
+                                std::vector<bool>* carried = nullptr);
 
 /// @brief Proposes to split each large label in two along its principal 3D axis, predicts the data-cost
 /// decrease of giving each half its own Gauss-Newton motion (one pass over the pixels for all

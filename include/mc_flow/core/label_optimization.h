@@ -56,6 +56,11 @@ void geometricWeights(const PyramidLevel& frame1, double min_weight, ImageF& wei
 void computeDataCosts(const PyramidLevel& frame1, const PyramidLevel& frame2, const std::vector<Vector6d>& twists,
                       const ImageU8* occluded, const Config& config, LabelProblem& problem);
 
+/// @brief Stream mode's switching cost (Config::warm_switch_cost): where `carried` holds a label (>= 0, the segment
+/// of the previous pair the pixel was carried in), every other label's cost, the outlier's included, rises by
+/// `cost`; pixels without depth are left alone. `carried` has the problem's size.
+void addSwitchingCost(const ImageI32& carried, float cost, LabelProblem& problem);
+
 /// @brief E(u) = sum_i <u_i, D_i> + R(u).
 double labelEnergy(const LabelProblem& problem, const SoftLabels& u);
 

@@ -75,6 +75,11 @@ class SolveBackend : public LabelStore {
   /// assignToNearestCentre(framePoints(level), centres); the CUDA backend assigns on the device, without
   /// downloading the level's points.
   virtual void initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres);
+  /// @brief Stream mode (a warm start), right after initialiseLabels: the initial labels below `carried_labels` are the
+  /// previous pair's segments. From then on each label step adds Config::warm_switch_cost to every other label's data
+  /// cost at the pixels that started in one of them (addSwitchingCost). The carried labels follow remap (merged into
+  /// the merged label; removed: none) and moveLabels (nearest pixel); buildPyramids and initialiseLabels clear them.
+  virtual void holdCarriedLabels(int carried_labels) = 0;
   /// @brief Pyramid level the labels live at.
   virtual int labelLevel() const = 0;
   /// @brief Carries the labels to `level` (up: bilinear and renormalised; down: 2x2 means; the same level:
