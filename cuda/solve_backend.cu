@@ -156,6 +156,7 @@ class CudaSolveBackend final : public SolveBackend {
 
   void holdCarriedLabels(int carried_labels) override {
     carried_held_ = false;
+    carried_slot_ = 0;  // buffer 0 at the label level, buffer 1 at the level moved to: no regrowth from pair to pair
     if (carried_labels <= 0 || count_ == 0) return;
     const DeviceLevel& L = levels_[std::size_t(level_)];
     carried_[carried_slot_].reserve(plane());
