@@ -374,8 +374,13 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
   std::vector<bool>* carried_or_null = start.carried_labels > 0 ? &carried : nullptr;
   auto t = Clock::now();
 
-  // ---- Algorithm 1
-  for (int k = 0; k < start.outer_iterations; ++k) {
+  // ---- Algorithm 1. An outer iteration that split labels is followed by another (up to the larger of the start's
+  // and Config::outer_iterations), so that new labels always get a motion step of their own: a warm start's single
+  // outer iteration can still split off a part that starts moving.
+  const int most_outer = std::max(start.outer_iterations, config.outer_iterations);
+  bool split_last = false;
+  for (int k = 0; k < most_outer; ++k) {
+    if (k >= start.outer_iterations && !split_last) break;
     OuterIterationStats stats;
     stats.iteration = k;
     stats.labels_before = labels.labelCount() - 1;
@@ -424,10 +429,11 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.smallest_refused_merge = as.smallest_refused_merge;
-    if (k + 1 < start.outer_iterations) {
+    if (k + 1 < most_outer) {
       stats.split = proposeSplits(labels, twists, occlusions, p.valid_label_level, config).split;
       carried.resize(twists.size(), false);  // split-off halves are new segments
     }
+    split_last = stats.split > 0;
     stats.labels_after = labels.labelCount() - 1;
     result.timings.adaptation += elapsedMs(t);
     result.energy = ls.energy;
