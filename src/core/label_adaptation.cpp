@@ -96,19 +96,16 @@ double mergeCostIncrease(const Matrix6d& H_a, const Matrix6d& H_b, const Vector6
   return std::max(0.0, (H_a * d).dot(regularised(H_a + H_b).ldlt().solve(Hb_d)));
 }
 
-// A merge priced relatively never raises the smaller label's own cost by more than this share of it, so a small part
-// that moves differently is not priced by the background it would join.
-constexpr double kMaxShareOfSmallerCost = 0.5;
-
 double labelCost(const Config& config, int valid_pixels) { return config.label_cost * double(valid_pixels); }
 
 // The price of keeping two motions apart where the two labels pay cost_a and cost_b now: the absolute price, or the
-// relative one where that is larger, a fraction of the parallel sum cost_a cost_b / (cost_a + cost_b) (about the
-// smaller label's cost: a small part is judged by what it pays, not by the background it would join). The same
-// rule decides merges and splits, so a split is not merged back.
+// relative one where that is larger, a fraction of cost_a + cost_b, capped at a share of the smaller label's cost (a
+// small part is judged by what it pays, not by the background it would join). The same rule decides merges and
+// splits, so a split is not merged back.
 double priceFor(double absolute_price, double cost_a, double cost_b, const Config& config) {
   const double a = std::max(0.0, cost_a), b = std::max(0.0, cost_b);
-  const double relative = std::min(config.label_cost_relative * (a + b), kMaxShareOfSmallerCost * std::min(a, b));
+  const double relative =
+      std::min(config.label_cost_relative * (a + b), config.label_cost_relative_cap * std::min(a, b));
   return std::max(absolute_price, relative);
 }
 

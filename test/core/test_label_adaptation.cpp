@@ -168,7 +168,7 @@ TEST(LabelAdaptation, MergingTwoCarriedLabelsPaysTheSwitchingCostOfTheSmallerOne
 }
 
 TEST(LabelAdaptation, RelativePriceMergesWhereTheLabelsPayALotButNotASmallPartIntoTheBackground) {
-  auto run = [](double relative, double cost_a, double cost_b) {
+  auto run = [](double relative, double cost_a, double cost_b, double cap = Config().label_cost_relative_cap) {
     SoftLabels u;
     ImageF points;
     makeBands(u, points);
@@ -182,13 +182,16 @@ TEST(LabelAdaptation, RelativePriceMergesWhereTheLabelsPayALotButNotASmallPartIn
     Config config;
     config.label_cost = 0.001;  // x 300 valid pixels = 0.3, far below 5
     config.label_cost_relative = relative;
+    config.label_cost_relative_cap = cap;
     return adaptOnHost(u, twists, model, 300, config).merged;
   };
+  ASSERT_EQ(Config().label_cost_relative_cap, 0.5);  // the cases below assume the default cap
   EXPECT_EQ(run(0.0, 200.0, 200.0), 0) << "the absolute price alone keeps them apart";
   EXPECT_EQ(run(0.03, 200.0, 200.0), 1) << "0.03 x 400 = 12 > 5: merged";
   EXPECT_EQ(run(0.01, 200.0, 200.0), 0) << "0.01 x 400 = 4 < 5: kept apart";
   EXPECT_EQ(run(0.03, 2000.0, 8.0), 0) << "a small part: at most half its own cost (4) < 5";
   EXPECT_EQ(run(0.03, 2000.0, 12.0), 1) << "half of 12 = 6 > 5: merged";
+  EXPECT_EQ(run(0.03, 2000.0, 8.0, 1.0), 1) << "label_cost_relative_cap 1: all of 8 > 5: merged";
 }
 
 TEST(LabelAdaptation, DirectionsTheDataDoesNotConstrainDoNotKeepLabelsApart) {
