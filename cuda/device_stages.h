@@ -283,6 +283,13 @@ void launchGeometricWeights(const DeviceLevel& level, double min_weight, float* 
 void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms, int motion_labels,
                      const std::uint8_t* occluded, const Config& config, float* data_cost,
                      std::uint8_t* outlier_only, cudaStream_t stream);
+/// @brief switchingEnergy without the cost factor: the sum of 1 - u_carried over the carried pixels with depth (`out`: one
+/// double on the device).
+void launchSwitchingShare(const float* u, const int* carried, const std::uint8_t* outlier_only, std::size_t plane,
+                          DeviceBuffer<double>& scratch, double* out, cudaStream_t stream);
+/// @brief Carried labels of the pixels a cut moved (u > 0 on planes first_new .. first_new + cut_count - 1) set to -1.
+void launchReleaseCutPixels(const float* u, std::size_t plane, int first_new, int cut_count, int* carried,
+                            cudaStream_t stream);
 /// @brief addSwitchingCost: `cost` added to every label but the carried one where carried >= 0 and not outlier-only.
 void launchAddSwitchingCost(const int* carried, float cost, std::size_t plane, int count,
                             const std::uint8_t* outlier_only, float* data_cost, cudaStream_t stream);

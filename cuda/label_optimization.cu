@@ -660,7 +660,24 @@ __global__ void addSwitchingCostKernel(const int* __restrict__ carried, float co
     if (i != own) data_cost[std::size_t(i) * plane + idx] = __fadd_rn(data_cost[std::size_t(i) * plane + idx], cost);
 }
 
+struct SwitchingPixel {
+  const float* u;
+  const int* carried;
+  const std::uint8_t* outlier_only;
+  std::size_t plane;
+  __device__ void operator()(int, std::size_t k, double* sums) const {
+    const int own = carried[k];
+    if (own >= 0 && !outlier_only[k]) sums[0] += 1.0 - double(u[std::size_t(own) * plane + k]);
+  }
+};
+
 }  // namespace
+
+void launchSwitchingShare(const float* u, const int* carried, const std::uint8_t* outlier_only, std::size_t plane,
+                          DeviceBuffer<double>& scratch, double* out, cudaStream_t stream) {
+  launchChunkSums<1>(SwitchingPixel{u, carried, outlier_only, plane}, plane, 1, scratch, out, stream,
+                     "switching energy");
+}
 
 void launchAddSwitchingCost(const int* carried, float cost, std::size_t plane, int count,
                             const std::uint8_t* outlier_only, float* data_cost, cudaStream_t stream) {

@@ -139,6 +139,14 @@ __global__ void remapCarriedKernel(int* __restrict__ carried, std::size_t plane,
   carried[idx] = t == new_count - 1 ? -1 : t;  // merged: the merged label; removed to the outlier label: none
 }
 
+__global__ void releaseCutPixelsKernel(const float* __restrict__ u, std::size_t plane, int first_new, int cut_count,
+                                       int* __restrict__ carried) {
+  const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (idx >= plane) return;
+  for (int c = 0; c < cut_count; ++c)
+    if (u[std::size_t(first_new + c) * plane + idx] > 0.f) carried[idx] = -1;
+}
+
 // Pixel k's share of label `label`'s support: sum of u.
 struct SupportPixel {
   const float* u;
@@ -261,6 +269,12 @@ void launchRemapCarried(int* carried, std::size_t plane, int count, const int* t
   for (int i = 0; i < count; ++i) table.target[i] = target[i];
   remapCarriedKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(carried, plane, table, new_count);
   MCFLOW_CUDA_CHECK_LAUNCH("remapCarriedKernel");
+}
+
+void launchReleaseCutPixels(const float* u, std::size_t plane, int first_new, int cut_count, int* carried,
+                            cudaStream_t stream) {
+  releaseCutPixelsKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(u, plane, first_new, cut_count, carried);
+  MCFLOW_CUDA_CHECK_LAUNCH("releaseCutPixelsKernel");
 }
 
 void launchRemapLabels(const float* in, std::size_t plane, int count, const int* target, int new_count, float* out,

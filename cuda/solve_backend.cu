@@ -158,6 +158,9 @@ class CudaSolveBackend final : public SolveBackend {
     carried_held_ = false;
     carried_slot_ = 0;  // buffer 0 at the label level, buffer 1 at the level moved to: no regrowth from pair to pair
     if (carried_labels <= 0 || count_ == 0) return;
+    if (level_ != hard_level_)
+      throw InputError("CUDA backend: holdCarriedLabels must follow initialiseLabels (labels at level " +
+                       std::to_string(level_) + ", initial labels at level " + std::to_string(hard_level_) + ")");
     const DeviceLevel& L = levels_[std::size_t(level_)];
     carried_[carried_slot_].reserve(plane());
     cuda_detail::launchCarriedFromHard(L.points1, hard_labels_.get(), std::min(carried_labels, count_ - 1), carried(),
@@ -304,15 +307,19 @@ class CudaSolveBackend final : public SolveBackend {
     problem.lambda = config.lambda();
     const LabelStats ls = primal_dual_->run(problem, labels(), dual_.get(), iterations, tolerance);
 
-    scalar_.reserve(1);
+    scalar_.reserve(2);
     cuda_detail::launchAbsoluteChange(labels(), before_.get(), values, partials_, scalar_.get(), s);
-    double* change = staged_doubles_.reserve(1);
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(change, scalar_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
+    if (carried_held_)
+      cuda_detail::launchSwitchingShare(labels(), carried(), outlier_only_.get(), p, partials_, scalar_.get() + 1, s);
+    double* sums = staged_doubles_.reserve(2);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(sums, scalar_.get(), (carried_held_ ? 2 : 1) * sizeof(double),
+                                      cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
     LabelStepStats out;
     out.iterations = ls.iterations;
-    out.energy = ls.energy;
-    out.mean_change = *change / double(p);
+    out.energy = ls.energy;  // E(u) of eq. 4, without the switching cost
+    if (carried_held_) out.energy -= double(float(config.warm_switch_cost)) * sums[1];
+    out.mean_change = sums[0] / double(p);
     return out;
   }
 
@@ -474,6 +481,9 @@ class CudaSolveBackend final : public SolveBackend {
     if (cuts.empty()) return;
     cutInto(cuts);
     swapLabels();
+    // A cut's pixels are free of the switching cost: the label step decides between the halves on the data alone.
+    if (carried_held_)
+      cuda_detail::launchReleaseCutPixels(labels(), plane(), count_ - 1, int(cuts.size()), carried(), stream_.stream);
     count_ += int(cuts.size());
     zeroDual(plane(), count_);
   }
@@ -586,6 +596,7 @@ class CudaSolveBackend final : public SolveBackend {
   void labelsFromHardLabels(int level, int motion_labels) {
     count_ = 0;  // nothing to keep when the buffers grow
     level_ = level;
+    hard_level_ = level;
     reserveLabels(plane(), motion_labels + 1);
     count_ = motion_labels + 1;
     cuda_detail::launchOneHotLabels(levelAt(level).points1, hard_labels_.get(), count_, labels(), stream_.stream);
@@ -634,6 +645,7 @@ class CudaSolveBackend final : public SolveBackend {
   DeviceBuffer<int> carried_[2];
   int carried_slot_ = 0;
   bool carried_held_ = false;
+  int hard_level_ = -1;  // the level of hard_labels_
   int* carried() { return carried_[carried_slot_].get(); }
   DeviceBuffer<long long> targets_;
   DeviceBuffer<unsigned long long> moved_;

@@ -113,6 +113,17 @@ void addSwitchingCost(const ImageI32& carried, float cost, LabelProblem& problem
   }
 }
 
+double switchingEnergy(const ImageI32& carried, float cost, const LabelProblem& problem, const SoftLabels& u) {
+  const std::size_t plane = u.planeSize();
+  double leaving = 0.0;
+  for (std::size_t idx = 0; idx < plane; ++idx) {
+    const int own = carried.data[idx];
+    if (own < 0 || problem.outlier_only.data[idx]) continue;
+    leaving += 1.0 - double(u.data[std::size_t(own) * plane + idx]);
+  }
+  return double(cost) * leaving;
+}
+
 namespace {
 
 // Regulariser value of one pixel of one label given its weighted forward differences.

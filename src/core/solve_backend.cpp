@@ -114,8 +114,8 @@ class CpuSolveBackend final : public SolveBackend {
   int labelLevel() const override { return level_; }
 
   void moveLabels(int level) override {
-    if (!carried_.data.empty())
-      carried_ = resampleMask(carried_, pyramid1_[level].points.width, pyramid1_[level].points.height);
+    const PyramidLevel& to = levelOf(pyramid1_, level);  // checks the level
+    if (!carried_.data.empty()) carried_ = resampleMask(carried_, to.points.width, to.points.height);
     u_ = labelsAtLevel(u_, level_, level, pyramid1_);
     level_ = level;
     occlusion_ = ImageU8(u_.width, u_.height, 1, 0);
@@ -155,7 +155,8 @@ class CpuSolveBackend final : public SolveBackend {
     const LabelStats ls = optimizer_->optimize(problem_, u_, dual_, iterations, tolerance);
     LabelStepStats out;
     out.iterations = ls.iterations;
-    out.energy = ls.energy;
+    out.energy = ls.energy;  // E(u) of eq. 4, without the switching cost
+    if (!carried_.data.empty()) out.energy -= switchingEnergy(carried_, float(config.warm_switch_cost), problem_, u_);
     double change = 0;
     for (std::size_t i = 0; i < u_.data.size(); ++i) change += std::fabs(u_.data[i] - before.data[i]);
     out.mean_change = change / double(u_.planeSize());
@@ -213,7 +214,13 @@ class CpuSolveBackend final : public SolveBackend {
   }
   void applyCuts(const std::vector<LabelCut>& cuts) override {
     if (!cuts.empty()) dual_ = LabelDual();
+    const int first_new = u_.count - 1;
     store().applyCuts(cuts);
+    // A cut's pixels are free of the switching cost: the label step decides between the halves on the data alone.
+    if (!carried_.data.empty())
+      for (std::size_t k = 0; k < carried_.data.size(); ++k)
+        for (int c = 0; c < int(cuts.size()); ++c)
+          if (u_.plane(first_new + c)[k] > 0.f) carried_.data[k] = -1;
   }
   LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
     return store().costModel(twists, use_occlusion, config);

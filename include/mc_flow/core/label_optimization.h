@@ -61,6 +61,10 @@ void computeDataCosts(const PyramidLevel& frame1, const PyramidLevel& frame2, co
 /// `cost`; pixels without depth are left alone. `carried` has the problem's size.
 void addSwitchingCost(const ImageI32& carried, float cost, LabelProblem& problem);
 
+/// @brief The part of E(u) that addSwitchingCost put in: cost x the sum over pixels with a carried label (and depth)
+/// of 1 - u_carried(x), summed in double. The label step reports E(u) without it.
+double switchingEnergy(const ImageI32& carried, float cost, const LabelProblem& problem, const SoftLabels& u);
+
 /// @brief E(u) = sum_i <u_i, D_i> + R(u).
 double labelEnergy(const LabelProblem& problem, const SoftLabels& u);
 
