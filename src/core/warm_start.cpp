@@ -47,6 +47,8 @@ ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& poi
     }
   ImageI32 carried(W, H, 1, 0);
   auto observed = [&](int x, int y) { return points(x, y, 2); };
+  // The splat above stays serial (the nearest point wins a pixel); the passes below write one pixel each.
+#pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x)
       if (splat(x, y) > 0 && std::isfinite(observed(x, y)) && std::abs(nearest(x, y) - observed(x, y)) <= depth_tolerance)
@@ -54,6 +56,7 @@ ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& poi
   // Close the one-pixel gaps that rounding leaves where a surface comes closer (it covers more pixels):
   // a pixel without an id takes the most common id of its 8 neighbours whose observed depth is close.
   ImageI32 closed = carried;
+#pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       if (carried(x, y) > 0 || !std::isfinite(observed(x, y))) continue;
@@ -91,12 +94,17 @@ CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& le
                      std::to_string(scale));
   CarriedLabels out;
   out.hard = ImageI32(w, h, 1, -1);
-  std::map<int, int> index_of_id;
-  std::vector<std::pair<int, int>> counts;  // (id, count) within a block
-  for (int y = 0; y < h; ++y)
+  // Each level pixel's majority id (0: none, -1: no depth), in parallel; then the label indices in raster order, so
+  // that they do not depend on the threads.
+  ImageI32 majority(w, h, 1, 0);
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < h; ++y) {
+    std::vector<std::pair<int, int>> counts;  // (id, count) within a block
     for (int x = 0; x < w; ++x) {
-      if (!std::isfinite(level_points(x, y, 2))) continue;
-      ++out.valid;
+      if (!std::isfinite(level_points(x, y, 2))) {
+        majority(x, y) = -1;
+        continue;
+      }
       counts.clear();
       for (int by = 0; by < scale; ++by)
         for (int bx = 0; bx < scale; ++bx) {
@@ -113,12 +121,20 @@ CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& le
       const auto best = std::max_element(counts.begin(), counts.end(), [](const auto& a, const auto& b) {
         return a.second < b.second || (a.second == b.second && a.first > b.first);
       });
-      if (2 * best->second < scale * scale) continue;
-      auto [it, inserted] = index_of_id.emplace(best->first, int(index_of_id.size()));
-      if (inserted) out.ids.push_back(best->first);
-      out.hard(x, y) = it->second;
-      ++out.covered;
+      if (2 * best->second >= scale * scale) majority(x, y) = best->first;
     }
+  }
+  std::map<int, int> index_of_id;
+  for (std::size_t k = 0; k < majority.data.size(); ++k) {
+    const int id = majority.data[k];
+    if (id < 0) continue;
+    ++out.valid;
+    if (id == 0) continue;
+    auto [it, inserted] = index_of_id.emplace(id, int(index_of_id.size()));
+    if (inserted) out.ids.push_back(id);
+    out.hard.data[k] = it->second;
+    ++out.covered;
+  }
   return out;
 }
 
