@@ -153,6 +153,19 @@ TEST(LabelAdaptation, MergingTwoCarriedLabelsPaysTheSwitchingCostOfTheSmallerOne
   const AdaptationStats one_new = run({true, false, true}, &kept);
   EXPECT_EQ(one_new.merged, 1);
   EXPECT_EQ(kept, (std::vector<bool>{true, true}));  // the merged label is carried
+  {  // the kept label (the larger) is the new one, the dropped one was carried: the merged label is carried
+    SoftLabels u;
+    ImageF points;
+    makeBands(u, points, 40, 10);  // supports 140, 130, 130
+    std::vector<Vector6d> twists{a, b, c};
+    LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
+    const PyramidLevel unused;
+    HostLabelStore store(u, unused, unused, nullptr);
+    std::vector<bool> carried{false, true, true};
+    EXPECT_EQ(adaptLabelCount(store, twists, model, 400, config, true, &carried).merged, 1);
+    EXPECT_EQ(carried, (std::vector<bool>{true, true}));
+    EXPECT_NEAR(u.support(0), 270.0, 1e-3);
+  }
   config.warm_switch_cost = 0.05;  // x 100 = 5 < 6: the pair pays less than a label
   EXPECT_EQ(run({true, true, true}, nullptr).merged, 1);
   // Flags that do not match the labels are refused.
