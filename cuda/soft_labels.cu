@@ -260,13 +260,23 @@ void launchCarriedFromHard(const DeviceImage& points, const int* hard, int carri
   MCFLOW_CUDA_CHECK_LAUNCH("carriedFromHardKernel");
 }
 
-void launchRemapCarried(int* carried, std::size_t plane, int count, const int* target, int new_count,
-                        cudaStream_t stream) {
+namespace {
+
+// A remap's host targets as a kernel argument.
+RemapTable remapTable(const int* target, int count, const char* what) {
   if (count > kMaxRemapPlanes)
-    throw InputError("CUDA carried-label remap: " + std::to_string(count) + " planes, at most " +
+    throw InputError(std::string(what) + ": " + std::to_string(count) + " planes, at most " +
                      std::to_string(kMaxRemapPlanes));
   RemapTable table{};
   for (int i = 0; i < count; ++i) table.target[i] = target[i];
+  return table;
+}
+
+}  // namespace
+
+void launchRemapCarried(int* carried, std::size_t plane, int count, const int* target, int new_count,
+                        cudaStream_t stream) {
+  const RemapTable table = remapTable(target, count, "CUDA carried-label remap");
   remapCarriedKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(carried, plane, table, new_count);
   MCFLOW_CUDA_CHECK_LAUNCH("remapCarriedKernel");
 }
@@ -279,11 +289,7 @@ void launchReleaseCutPixels(const float* u, std::size_t plane, int first_new, in
 
 void launchRemapLabels(const float* in, std::size_t plane, int count, const int* target, int new_count, float* out,
                        cudaStream_t stream) {
-  if (count > kMaxRemapPlanes)
-    throw InputError("CUDA label remap: " + std::to_string(count) + " planes, at most " +
-                     std::to_string(kMaxRemapPlanes));
-  RemapTable table{};
-  for (int i = 0; i < count; ++i) table.target[i] = target[i];
+  const RemapTable table = remapTable(target, count, "CUDA label remap");
   remapKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(in, plane, count, table, new_count, out);
   MCFLOW_CUDA_CHECK_LAUNCH("remapKernel");
 }

@@ -132,52 +132,44 @@ TEST(LabelAdaptation, MergingTwoCarriedLabelsPaysTheSwitchingCostOfTheSmallerOne
   Config config;
   config.label_cost = 0.02;  // x 300 valid pixels = 6
   config.warm_switch_cost = 0.1;  // x 100 pixels of the smaller label = 10 > 6
-  auto run = [&](std::vector<bool> carried, std::vector<bool>* kept) {
+  struct Outcome {
+    AdaptationStats stats;
+    std::vector<bool> carried;
+    double first_support = 0;
+  };
+  // Three bands (width / 3 columns each, the first one wider where width is not a multiple of 3), 10 rows.
+  auto run = [&](std::vector<bool> carried, int width = 30) {
     SoftLabels u;
     ImageF points;
-    makeBands(u, points);
+    makeBands(u, points, width, 10);
     std::vector<Vector6d> twists{a, b, c};
     LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
     const PyramidLevel unused;
     HostLabelStore store(u, unused, unused, nullptr);
-    const AdaptationStats st = adaptLabelCount(store, twists, model, 300, config, true, &carried);
+    Outcome out;
+    out.stats = adaptLabelCount(store, twists, model, 10 * width, config, true, &carried);
     EXPECT_EQ(carried.size(), twists.size());
     EXPECT_EQ(u.count, int(twists.size()) + 1);
-    if (kept) *kept = carried;
-    return st;
+    out.carried = carried;
+    out.first_support = u.support(0);
+    return out;
   };
-  std::vector<bool> kept;
-  const AdaptationStats refused = run({true, true, true}, &kept);
-  EXPECT_EQ(refused.merged, 0);
-  EXPECT_NEAR(refused.smallest_refused_merge, 0.0, 1e-6);  // the data-cost increase, without the switching cost
-  const AdaptationStats one_new = run({true, false, true}, &kept);
-  EXPECT_EQ(one_new.merged, 1);
-  EXPECT_EQ(kept, (std::vector<bool>{true, true}));  // the merged label is carried
-  {  // the kept label (the larger) is the new one, the dropped one was carried: the merged label is carried
-    SoftLabels u;
-    ImageF points;
-    makeBands(u, points, 40, 10);  // supports 140, 130, 130
-    std::vector<Vector6d> twists{a, b, c};
-    LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
-    const PyramidLevel unused;
-    HostLabelStore store(u, unused, unused, nullptr);
-    std::vector<bool> carried{false, true, true};
-    EXPECT_EQ(adaptLabelCount(store, twists, model, 400, config, true, &carried).merged, 1);
-    EXPECT_EQ(carried, (std::vector<bool>{true, true}));
-    EXPECT_NEAR(u.support(0), 270.0, 1e-3);
-  }
+  const Outcome refused = run({true, true, true});
+  EXPECT_EQ(refused.stats.merged, 0);
+  EXPECT_NEAR(refused.stats.smallest_refused_merge, 0.0, 1e-6);  // the data-cost increase, without the switching cost
+  const Outcome one_new = run({true, false, true});
+  EXPECT_EQ(one_new.stats.merged, 1);
+  EXPECT_EQ(one_new.carried, (std::vector<bool>{true, true}));  // the merged label is carried
+  // The kept label (the larger: supports 140, 130, 130) is the new one, the dropped one was carried: the merged label
+  // is carried (label_cost 0.02 x 400 = 8, no switching cost: merged).
+  const Outcome kept_new = run({false, true, true}, 40);
+  EXPECT_EQ(kept_new.stats.merged, 1);
+  EXPECT_EQ(kept_new.carried, (std::vector<bool>{true, true}));
+  EXPECT_NEAR(kept_new.first_support, 270.0, 1e-3);
   config.warm_switch_cost = 0.05;  // x 100 = 5 < 6: the pair pays less than a label
-  EXPECT_EQ(run({true, true, true}, nullptr).merged, 1);
+  EXPECT_EQ(run({true, true, true}).stats.merged, 1);
   // Flags that do not match the labels are refused.
-  SoftLabels u;
-  ImageF points;
-  makeBands(u, points);
-  std::vector<Vector6d> twists{a, b, c};
-  LabelCostModel model = uniformModel(3, 1e5 * Matrix6d::Identity());
-  const PyramidLevel unused;
-  HostLabelStore store(u, unused, unused, nullptr);
-  std::vector<bool> wrong{true, true};
-  EXPECT_THROW(adaptLabelCount(store, twists, model, 300, config, true, &wrong), InputError);
+  EXPECT_THROW(run({true, true}), InputError);
 }
 
 TEST(LabelAdaptation, RelativePriceMergesWhereTheLabelsPayALotButNotASmallPartIntoTheBackground) {
