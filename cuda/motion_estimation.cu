@@ -509,6 +509,7 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
 // result once per level instead of once per iteration.
 
 constexpr int kStepThreads = 512;  // 16 warps for the rank-6 updates of a group's factorization
+static_assert(2 * kMaxMotionLabels <= kStepThreads, "irlsStep: a thread per label, two per label for the twist update");
 
 /// @brief The state of a level's device loop (read by the host once, at the end of the level).
 struct IrlsState {
@@ -562,12 +563,87 @@ __device__ __forceinline__ void dampedLabelBlock(const double* upper, double dam
     }
 }
 
+// A damped 6x6 block's Cholesky factor as choleskyLower6 gives it, but each diagonal slot holds the reciprocal of the
+// pivot (from rsqrt, as the group factorization's), so that the solve and the coupling strength multiply where the
+// host's divide: shorter serial chains for the one thread that handles a label. Steps and strengths differ from the
+// host's in the last bits (a coupling decision only where a strength equals motion_min_coupling to ~1e-15).
+__device__ __forceinline__ void choleskyReciprocal6(const double A[36], double F[21]) {
+#pragma unroll
+  for (int j = 0; j < 6; ++j) {
+    double d = A[j * 6 + j];
+    const double floor = 1e-12 * d;
+#pragma unroll
+    for (int k = 0; k < j; ++k) {
+      const double l = F[lowerIndex6(j, k)];
+      d -= l * l;
+    }
+    const double inverse = rsqrt(d > floor ? d : floor);
+    F[lowerIndex6(j, j)] = inverse;
+#pragma unroll
+    for (int i = j + 1; i < 6; ++i) {
+      double v = A[i * 6 + j];
+#pragma unroll
+      for (int k = 0; k < j; ++k) v -= F[lowerIndex6(i, k)] * F[lowerIndex6(j, k)];
+      F[lowerIndex6(i, j)] = v * inverse;
+    }
+  }
+}
+
+// choleskySolve6 over choleskyReciprocal6's factor.
+__device__ __forceinline__ void solveCholeskyReciprocal6(const double F[21], const double b[6], double x[6]) {
+  double y[6];
+#pragma unroll
+  for (int i = 0; i < 6; ++i) {
+    double v = b[i];
+#pragma unroll
+    for (int k = 0; k < i; ++k) v -= F[lowerIndex6(i, k)] * y[k];
+    y[i] = v * F[lowerIndex6(i, i)];
+  }
+#pragma unroll
+  for (int i = 5; i >= 0; --i) {
+    double v = y[i];
+#pragma unroll
+    for (int k = i + 1; k < 6; ++k) v -= F[lowerIndex6(k, i)] * x[k];
+    x[i] = v * F[lowerIndex6(i, i)];
+  }
+}
+
+// motionCouplingStrength over choleskyReciprocal6's factors: || L_a^-1 H_ab L_b^-T ||_F.
+__device__ __forceinline__ double motionCouplingStrengthDevice(const double F_a[21], const double pair[36],
+                                                               const double F_b[21]) {
+  double X[36];  // L_a^-1 H_ab, column by column
+#pragma unroll
+  for (int j = 0; j < 6; ++j)
+#pragma unroll
+    for (int i = 0; i < 6; ++i) {
+      double v = pair[i * 6 + j];
+#pragma unroll
+      for (int k = 0; k < i; ++k) v -= F_a[lowerIndex6(i, k)] * X[k * 6 + j];
+      X[i * 6 + j] = v * F_a[lowerIndex6(i, i)];
+    }
+  double sum = 0.0;
+#pragma unroll
+  for (int i = 0; i < 6; ++i) {
+    double m[6];
+#pragma unroll
+    for (int j = 0; j < 6; ++j) {
+      double v = X[i * 6 + j];
+#pragma unroll
+      for (int k = 0; k < j; ++k) v -= F_b[lowerIndex6(j, k)] * m[k];
+      m[j] = v * F_b[lowerIndex6(j, j)];
+      sum += m[j] * m[j];
+    }
+  }
+  return sqrt(sum);
+}
+
 __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   extern __shared__ double shared_matrix[];
   __shared__ int s_stop;
   __shared__ bool frozen[kMaxMotionLabels];
   __shared__ int root[kMaxMotionLabels], members[kMaxMotionLabels], group_start[kMaxMotionLabels + 1];
   __shared__ int group_count;
+  __shared__ int s_largest;
   __shared__ double delta[6 * kMaxMotionLabels];
   __shared__ double rhs[6 * kMaxMotionLabels];
   __shared__ double inverse_diagonal[6 * kMaxMotionLabels];  // of the group's Cholesky factor
@@ -607,7 +683,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     if (q.min_coupling > 0.0 && !frozen[i]) {
       double A[36];
       dampedLabelBlock(label, q.control[i].damping, A, 6, 0);
-      choleskyLower6(A, label_factor + 21 * i);
+      choleskyReciprocal6(A, label_factor + 21 * i);
     }
   }
   __syncthreads();
@@ -635,7 +711,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     if (nonzero && q.min_coupling > 0.0) {
       double C[36];
       for (int k = 0; k < kUpper; ++k) C[kUpperRow[k] * 6 + kUpperCol[k]] = C[kUpperCol[k] * 6 + kUpperRow[k]] = block[k];
-      strength = motionCouplingStrength(label_factor + 21 * a, C, label_factor + 21 * b);
+      strength = motionCouplingStrengthDevice(label_factor + 21 * a, C, label_factor + 21 * b);
     }
     if (motionLabelsCoupled(strength, nonzero != 0, q.min_coupling)) {
       atomicOr(&coupled[pair / 32], 1u << (pair % 32));
@@ -644,7 +720,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   }
   if (!__syncthreads_or(any_coupled)) {  // also the barrier after the atomicOr's
     // No coupling kept (the common case with motion_min_coupling > 0): every label is its own group, set in parallel
-    // instead of by the serial union-find below.
+    // instead of by the propagation below.
     for (int i = tid; i < n; i += blockDim.x) {
       root[i] = i;
       members[i] = i;
@@ -655,34 +731,50 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
       group_count = n;
       state.largest_group = max(state.largest_group, 1);
     }
-  } else if (tid == 0) {
-    for (int i = 0; i < n; ++i) root[i] = i;
-    for (int a = 0; a < n; ++a)
-      for (int b = a + 1; b < n; ++b) {
-        const int pair = pairIndex(n, a, b);
-        if (!((coupled[pair / 32] >> (pair % 32)) & 1u)) continue;
-        int ra = a, rb = b;
-        while (root[ra] != ra) ra = root[ra];
-        while (root[rb] != rb) rb = root[rb];
-        if (ra != rb) root[rb > ra ? rb : ra] = rb > ra ? ra : rb;  // the smaller label is the group's root
+  } else {
+    // Connected components of the coupling graph, one label per thread: every label takes the smallest root among
+    // itself and the labels coupled to it until nothing changes, so each group's root is its smallest label, as a
+    // serial union-find that roots every group at its smallest label gives.
+    if (tid < n) root[tid] = tid;
+    if (tid == 0) s_largest = 0;
+    __syncthreads();
+    for (;;) {
+      int best = tid < n ? root[tid] : 0;
+      if (tid < n)
+        for (int j = 0; j < n; ++j) {
+          if (j == tid) continue;
+          const int pair = j < tid ? pairIndex(n, j, tid) : pairIndex(n, tid, j);
+          if ((coupled[pair / 32] >> (pair % 32)) & 1u) best = min(best, root[j]);
+        }
+      __syncthreads();  // every root read before any changes
+      const int changed = tid < n && best < root[tid];
+      if (changed) root[tid] = best;
+      if (!__syncthreads_or(changed)) break;
+    }
+    // Groups in ascending order of their roots, members ascending within a group (the serial loop's order).
+    const int roots = __syncthreads_count(tid < n && root[tid] == tid);
+    if (tid < n) {
+      const int r = root[tid];
+      int start = 0, rank = 0, position = 0, size = 0;
+      for (int j = 0; j < n; ++j) {
+        const int rj = root[j];
+        start += rj < r ? 1 : 0;
+        rank += rj == j && j < r ? 1 : 0;
+        position += rj == r && j < tid ? 1 : 0;
+        size += rj == r ? 1 : 0;
       }
-    // Members grouped by root (roots in ascending order, members ascending within a group).
-    for (int r = 0; r < n; ++r) {
-      int rr = r;
-      while (root[rr] != rr) rr = root[rr];
-      root[r] = rr;
+      members[start + position] = tid;
+      if (tid == r) {
+        group_start[rank] = start;
+        atomicMax(&s_largest, size);
+      }
     }
-    int at = 0, count = 0, largest = 0;
-    for (int g = 0; g < n; ++g) {
-      if (root[g] != g) continue;
-      group_start[count++] = at;
-      for (int i = g; i < n; ++i)
-        if (root[i] == g) members[at++] = i;
-      largest = max(largest, at - group_start[count - 1]);
+    __syncthreads();
+    if (tid == 0) {
+      group_start[roots] = n;
+      group_count = roots;
+      state.largest_group = max(state.largest_group, s_largest);
     }
-    group_start[count] = at;
-    group_count = count;
-    state.largest_group = max(state.largest_group, largest);
   }
   __syncthreads();
 
@@ -693,11 +785,17 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     const double* label = q.sums + i * kLabelStride;
     double x[6] = {0, 0, 0, 0, 0, 0};
     if (!frozen[i]) {
-      double M[36], L[21], b[6];
-      dampedLabelBlock(label, q.control[i].damping, M, 6, 0);
-      choleskyLower6(M, L);
+      // The coupling test factored this block already (same damping); otherwise factor it here.
+      double F[21], b[6];
+      const double* factor = label_factor + 21 * i;
+      if (!(q.min_coupling > 0.0)) {
+        double M[36];
+        dampedLabelBlock(label, q.control[i].damping, M, 6, 0);
+        choleskyReciprocal6(M, F);
+        factor = F;
+      }
       for (int k = 0; k < 6; ++k) b[k] = -label[kUpper + k];
-      choleskySolve6(L, b, x);
+      solveCholeskyReciprocal6(factor, b, x);
     }
     for (int k = 0; k < 6; ++k) delta[6 * i + k] = x[k];
   }
@@ -845,13 +943,25 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   if ((tid & 31) == 0) largest_step[tid >> 5] = largest;
   __syncthreads();
   // Twists move by the (scaled) step and the next accumulation's linearisation points follow.
-  for (int i = tid; i < n; i += blockDim.x) {
-    double* xi = q.twists + 6 * i;
-    for (int k = 0; k < 6; ++k) xi[k] += delta[6 * i + k];
-    LabelMotion& motion = q.motions[i];
-    se3ExpDevice(xi, motion.transform);
-    se3LeftJacobianDevice(xi, motion.left_jacobian);
-    for (int k = 0; k < 6; ++k) motion.twist[k] = xi[k];
+  // Two threads per label: the transform on one, the left Jacobian on the other (each a long serial chain in double).
+  {
+    const int i = tid >> 1;
+    double xi[6];
+    if (tid < 2 * n)
+      for (int k = 0; k < 6; ++k) xi[k] = q.twists[6 * i + k] + delta[6 * i + k];
+    __syncthreads();  // both threads of a label have read its twist before it is overwritten
+    if (tid < 2 * n) {
+      LabelMotion& motion = q.motions[i];
+      if (tid & 1) {
+        se3LeftJacobianDevice(xi, motion.left_jacobian);
+      } else {
+        se3ExpDevice(xi, motion.transform);
+        for (int k = 0; k < 6; ++k) {
+          q.twists[6 * i + k] = xi[k];
+          motion.twist[k] = xi[k];
+        }
+      }
+    }
   }
   if (tid == 0) {
     double all = 0.0;
