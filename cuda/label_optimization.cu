@@ -9,9 +9,11 @@
 // two orders drift apart.
 //
 // Convergence: the CPU tests max |u_new - u_old| after every iteration; here the test needs a device
-// reduction and a host sync, so it runs every kConvergenceCheckInterval iterations and at the last one.
-// With a tolerance the GPU may therefore run up to kConvergenceCheckInterval - 1 iterations more than the
-// CPU; with tolerance <= 0 both run exactly `iterations` iterations.
+// reduction, so it runs every kConvergenceCheckInterval iterations and at the last one. With a tolerance the GPU
+// may therefore run up to kConvergenceCheckInterval - 1 iterations more than the CPU; with tolerance <= 0 both run
+// exactly `iterations` iterations. The test is decided on the device (checkConvergence): the rounds are queued
+// without waiting (the host reads the stop flag only every kRoundsBetweenReads rounds, so a label step of the default
+// 50 iterations waits once, at the end), and iterations queued after a converged round return at once.
 #include <cuda_runtime.h>
 
 #include <cub/device/device_reduce.cuh>
@@ -36,6 +38,7 @@ using cuda_detail::DeviceBuffer;
 
 constexpr int kMaxLabels = 128;                 // these kernels' bound (the CPU has none); Config allows 65: 64 + outlier
 constexpr int kConvergenceCheckInterval = 10;   // iterations between two max-change reductions
+constexpr int kRoundsBetweenReads = 5;          // checked rounds queued between two host reads of the stop flag
 constexpr int kBlockX = 32, kBlockY = 8;        // a warp spans 32 consecutive pixels of a row
 
 // Rounded float operations that the compiler may not contract into FMAs (keeps the CPU's rounding).
@@ -75,7 +78,9 @@ __global__ void computeStepSizes(const float* __restrict__ rx, const float* __re
 // At the last column/row r = 0, so the CPU adds an exact zero there; here the difference is not read.
 __global__ void dualStep(const float* __restrict__ u_bar, float* __restrict__ p, const float* __restrict__ sigma_rx,
                          const float* __restrict__ sigma_ry, const float* __restrict__ shrink_x,
-                         const float* __restrict__ shrink_y, int width, int height, bool tv, float inv_lambda) {
+                         const float* __restrict__ shrink_y, int width, int height, bool tv, float inv_lambda,
+                         const int* __restrict__ stopped) {
+  if (*stopped) return;  // a queued iteration after convergence
   const int x = blockIdx.x * blockDim.x + threadIdx.x;
   const int y = blockIdx.y * blockDim.y + threadIdx.y;
   if (x >= width || y >= height) return;
@@ -110,7 +115,9 @@ __global__ void dualStep(const float* __restrict__ u_bar, float* __restrict__ p,
 __global__ void primalStep(float* __restrict__ u, float* __restrict__ u_bar, const float* __restrict__ p,
                            const float* __restrict__ data_cost, const std::uint8_t* __restrict__ outlier_only,
                            const float* __restrict__ rx, const float* __restrict__ ry, const float* __restrict__ tau,
-                           int width, int height, int count, bool record_change, float* __restrict__ change) {
+                           int width, int height, int count, bool record_change, float* __restrict__ change,
+                           const int* __restrict__ stopped) {
+  if (*stopped) return;  // a queued iteration after convergence (uniform: no barrier is skipped by part of the block)
   extern __shared__ float scratch[];  // count x 32 candidate values, then blockDim.y x 32 partial changes
   float* partial_change = scratch + count * kBlockX;
   const int x = blockIdx.x * kBlockX + threadIdx.x;
@@ -181,6 +188,22 @@ __global__ void pixelEnergy(const float* __restrict__ u, const float* __restrict
   energy[i] = sum;
 }
 
+// The state of a label step's iteration loop on the device.
+struct LoopState {
+  int stopped;          // 1 once a checked round's largest change fell below the tolerance
+  int iterations;       // iterations run (the end of the last round that ran)
+  float last_change;    // the largest change of the last checked iteration that ran
+};
+
+// After the checked iteration that ends a round at `round_end`: records it and stops the loop below the tolerance.
+__global__ void checkConvergence(const float* __restrict__ max_change, double tolerance, int round_end,
+                                 LoopState* __restrict__ state) {
+  if (state->stopped) return;
+  state->iterations = round_end;
+  state->last_change = *max_change;
+  if (double(*max_change) < tolerance) state->stopped = 1;
+}
+
 void validateProblem(const LabelProblem& problem, const SoftLabels& u) {
   const int W = problem.width, H = problem.height, n = problem.count;
   if (W <= 0 || H <= 0 || n < 1 || n > kMaxLabels)
@@ -210,7 +233,7 @@ void validateProblem(const LabelProblem& problem, const SoftLabels& u) {
 
 
 struct PinnedScalars {
-  float max_change = 0.f;
+  LoopState loop{};
   double energy = 0.0;
 };
 
@@ -250,9 +273,10 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     MCFLOW_CUDA_CHECK_LAUNCH("computeStepSizes");
 
     // Iterations run in rounds that end with a checked iteration (one recording the change): every
-    // kConvergenceCheckInterval-th with a tolerance, and always the last one (for stats.last_change).
-    LabelStats stats;
-    int done = 0;
+    // kConvergenceCheckInterval-th with a tolerance, and always the last one (for stats.last_change). Rounds are queued
+    // without waiting; checkConvergence stops the rest on the device.
+    MCFLOW_CUDA_CHECK(cudaMemsetAsync(loop_state_.get(), 0, sizeof(LoopState), s));
+    int done = 0, rounds_queued = 0;
     while (done < iterations) {
       const int round_end = tolerance > 0 ? std::min(iterations, (done / kConvergenceCheckInterval + 1) *
                                                                       kConvergenceCheckInterval)
@@ -264,14 +288,17 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
       for (; unchecked > 0; --unchecked) launchIteration(launch, false);
       launchIteration(launch, true);
       done = round_end;
-      stats.iterations = done;
       std::size_t bytes = temp_bytes_;
       MCFLOW_CUDA_CHECK_CUB(cub::DeviceReduce::Max(temp_.get(), bytes, change_.get(), max_change_.get(), int(plane), s));
-      MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->max_change, max_change_.get(), sizeof(float),
-                                        cudaMemcpyDeviceToHost, s));
-      MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
-      stats.last_change = scalars_->max_change;
-      if (stats.last_change < tolerance) break;
+      checkConvergence<<<1, 1, 0, s>>>(max_change_.get(), tolerance, round_end, loop_state_.get());
+      MCFLOW_CUDA_CHECK_LAUNCH("checkConvergence");
+      // A long loop (a large iteration limit with a tolerance) reads the flag now and then, so that a converged loop
+      // does not leave thousands of queued iterations behind it (each a few microseconds even when it returns at once).
+      if (++rounds_queued % kRoundsBetweenReads == 0 && done < iterations) {
+        MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->loop, loop_state_.get(), sizeof(LoopState), cudaMemcpyDeviceToHost, s));
+        MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+        if (scalars_->loop.stopped) break;
+      }
     }
 
     pixelEnergy<<<launch.grid, launch.block, 0, s>>>(u, problem.data_cost, problem.weight_x, problem.weight_y, W, H,
@@ -280,7 +307,11 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     std::size_t bytes = temp_bytes_;
     MCFLOW_CUDA_CHECK_CUB(cub::DeviceReduce::Sum(temp_.get(), bytes, pixel_energy_.get(), energy_.get(), int(plane), s));
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->energy, energy_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->loop, loop_state_.get(), sizeof(LoopState), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    LabelStats stats;
+    stats.iterations = scalars_->loop.iterations;
+    stats.last_change = scalars_->loop.last_change;
     stats.energy = scalars_->energy;
     return stats;
   }
@@ -301,6 +332,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     const float* rx = nullptr;
     const float* ry = nullptr;
     const std::uint8_t* outlier_only = nullptr;
+    const int* stopped = nullptr;  // the loop state's stop flag
     std::uint64_t buffers = 0;  // generation of the engine's buffers (pointers change when they grow)
     bool operator==(const Launch& o) const {
       return width == o.width && height == o.height && count == o.count && tv == o.tv && lambda == o.lambda &&
@@ -324,6 +356,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     l.rx = problem.weight_x;
     l.ry = problem.weight_y;
     l.outlier_only = problem.outlier_only;
+    l.stopped = &loop_state_.get()->stopped;
     l.buffers = buffer_generation_;
     l.block = dim3(kBlockX, kBlockY);
     l.grid = dim3((W + kBlockX - 1) / kBlockX, (H + kBlockY - 1) / kBlockY);
@@ -351,11 +384,11 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
   void launchIteration(const Launch& l, bool record_change) {
     cudaStream_t s = stream_;
     dualStep<<<l.label_grid, l.block, 0, s>>>(u_bar_.get(), l.p, sigma_rx_.get(), sigma_ry_.get(), shrink_x_.get(),
-                                              shrink_y_.get(), l.width, l.height, l.tv, l.inv_lambda);
+                                              shrink_y_.get(), l.width, l.height, l.tv, l.inv_lambda, l.stopped);
     MCFLOW_CUDA_CHECK_LAUNCH("dualStep");
     primalStep<<<l.primal_grid, l.primal_block, l.primal_shared_bytes, s>>>(
         l.u, u_bar_.get(), l.p, l.data_cost, l.outlier_only, l.rx, l.ry, tau_.get(), l.width, l.height, l.count,
-        record_change, change_.get());
+        record_change, change_.get(), l.stopped);
     MCFLOW_CUDA_CHECK_LAUNCH("primalStep");
   }
 
@@ -400,6 +433,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     grow(change_, plane);
     grow(pixel_energy_, plane);
     grow(max_change_, 1);
+    grow(loop_state_, 1);
     grow(energy_, 1);
     if (plane > reduced_items_) {
       std::size_t max_bytes = 0, sum_bytes = 0;
@@ -418,6 +452,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
   PinnedScalars* scalars_;  // the two scalars read back
   DeviceBuffer<float> u_bar_, sigma_rx_, sigma_ry_, shrink_x_, shrink_y_, tau_;
   DeviceBuffer<float> change_, max_change_;
+  DeviceBuffer<LoopState> loop_state_;
   DeviceBuffer<std::uint8_t> temp_;
   DeviceBuffer<double> pixel_energy_, energy_;
   std::size_t temp_bytes_ = 0, reduced_items_ = 0;
