@@ -334,6 +334,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     const std::uint8_t* outlier_only = nullptr;
     const int* stopped = nullptr;  // the loop state's stop flag
     std::uint64_t buffers = 0;  // generation of the engine's buffers (pointers change when they grow)
+    // `stopped` is not compared: it points into loop_state_, whose reallocation changes `buffers`.
     bool operator==(const Launch& o) const {
       return width == o.width && height == o.height && count == o.count && tv == o.tv && lambda == o.lambda &&
              u == o.u && p == o.p && data_cost == o.data_cost && rx == o.rx && ry == o.ry &&
@@ -449,7 +450,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
   static constexpr int kPrimalLabelThreads = 8;
   cudaStream_t stream_;
   cuda_detail::PinnedBuffer<PinnedScalars> pinned_;
-  PinnedScalars* scalars_;  // the two scalars read back
+  PinnedScalars* scalars_;  // what the host reads back: the loop state and the energy
   DeviceBuffer<float> u_bar_, sigma_rx_, sigma_ry_, shrink_x_, shrink_y_, tau_;
   DeviceBuffer<float> change_, max_change_;
   DeviceBuffer<LoopState> loop_state_;

@@ -566,7 +566,9 @@ __device__ __forceinline__ void dampedLabelBlock(const double* upper, double dam
 // A damped 6x6 block's Cholesky factor as choleskyLower6 gives it, but each diagonal slot holds the reciprocal of the
 // pivot (from rsqrt, as the group factorization's), so that the solve and the coupling strength multiply where the
 // host's divide: shorter serial chains for the one thread that handles a label. Steps and strengths differ from the
-// host's in the last bits (a coupling decision only where a strength equals motion_min_coupling to ~1e-15).
+// host's by rounding: in the last bits for well-conditioned blocks, more where a pivot is near its floor (as the
+// device's contracted FMAs already made them differ); a coupling decision differs only for a strength at
+// motion_min_coupling to that rounding.
 __device__ __forceinline__ void choleskyReciprocal6(const double A[36], double F[21]) {
 #pragma unroll
   for (int j = 0; j < 6; ++j) {
@@ -647,7 +649,8 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   __shared__ double delta[6 * kMaxMotionLabels];
   __shared__ double rhs[6 * kMaxMotionLabels];
   __shared__ double inverse_diagonal[6 * kMaxMotionLabels];  // of the group's Cholesky factor
-  __shared__ double label_factor[21 * kMaxMotionLabels];     // Cholesky of each damped block, for the coupling test
+  __shared__ double label_factor[21 * kMaxMotionLabels];     // each damped block's factor (reciprocal pivots): the
+                                                              // coupling test, then the label's own solve
   __shared__ unsigned coupled[(kMaxMotionLabels * (kMaxMotionLabels - 1) / 2 + 31) / 32];
   __shared__ double largest_step[kStepThreads / 32];
   const int n = q.n, tid = threadIdx.x;
@@ -751,7 +754,8 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
       if (changed) root[tid] = best;
       if (!__syncthreads_or(changed)) break;
     }
-    // Groups in ascending order of their roots, members ascending within a group (the serial loop's order).
+    // Groups in ascending order of their roots, members ascending within a group (the order of the serial union-find
+    // this replaced, which the host loop's grouping also gives).
     const int roots = __syncthreads_count(tid < n && root[tid] == tid);
     if (tid < n) {
       const int r = root[tid];
