@@ -11,6 +11,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/solve_backend.h"
 
 namespace mc_flow {
 
@@ -298,6 +299,56 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
     ++stats.split;
   }
   labels.applyCuts(taken);
+  return stats;
+}
+
+AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vector6d>& twists, int valid_pixels,
+                                        const Config& config, std::vector<bool>* carried) {
+  AdaptationStats stats;
+  const int n = int(twists.size());
+  if (n != backend.labelCount() - 1)
+    throw InputError("mergeOcclusionAbsorbers: " + std::to_string(n) + " twists for " +
+                     std::to_string(backend.labelCount() - 1) + " motion labels");
+  if (n < 2) return stats;
+  const std::vector<double> support = backend.supports();
+  const int host = int(std::max_element(support.begin(), support.end()) - support.begin());
+  // Every other label under the host's motion at once (each pixel's occlusion test then uses that motion), then
+  // under its own motion on the same pixels.
+  std::vector<Vector6d> trial(std::size_t(n), twists[std::size_t(host)]);
+  backend.updateOcclusion(trial, config);
+  const LabelCostModel under_host = backend.costModel(trial, true, config);
+  const LabelCostModel own = backend.costModel(twists, true, config);
+  const double price = labelCost(config, valid_pixels);
+  std::vector<int> target(std::size_t(n) + 1);
+  int kept = 0;
+  for (int i = 0; i < n; ++i) {
+    double switching = 0;
+    if (carried && (*carried)[std::size_t(i)] && (*carried)[std::size_t(host)])
+      switching = config.warm_switch_cost * std::min(support[std::size_t(i)], support[std::size_t(host)]);
+    const double increase = under_host.cost[std::size_t(i)] - own.cost[std::size_t(i)];
+    const bool merge = i != host && increase + switching <
+                                        priceFor(price, own.cost[std::size_t(host)], own.cost[std::size_t(i)], config);
+    target[std::size_t(i)] = merge ? -1 : kept++;
+    if (merge) ++stats.merged;
+  }
+  if (stats.merged == 0) return stats;
+  for (int i = 0; i < n; ++i)
+    if (target[std::size_t(i)] < 0) target[std::size_t(i)] = target[std::size_t(host)];
+  target[std::size_t(n)] = kept;  // the outlier label stays last
+  std::vector<Vector6d> merged_twists;
+  std::vector<bool> merged_carried;
+  bool host_carried = carried && (*carried)[std::size_t(host)];
+  for (int i = 0; i < n; ++i)
+    if (carried && i != host && target[std::size_t(i)] == target[std::size_t(host)] && (*carried)[std::size_t(i)])
+      host_carried = true;  // as a merge in adaptLabelCount: the merged label is carried if either was
+  for (int i = 0; i < n; ++i) {
+    if (i != host && target[std::size_t(i)] == target[std::size_t(host)]) continue;
+    merged_twists.push_back(twists[std::size_t(i)]);
+    if (carried) merged_carried.push_back(i == host ? host_carried : bool((*carried)[std::size_t(i)]));
+  }
+  backend.remap(target, kept + 1);
+  twists.swap(merged_twists);
+  if (carried) carried->swap(merged_carried);
   return stats;
 }
 

@@ -407,6 +407,10 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     LabelCostModel early_model = labels.costModel(twists, occlusions, config);
     const AdaptationStats early = adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false, carried_or_null);
     stats.merged += early.merged;
+    // Labels that only explain pixels no motion sees (Config::merge_occlusion_absorbers): the trial's occlusion mask it
+    // leaves is replaced right below.
+    if (config.merge_occlusion_absorbers && occlusions)
+      stats.merged += mergeOcclusionAbsorbers(labels, twists, p.valid_label_level, config, carried_or_null).merged;
     result.timings.adaptation += elapsedMs(t);
 
     // occlusion mask of the current motions (section 6)

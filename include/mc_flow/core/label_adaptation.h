@@ -21,6 +21,8 @@
 
 namespace mc_flow {
 
+class SolveBackend;
+
 struct AdaptationStats {
   int merged = 0;
   int removed = 0;
@@ -123,6 +125,15 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
 /// refines them.
 AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists, bool use_occlusion, int valid_pixels,
                               const Config& config);
+
+/// @brief Config::merge_occlusion_absorbers: every other motion label is tried under the motion of the label with the
+/// largest support, with the occlusion mask of that trial (pixels that motion sends out of view or behind frame 2
+/// have no data term), against its own motion on the same pixels; where the increase is below the price (priceFor,
+/// plus the switching cost of two carried labels) it merges into the largest label, which keeps its motion. One
+/// occlusion update and two accumulator passes. It leaves the trial's occlusion mask in the backend: call it right
+/// before an occlusion update for the current labels (the solver does, before each label step).
+AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vector6d>& twists, int valid_pixels,
+                                        const Config& config, std::vector<bool>* carried = nullptr);
 
 /// @brief A LabelStore over host soft labels at one pyramid level (the CPU backend's, and the tests').
 class HostLabelStore final : public LabelStore {
