@@ -309,15 +309,19 @@ AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vecto
   if (n != backend.labelCount() - 1)
     throw InputError("mergeOcclusionAbsorbers: " + std::to_string(n) + " twists for " +
                      std::to_string(backend.labelCount() - 1) + " motion labels");
+  if (carried && int(carried->size()) != n)
+    throw InputError("mergeOcclusionAbsorbers: " + std::to_string(carried->size()) + " carried flags for " +
+                     std::to_string(n) + " motion labels");
   if (n < 2) return stats;
   const std::vector<double> support = backend.supports();
   const int host = int(std::max_element(support.begin(), support.end()) - support.begin());
-  // Every other label under the host's motion at once (each pixel's occlusion test then uses that motion), then
-  // under its own motion on the same pixels.
+  // Each configuration with its own occlusions, as the energy counts them (occluded pixels pay nothing): the labels
+  // under their own motions, then every other label under the host's motion at once.
+  backend.updateOcclusion(twists, config);
+  const LabelCostModel own = backend.costModel(twists, true, config);
   std::vector<Vector6d> trial(std::size_t(n), twists[std::size_t(host)]);
   backend.updateOcclusion(trial, config);
   const LabelCostModel under_host = backend.costModel(trial, true, config);
-  const LabelCostModel own = backend.costModel(twists, true, config);
   const double price = labelCost(config, valid_pixels);
   std::vector<int> target(std::size_t(n) + 1);
   int kept = 0;

@@ -126,12 +126,14 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
 AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists, bool use_occlusion, int valid_pixels,
                               const Config& config);
 
-/// @brief Config::merge_occlusion_absorbers: every other motion label is tried under the motion of the label with the
-/// largest support, with the occlusion mask of that trial (pixels that motion sends out of view or behind frame 2
-/// have no data term), against its own motion on the same pixels; where the increase is below the price (priceFor,
-/// plus the switching cost of two carried labels) it merges into the largest label, which keeps its motion. One
-/// occlusion update and two accumulator passes. It leaves the trial's occlusion mask in the backend: call it right
-/// before an occlusion update for the current labels (the solver does, before each label step).
+/// @brief Config::merge_occlusion_absorbers (needs detect_occlusions): each motion label's data cost under its own
+/// motion, with the occlusion mask of the current motions, against its cost when it and every other label take the
+/// motion of the label with the largest support, with the occlusion mask of that trial (pixels a motion sends out of
+/// view or behind frame 2 pay nothing in either, as in the energy). A label whose increase plus the switching cost of
+/// two carried labels is below the price (priceFor of the two labels' costs under their own motions) merges into the
+/// largest label, which keeps its motion. Two occlusion updates and two accumulator passes. It leaves the trial's
+/// occlusion mask in the backend: call it right before an occlusion update for the current labels (the solver does,
+/// before each label step). Throws InputError on mismatched sizes.
 AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vector6d>& twists, int valid_pixels,
                                         const Config& config, std::vector<bool>* carried = nullptr);
 
