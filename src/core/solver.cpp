@@ -407,9 +407,10 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     LabelCostModel early_model = labels.costModel(twists, occlusions, config);
     const AdaptationStats early = adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false, carried_or_null);
     stats.merged += early.merged;
-    // Labels that only explain pixels no motion sees (Config::merge_occlusion_absorbers): the trial's occlusion mask it
-    // leaves is replaced right below.
-    if (config.merge_occlusion_absorbers && occlusions)
+    // Labels whose pixels the largest label's motion explains as well (Config::merge_occlusion_absorbers), from the
+    // second outer iteration on: in the first, small labels' motions are still poor, and merging them there cost the
+    // pairs with people their residuals (docs/ACCURACY.md). The trial's occlusion mask it leaves is replaced below.
+    if (config.merge_occlusion_absorbers && occlusions && k > 0)
       stats.merged += mergeOcclusionAbsorbers(labels, twists, p.valid_label_level, config, carried_or_null).merged;
     result.timings.adaptation += elapsedMs(t);
 

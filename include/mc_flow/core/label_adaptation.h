@@ -133,7 +133,7 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
 /// two carried labels is below the price (priceFor of the two labels' costs under their own motions) merges into the
 /// largest label, which keeps its motion. Two occlusion updates and two accumulator passes. It leaves the trial's
 /// occlusion mask in the backend: call it right before an occlusion update for the current labels (the solver does,
-/// before each label step). Throws InputError on mismatched sizes.
+/// before the label steps of the second and later outer iterations). Throws InputError on mismatched sizes.
 AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vector6d>& twists, int valid_pixels,
                                         const Config& config, std::vector<bool>* carried = nullptr);
 
