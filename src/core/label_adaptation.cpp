@@ -110,6 +110,14 @@ double priceFor(double absolute_price, double cost_a, double cost_b, const Confi
   return std::max(absolute_price, relative);
 }
 
+// Stream mode: merging two labels that both descend from the previous pair's segments changes the smaller one's pixels'
+// segment (and id): warm_switch_cost per unit of its support. Nothing outside a stream (no flags) or for a new label.
+double mergeSwitchingCost(const std::vector<bool>* carried, const std::vector<double>& support, int a, int b,
+                          const Config& config) {
+  if (!carried || !(*carried)[std::size_t(a)] || !(*carried)[std::size_t(b)]) return 0.0;
+  return config.warm_switch_cost * std::min(support[std::size_t(a)], support[std::size_t(b)]);
+}
+
 void validateRemap(const std::vector<int>& target, int old_count, int new_count) {
   if (int(target.size()) != old_count || new_count < 1 || new_count > old_count)
     throw InputError("label remap: " + std::to_string(target.size()) + " targets for " + std::to_string(old_count) +
@@ -138,11 +146,7 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
                      std::to_string(n0) + " motion labels");
   const double price = labelCost(config, valid_pixels);
   std::vector<double> support = labels.supports();
-  // Stream mode: two segments of the previous pair that merge change the smaller one's pixels' segment (and id).
-  auto switchingCost = [&](int a, int b) {
-    if (!carried || !(*carried)[std::size_t(a)] || !(*carried)[std::size_t(b)]) return 0.0;
-    return config.warm_switch_cost * std::min(support[std::size_t(a)], support[std::size_t(b)]);
-  };
+  auto switchingCost = [&](int a, int b) { return mergeSwitchingCost(carried, support, a, b, config); };
   // group[i]: the current label of original label i (-1: removed to the outlier label). The labels
   // themselves change once, at the end, by one remap.
   std::vector<int> group(static_cast<std::size_t>(n0));
@@ -312,47 +316,49 @@ AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vecto
   if (carried && int(carried->size()) != n)
     throw InputError("mergeOcclusionAbsorbers: " + std::to_string(carried->size()) + " carried flags for " +
                      std::to_string(n) + " motion labels");
-  if (n < 2) return stats;
+  if (n < 2) {
+    backend.updateOcclusion(twists, config);
+    return stats;
+  }
   const std::vector<double> support = backend.supports();
   const int host = int(std::max_element(support.begin(), support.end()) - support.begin());
-  // Each configuration with its own occlusions, as the energy counts them (occluded pixels pay nothing): the labels
-  // under their own motions, then every other label under the host's motion at once.
+  // Each configuration with its own occlusions, as the energy counts them (occluded pixels pay nothing): every other
+  // label under the host's motion at once, then the labels under their own motions (whose mask then stays).
+  backend.updateOcclusion(std::vector<Vector6d>(std::size_t(n), twists[std::size_t(host)]), config);
+  const LabelCostModel under_host = backend.costModel(std::vector<Vector6d>(std::size_t(n), twists[std::size_t(host)]),
+                                                      true, config);
   backend.updateOcclusion(twists, config);
   const LabelCostModel own = backend.costModel(twists, true, config);
-  std::vector<Vector6d> trial(std::size_t(n), twists[std::size_t(host)]);
-  backend.updateOcclusion(trial, config);
-  const LabelCostModel under_host = backend.costModel(trial, true, config);
   const double price = labelCost(config, valid_pixels);
   std::vector<int> target(std::size_t(n) + 1);
-  int kept = 0;
+  std::vector<Vector6d> kept_twists;
+  std::vector<bool> kept_carried;
   for (int i = 0; i < n; ++i) {
-    double switching = 0;
-    if (carried && (*carried)[std::size_t(i)] && (*carried)[std::size_t(host)])
-      switching = config.warm_switch_cost * std::min(support[std::size_t(i)], support[std::size_t(host)]);
     const double increase = under_host.cost[std::size_t(i)] - own.cost[std::size_t(i)];
-    const bool merge = i != host && increase + switching <
-                                        priceFor(price, own.cost[std::size_t(host)], own.cost[std::size_t(i)], config);
-    target[std::size_t(i)] = merge ? -1 : kept++;
-    if (merge) ++stats.merged;
+    if (i != host && increase + mergeSwitchingCost(carried, support, i, host, config) <
+                         priceFor(price, own.cost[std::size_t(host)], own.cost[std::size_t(i)], config)) {
+      target[std::size_t(i)] = -1;  // into the host, whose index is known below
+      ++stats.merged;
+      continue;
+    }
+    target[std::size_t(i)] = int(kept_twists.size());
+    kept_twists.push_back(twists[std::size_t(i)]);
+    if (carried) kept_carried.push_back((*carried)[std::size_t(i)]);
   }
   if (stats.merged == 0) return stats;
+  const int into = target[std::size_t(host)];
   for (int i = 0; i < n; ++i)
-    if (target[std::size_t(i)] < 0) target[std::size_t(i)] = target[std::size_t(host)];
+    if (target[std::size_t(i)] < 0) {
+      target[std::size_t(i)] = into;
+      // As a merge in adaptLabelCount: the merged label is carried if either was.
+      if (carried && (*carried)[std::size_t(i)]) kept_carried[std::size_t(into)] = true;
+    }
+  const int kept = int(kept_twists.size());
   target[std::size_t(n)] = kept;  // the outlier label stays last
-  std::vector<Vector6d> merged_twists;
-  std::vector<bool> merged_carried;
-  bool host_carried = carried && (*carried)[std::size_t(host)];
-  for (int i = 0; i < n; ++i)
-    if (carried && i != host && target[std::size_t(i)] == target[std::size_t(host)] && (*carried)[std::size_t(i)])
-      host_carried = true;  // as a merge in adaptLabelCount: the merged label is carried if either was
-  for (int i = 0; i < n; ++i) {
-    if (i != host && target[std::size_t(i)] == target[std::size_t(host)]) continue;
-    merged_twists.push_back(twists[std::size_t(i)]);
-    if (carried) merged_carried.push_back(i == host ? host_carried : bool((*carried)[std::size_t(i)]));
-  }
   backend.remap(target, kept + 1);
-  twists.swap(merged_twists);
-  if (carried) carried->swap(merged_carried);
+  twists.swap(kept_twists);
+  if (carried) carried->swap(kept_carried);
+  backend.updateOcclusion(twists, config);  // the mask of the merged labels
   return stats;
 }
 

@@ -409,14 +409,15 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     stats.merged += early.merged;
     // Labels whose pixels the largest label's motion explains as well (Config::merge_occlusion_absorbers), from the
     // second outer iteration on: in the first, small labels' motions are still poor, and merging them there cost the
-    // pairs with people their residuals (docs/ACCURACY.md). The trial's occlusion mask it leaves is replaced below.
-    if (config.merge_occlusion_absorbers && occlusions && k > 0)
+    // pairs with people their residuals (docs/ACCURACY.md). It leaves the occlusion mask of the labels it returns.
+    const bool absorber_check = config.merge_occlusion_absorbers && occlusions && k > 0;
+    if (absorber_check)
       stats.merged += mergeOcclusionAbsorbers(labels, twists, p.valid_label_level, config, carried_or_null).merged;
     result.timings.adaptation += elapsedMs(t);
 
     // occlusion mask of the current motions (section 6)
     t = Clock::now();
-    if (occlusions) labels.updateOcclusion(twists, config);
+    if (occlusions && !absorber_check) labels.updateOcclusion(twists, config);
     result.timings.occlusion += elapsedMs(t);
 
     // 2. label step

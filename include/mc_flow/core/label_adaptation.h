@@ -131,9 +131,10 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
 /// motion of the label with the largest support, with the occlusion mask of that trial (pixels a motion sends out of
 /// view or behind frame 2 pay nothing in either, as in the energy). A label whose increase plus the switching cost of
 /// two carried labels is below the price (priceFor of the two labels' costs under their own motions) merges into the
-/// largest label, which keeps its motion. Two occlusion updates and two accumulator passes. It leaves the trial's
-/// occlusion mask in the backend: call it right before an occlusion update for the current labels (the solver does,
-/// before the label steps of the second and later outer iterations). Throws InputError on mismatched sizes.
+/// largest label, which keeps its motion. Two accumulator passes and two occlusion updates (a third after a merge); it
+/// leaves the backend with the occlusion mask of the labels and twists it returns, so the caller needs no update of its
+/// own (the solver runs it in place of the one before the label steps of the second and later outer iterations).
+/// Throws InputError on mismatched sizes.
 AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vector6d>& twists, int valid_pixels,
                                         const Config& config, std::vector<bool>* carried = nullptr);
 
