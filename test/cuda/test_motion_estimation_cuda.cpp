@@ -517,6 +517,52 @@ TEST(CudaMotionAccumulator, DeviceLoopWithoutDampingStillSteps) {
   EXPECT_NEAR(a.cost_after, b.cost_after, 1e-6 * a.cost_after);
 }
 
+// Two interleaved chains of coupled labels (vertical bands; even labels on the left half, odd ones on the right, each
+// band blending with the next band of its half): two groups whose members are not contiguous label numbers, found by
+// the device's label propagation in as many rounds as a chain has links, in the host's order (roots ascending,
+// members ascending): the same groups, steps and stops as the host loop.
+TEST(CudaMotionAccumulator, DeviceLoopGroupsTwoInterleavedChainsAsTheHostLoopDoes) {
+  SKIP_WITHOUT_GPU();
+  const Scene s = makeScene(320, 240, 1, 0);
+  Config config;
+  config.motion_min_coupling = 0.0;  // every coupling joins groups
+  const int chain = 8, motion_labels = 2 * chain, W = s.pair.frame1.width(), H = s.pair.frame1.height();
+  SoftLabels u(W, H, motion_labels + 1, 0.f);
+  const int half = W / 2, band = half / chain;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const int side = x < half ? 0 : 1;
+      const int k = std::min(chain - 1, (x - side * half) / band);
+      const int own = 2 * k + side, next = 2 * (k + 1) + side;
+      const bool blend = k + 1 < chain && (x - side * half) % band >= band - 4;  // the band's last 4 columns
+      if (blend) {
+        u.at(own, x, y) = 0.6f;
+        u.at(next, x, y) = 0.4f;
+      } else {
+        u.at(own, x, y) = 1.f;
+      }
+    }
+  std::vector<Vector6d> twists_cpu(std::size_t(motion_labels), Vector6d::Zero());
+  for (int i = 0; i < motion_labels; ++i) twists_cpu[std::size_t(i)] << 0.003 * i, -0.004, 0.01, 0.002, -0.001 * i, 0.001;
+  std::vector<Vector6d> twists_gpu = twists_cpu;
+  auto cpu = makeCpuMotionAccumulator();
+  auto gpu = makeCudaMotionAccumulator();
+  const MotionLevelStats a = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_cpu, config, cpu.get());
+  const MotionLevelStats b = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_gpu, config, gpu.get());
+  EXPECT_EQ(a.largest_block, chain);
+  EXPECT_EQ(b.largest_block, chain);
+  EXPECT_EQ(a.iterations, b.iterations);
+  EXPECT_EQ(a.stop, b.stop) << toString(a.stop) << " / " << toString(b.stop);
+  double largest_difference = 0, largest_step = 0;
+  for (int i = 0; i < motion_labels; ++i) {
+    largest_difference = std::max(largest_difference,
+                                  (twists_cpu[std::size_t(i)] - twists_gpu[std::size_t(i)]).cwiseAbs().maxCoeff());
+    largest_step = std::max(largest_step, std::abs(twists_gpu[std::size_t(i)](1) + 0.004));
+  }
+  EXPECT_GT(largest_step, 1e-4) << "the labels did move";
+  EXPECT_LE(largest_difference, kTwistTolerance);
+}
+
 // The whole solver on both backends: test_solve_backend_cuda.cpp, SolverMatchesCpuOnSyntheticScenes.
 
 }  // namespace
