@@ -104,31 +104,28 @@ __global__ void dualStep(const float* __restrict__ u_bar, float* __restrict__ p,
   }
 }
 
-// Primal descent + simplex projection + extrapolation. A block covers 32 consecutive pixels in each of blockDim.z
-// rows; its blockDim.y threads per pixel share the labels (label = threadIdx.y, + blockDim.y, ...) for the descent
-// and the extrapolation, and the first of them projects the pixel's n values onto the simplex. Small levels use
-// several threads per pixel and one row (one thread per pixel left a 160x120 level with 19,200 threads, about four
-// warps per multiprocessor: 11.5 us per call on an H100 under ncu, latency-bound); large levels one thread per pixel
-// and several rows (there the other threads only waited at the barrier while the first projected). The n candidate
-// values sit in shared memory, label-major (a warp touches 32 consecutive banks), one scratch area per row.
-// Outlier-only pixels take the outlier label, and are extrapolated like every other pixel, as on the CPU. `change`
-// (one float per pixel) receives max_i |u_new - u_old| when record_change is set (a max: the same bits in any
-// order).
+// Primal descent + simplex projection + extrapolation. A block covers 32 consecutive pixels of a row; its
+// blockDim.y threads per pixel share the labels (label = threadIdx.y, + blockDim.y, ...) for the descent and the
+// extrapolation, and the first of them projects the pixel's n values onto the simplex. (One thread per pixel for
+// everything left a 160x120 level with 19,200 threads, about four warps per multiprocessor: 11.5 us per call on
+// an H100 under ncu, latency-bound.) The n candidate values sit in shared memory, label-major (a warp touches 32
+// consecutive banks). Outlier-only pixels take the outlier label, and are extrapolated like every other pixel, as
+// on the CPU. `change` (one float per pixel) receives max_i |u_new - u_old| when record_change is set (a max: the
+// same bits in any order).
 __global__ void primalStep(float* __restrict__ u, float* __restrict__ u_bar, const float* __restrict__ p,
                            const float* __restrict__ data_cost, const std::uint8_t* __restrict__ outlier_only,
                            const float* __restrict__ rx, const float* __restrict__ ry, const float* __restrict__ tau,
                            int width, int height, int count, bool record_change, float* __restrict__ change,
                            const int* __restrict__ stopped) {
   if (*stopped) return;  // a queued iteration after convergence (uniform: no barrier is skipped by part of the block)
-  extern __shared__ float shared[];  // per row: count x 32 candidate values, then blockDim.y x 32 partial changes
-  float* scratch = shared + threadIdx.z * (count + blockDim.y) * kBlockX;
+  extern __shared__ float scratch[];  // count x 32 candidate values, then blockDim.y x 32 partial changes
   float* partial_change = scratch + count * kBlockX;
   const int x = blockIdx.x * kBlockX + threadIdx.x;
-  const int y = blockIdx.y * blockDim.z + threadIdx.z;
-  const bool inside = x < width && y < height;  // every thread reaches the barriers below
+  const int y = blockIdx.y;
+  const bool inside = x < width;  // every thread reaches the barriers below
   float* v = scratch + threadIdx.x;
   const std::size_t plane = std::size_t(width) * height;
-  const std::size_t i = inside ? std::size_t(y) * width + x : 0;
+  const std::size_t i = std::size_t(y) * width + (inside ? x : 0);
   const bool outlier = inside && outlier_only[i];
   if (inside && !outlier) {
     const float rx_here = rx[i], ry_here = ry[i], tau_here = tau[i];
@@ -365,17 +362,12 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     l.block = dim3(kBlockX, kBlockY);
     l.grid = dim3((W + kBlockX - 1) / kBlockX, (H + kBlockY - 1) / kBlockY);
     l.label_grid = dim3(l.grid.x, l.grid.y, unsigned(n));
-    // Small levels: 32 pixels of one row per block, up to kPrimalLabelThreads threads per pixel sharing its labels.
-    // Large levels (kPrimalOneThreadMinPixels and up): one thread per pixel, 32 pixels in each of up to
-    // kPrimalRows rows (fewer where the scratch would pass 48 KiB). The shared scratch is (n + threads per pixel)
-    // x 32 floats per row (16.5 KiB at 128 labels).
-    const bool large = std::size_t(W) * std::size_t(H) >= std::size_t(kPrimalOneThreadMinPixels);
-    const int label_threads = large ? 1 : std::min(n, kPrimalLabelThreads);
-    const std::size_t row_bytes = (std::size_t(n) + std::size_t(label_threads)) * kBlockX * sizeof(float);
-    const int rows = large ? int(std::clamp<std::size_t>(48 * 1024 / row_bytes, 1, kPrimalRows)) : 1;
-    l.primal_block = dim3(kBlockX, unsigned(label_threads), unsigned(rows));
-    l.primal_grid = dim3((W + kBlockX - 1) / kBlockX, unsigned((H + rows - 1) / rows));
-    l.primal_shared_bytes = row_bytes * std::size_t(rows);
+    // 32 pixels of a row per block, up to kPrimalLabelThreads threads per pixel sharing its labels; the shared scratch
+    // is (n + those threads) x 32 floats (16.5 KiB at 128 labels).
+    const int label_threads = std::min(n, kPrimalLabelThreads);
+    l.primal_block = dim3(kBlockX, unsigned(label_threads));
+    l.primal_grid = dim3((W + kBlockX - 1) / kBlockX, unsigned(H));
+    l.primal_shared_bytes = (std::size_t(n) + std::size_t(label_threads)) * kBlockX * sizeof(float);
     if (l.primal_shared_bytes > primal_shared_limit_) {
       const cudaError_t status = cudaFuncSetAttribute(primalStep, cudaFuncAttributeMaxDynamicSharedMemorySize,
                                                       int(l.primal_shared_bytes));
@@ -456,11 +448,6 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
   }
 
   static constexpr int kPrimalLabelThreads = 8;
-  static constexpr int kPrimalRows = 4;
-#ifndef MCFLOW_PRIMAL_ONE_THREAD_MIN_PIXELS
-#define MCFLOW_PRIMAL_ONE_THREAD_MIN_PIXELS 100000
-#endif
-  static constexpr long kPrimalOneThreadMinPixels = MCFLOW_PRIMAL_ONE_THREAD_MIN_PIXELS;
   cudaStream_t stream_;
   cuda_detail::PinnedBuffer<PinnedScalars> pinned_;
   PinnedScalars* scalars_;  // what the host reads back: the loop state and the energy
