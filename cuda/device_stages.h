@@ -303,6 +303,23 @@ struct KMeansCentres {
 };
 /// @brief Nearest centre (nearest_centre.h) of each valid point, -1 where the point is invalid.
 void launchNearestCentreLabels(const DeviceImage& points, const KMeansCentres& centres, int* hard, cudaStream_t stream);
+/// @brief What kmeansPoints is asked for, with its seeding's draws (kmeansSeedingDraws), as a kernel argument.
+struct KMeansRun {
+  double draws[KMeansCentres::kMax];
+  int k = 0;  ///< 1..KMeansCentres::kMax
+  int max_iterations = 0;
+  double tolerance_m = 0;
+};
+/// @brief K-means' answer: the centres (count 0 when no point is valid) and the Lloyd iterations run.
+struct KMeansOutcome {
+  KMeansCentres centres;
+  int iterations = 0;
+};
+/// @brief kmeansPoints on the valid points of `points` in one block on the device: `scratch_points` (3 floats per
+/// pixel), `scratch_distances` (a double per pixel) and `scratch_assignment` (an int per pixel) hold the level's
+/// points, the seeding's distances and the clusters; the answer goes to `outcome` (device memory).
+void launchKMeans(const DeviceImage& points, const KMeansRun& run, float* scratch_points, double* scratch_distances,
+                  int* scratch_assignment, KMeansOutcome* outcome, cudaStream_t stream);
 
 // ---------------------------------------------------------------- soft labels (soft_labels.cu)
 /// @brief `count` planes of one-hot labels from hard labels (-1 = outlier, the last plane); pixels without a

@@ -15,6 +15,7 @@
 #include "cuda_check.h"
 #include "device_stages.h"
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/kmeans.h"
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/solve_backend.h"
 
@@ -137,6 +138,33 @@ class CudaSolveBackend final : public SolveBackend {
     labelsFromHardLabels(level, motion_labels);
     // The staging buffer is reused by the next small transfer: wait for this one.
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
+  }
+
+  std::vector<Eigen::Vector3f> kmeansCentres(int level, int k, int max_iterations, double tolerance_m,
+                                             unsigned seed) override {
+    // Outside what the kernel argument holds (Config caps initial_labels at its size), or refused: the host's.
+    if (k < 1 || k > cuda_detail::KMeansCentres::kMax || max_iterations < 0)
+      return SolveBackend::kmeansCentres(level, k, max_iterations, tolerance_m, seed);
+    const DeviceLevel& L = levelAt(level);
+    const std::size_t p = std::size_t(L.width) * L.height;
+    cuda_detail::KMeansRun run;
+    const std::vector<double> draws = kmeansSeedingDraws(seed, k);
+    std::copy(draws.begin(), draws.end(), run.draws);
+    run.k = k;
+    run.max_iterations = max_iterations;
+    run.tolerance_m = tolerance_m;
+    kmeans_points_.reserve(3 * p);
+    kmeans_distances_.reserve(p);
+    kmeans_assignment_.reserve(p);
+    kmeans_outcome_.reserve(1);
+    cuda_detail::launchKMeans(L.points1, run, kmeans_points_.get(), kmeans_distances_.get(), kmeans_assignment_.get(),
+                              kmeans_outcome_.get(), stream_.stream);
+    cuda_detail::KMeansOutcome outcome;
+    download(&outcome, kmeans_outcome_.get(), 1, staged_kmeans_);
+    std::vector<Eigen::Vector3f> centres(std::size_t(outcome.centres.count));
+    for (std::size_t c = 0; c < centres.size(); ++c)
+      centres[c] = Eigen::Vector3f(outcome.centres.xyz[3 * c], outcome.centres.xyz[3 * c + 1], outcome.centres.xyz[3 * c + 2]);
+    return centres;
   }
 
   void initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres) override {
@@ -622,6 +650,7 @@ class CudaSolveBackend final : public SolveBackend {
   PinnedBuffer<unsigned long long> staged_counts_;
   PinnedBuffer<std::uint8_t> staged_bytes_;
   PinnedBuffer<double> staged_motions_;
+  PinnedBuffer<cuda_detail::KMeansOutcome> staged_kmeans_;
   static constexpr int kOutputImages = 6;  // StagedOutputs' images
   cuda_detail::EventHolder image_downloaded_[kOutputImages];  // each output image has reached its staging buffer
   cuda_detail::EventHolder motions_uploaded_;  // the last upload from staged_motions_ has finished
@@ -641,6 +670,11 @@ class CudaSolveBackend final : public SolveBackend {
   DeviceBuffer<double> scalar_, partials_, motions_, cuts_;  // partials_: chunked sums' scratch
   DeviceBuffer<cuda_detail::DeviceTransform> transforms_;
   DeviceBuffer<int> counts_, hard_labels_;
+  // kmeansCentres: the level's valid points, the seeding's distances, the clusters, the answer.
+  DeviceBuffer<float> kmeans_points_;
+  DeviceBuffer<double> kmeans_distances_;
+  DeviceBuffer<int> kmeans_assignment_;
+  DeviceBuffer<cuda_detail::KMeansOutcome> kmeans_outcome_;
   // holdCarriedLabels: the carried label each pixel started in (-1: none), at level_; two buffers for moveLabels.
   DeviceBuffer<int> carried_[2];
   int carried_slot_ = 0;

@@ -50,24 +50,24 @@ void assignAll(const std::vector<Eigen::Vector3f>& points, const std::vector<Eig
   for (long i = 0; i < n; ++i) assignment[std::size_t(i)] = nearestCentre(points[std::size_t(i)], centres);
 }
 
-// Uniform double in [0, 1) from raw mt19937 output: std::uniform_real_distribution is implementation-defined,
-// this is not, so a seed gives the same clustering with every standard library.
-double uniform01(std::mt19937& rng) { return double(rng()) / 4294967296.0; }
+float squaredDistance(const Eigen::Vector3f& p, const Eigen::Vector3f& centre) {
+  return kmeansSquaredDistance(p.x(), p.y(), p.z(), centre.data());
+}
 
 /// k-means++ seeding; stops early when every remaining point coincides with a centre.
 std::vector<Eigen::Vector3f> seedCentres(const std::vector<Eigen::Vector3f>& points, int k, unsigned seed) {
-  std::mt19937 rng(seed);
+  const std::vector<double> draws = kmeansSeedingDraws(seed, k);
   const std::size_t n = points.size();
   std::vector<Eigen::Vector3f> centres;
   centres.reserve(std::size_t(k));
-  centres.push_back(points[std::min(n - 1, std::size_t(uniform01(rng) * double(n)))]);
+  centres.push_back(points[std::min(n - 1, std::size_t(draws[0] * double(n)))]);
   std::vector<double> dist2(n);
-  for (std::size_t i = 0; i < n; ++i) dist2[i] = (points[i] - centres[0]).squaredNorm();
+  for (std::size_t i = 0; i < n; ++i) dist2[i] = squaredDistance(points[i], centres[0]);
   while (int(centres.size()) < k) {
     double total = 0;
     for (const double d : dist2) total += d;
     if (!(total > 0)) break;
-    const double target = uniform01(rng) * total;
+    const double target = draws[centres.size()] * total;
     double running = 0;
     std::size_t chosen = n;
     for (std::size_t i = 0; i < n; ++i) {
@@ -84,8 +84,7 @@ std::vector<Eigen::Vector3f> seedCentres(const std::vector<Eigen::Vector3f>& poi
           break;
         }
     centres.push_back(points[chosen]);
-    for (std::size_t i = 0; i < n; ++i)
-      dist2[i] = std::min(dist2[i], double((points[i] - centres.back()).squaredNorm()));
+    for (std::size_t i = 0; i < n; ++i) dist2[i] = std::min(dist2[i], double(squaredDistance(points[i], centres.back())));
   }
   return centres;
 }
@@ -106,7 +105,7 @@ double updateCentres(const std::vector<Eigen::Vector3f>& points, const std::vect
   for (std::size_t c = 0; c < centres.size(); ++c) {
     if (counts[c] == 0) continue;
     const Eigen::Vector3f mean = (sums[c] / double(counts[c])).cast<float>();
-    moved = std::max(moved, double((mean - centres[c]).norm()));
+    moved = std::max(moved, double(std::sqrt(squaredDistance(mean, centres[c]))));
     updated.push_back(mean);
   }
   if (updated.size() != centres.size()) moved = std::numeric_limits<double>::infinity();
@@ -115,6 +114,13 @@ double updateCentres(const std::vector<Eigen::Vector3f>& points, const std::vect
 }
 
 }  // namespace
+
+std::vector<double> kmeansSeedingDraws(unsigned seed, int k) {
+  std::mt19937 rng(seed);
+  std::vector<double> draws(std::size_t(std::max(k, 0)));
+  for (double& d : draws) d = double(rng()) / 4294967296.0;
+  return draws;
+}
 
 KMeansResult kmeansPoints(const ImageF& points, int k, int max_iterations, double tolerance_m, unsigned seed) {
   requirePointImage("kmeansPoints", points);

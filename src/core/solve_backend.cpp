@@ -30,6 +30,11 @@ void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int 
                        ", outside [-1, " + std::to_string(motion_labels) + ")");
 }
 
+std::vector<Eigen::Vector3f> SolveBackend::kmeansCentres(int level, int k, int max_iterations, double tolerance_m,
+                                                         unsigned seed) {
+  return kmeansPoints(framePoints(level), k, max_iterations, tolerance_m, seed).centres;
+}
+
 void SolveBackend::initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres) {
   if (centres.empty()) throw InputError("initial labels from K-means: no centre given");
   initialiseLabels(level, assignToNearestCentre(framePoints(level), centres), int(centres.size()));

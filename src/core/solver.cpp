@@ -273,12 +273,12 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
 }
 
 Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
-  // K-means on 3D points at a coarse level (a few hundred to a few thousand points, on the host), assigned at the
-  // label level. (Running it on a second host thread, beside the dominant motion, was measured on the H100 machine
-  // and dropped: a new thread per pair with its own OpenMP threads made the initialisation slower, 2.5-56 ms.)
+  // K-means on 3D points at a coarse level (a few hundred to a few thousand points; the CUDA backend runs it on the
+  // device and downloads only the centres), assigned at the label level.
   const auto t = Clock::now();
-  KMeansResult kmeans = kmeansPoints(backend->framePoints(p.kmeans_level), config.initial_labels,
-                                     config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
+  std::vector<Eigen::Vector3f> centres = backend->kmeansCentres(p.kmeans_level, config.initial_labels,
+                                                                config.kmeans_max_iterations, config.kmeans_tolerance,
+                                                                config.seed);
   // Every label starts from the dominant motion (one label over all valid pixels, coarse to fine down to the
   // label level): with a moving camera all labels then start near the truth, and a small segment that is
   // frozen at the coarse levels (too few pixels there) does not have to find a large motion from zero.
@@ -290,16 +290,16 @@ Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
       dominant = single[0];
     }
   }
-  if (kmeans.centres.empty())
-    kmeans = kmeansPoints(backend->framePoints(p.label_level), config.initial_labels, config.kmeans_max_iterations,
-                          config.kmeans_tolerance, config.seed);
+  if (centres.empty())
+    centres = backend->kmeansCentres(p.label_level, config.initial_labels, config.kmeans_max_iterations,
+                                     config.kmeans_tolerance, config.seed);
   Start start;
-  start.motion_labels = std::max(1, int(kmeans.centres.size()));
-  if (kmeans.centres.empty()) {  // no valid point at either level (prepare() refuses such a pair): all outliers
+  start.motion_labels = std::max(1, int(centres.size()));
+  if (centres.empty()) {  // no valid point at either level (prepare() refuses such a pair): all outliers
     const ImageF& points = backend->framePoints(p.label_level);
     backend->initialiseLabels(p.label_level, ImageI32(points.width, points.height, 1, -1), 1);
   } else {
-    backend->initialiseLabelsFromCentres(p.label_level, kmeans.centres);
+    backend->initialiseLabelsFromCentres(p.label_level, centres);
   }
   start.twists.assign(std::size_t(start.motion_labels), dominant);
   start.outer_iterations = config.outer_iterations;

@@ -439,6 +439,7 @@ TEST(LabelAdaptation, APartThatNoMotionSeesMergesIntoTheMotionThatSeesItOccluded
   config.backend = Backend::Cpu;
   config.regularizer = Regularizer::Quadratic;
   config.threads = 2;  // the sums' order, and with it a borderline result, depends on the thread count
+  config.merge_occlusion_absorbers = false;
   Config one = config;
   one.initial_labels = 1;
   Config absorbing = config;

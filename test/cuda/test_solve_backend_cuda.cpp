@@ -16,6 +16,7 @@
 #include <cstring>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -428,6 +429,63 @@ TEST(CudaSolveBackend, TwoSolversInTwoThreadsMatchTheirSolosBitForBit) {
         EXPECT_EQ((solo->segments[i].twist - concurrent->segments[i].twist).norm(), 0.0) << "round " << k;
     }
   }
+}
+
+// K-means on the device against kmeansPoints on the host, at every level of the synthetic scenes (40x30 to 640x480
+// points) with the default and other parameters: the same number of centres, each within 1e-5 m of the host's (the
+// clusters' double sums run in another order: a mean may differ by an ulp of a float; in practice they agree bit for
+// bit, which the test reports). Fewer distinct points than k give fewer centres, and no valid point none.
+TEST(CudaSolveBackend, KMeansCentresMatchTheHost) {
+  SKIP_WITHOUT_GPU();
+  Config config;
+  auto cpu = makeCpuSolveBackend();
+  auto gpu = makeCudaSolveBackend();
+  int compared = 0, identical = 0;
+  auto compare = [&](int level, int k, int iterations, double tolerance, unsigned seed, const std::string& what) {
+    const std::vector<Eigen::Vector3f> a = cpu->kmeansCentres(level, k, iterations, tolerance, seed);
+    const std::vector<Eigen::Vector3f> b = gpu->kmeansCentres(level, k, iterations, tolerance, seed);
+    ASSERT_EQ(a.size(), b.size()) << what;
+    for (std::size_t c = 0; c < a.size(); ++c) {
+      EXPECT_LE((a[c] - b[c]).cwiseAbs().maxCoeff(), 1e-5f) << what << ", centre " << c;
+      identical += a[c] == b[c] ? 1 : 0;
+      ++compared;
+    }
+  };
+  for (const auto& [width, height, variant] : {std::tuple{320, 240, 0}, std::tuple{320, 240, 1}, std::tuple{317, 239, 2},
+                                               std::tuple{640, 480, 0}}) {
+    SyntheticSceneOptions options;
+    options.width = width;
+    options.height = height;
+    options.variant = variant;
+    const SyntheticPair pair = renderSyntheticPair(options);
+    const int levels = pyramidLevelCount(width, height, config.coarsest_min_width);
+    for (SolveBackend* b : {cpu.get(), gpu.get()}) b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
+    for (int level = 0; level < levels; ++level) {
+      const std::string what = std::to_string(width) + "x" + std::to_string(height) + " variant " +
+                               std::to_string(variant) + " level " + std::to_string(level);
+      compare(level, config.initial_labels, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed, what);
+      compare(level, 64, 30, 0.0, 12345u, what + ", 64 centres, 30 iterations");
+      compare(level, 3, 0, 0.0, 9u, what + ", seeding only");
+    }
+  }
+  std::printf("K-means: %d of %d centres bit-identical to the host's\n", identical, compared);
+
+  // Three valid pixels (depth elsewhere outside [min_depth, max_depth]): three centres out of 20; then none valid.
+  SyntheticSceneOptions options;
+  options.width = 64;
+  options.height = 48;
+  SyntheticPair pair = renderSyntheticPair(options);
+  for (float& z : pair.frame1.depth.data) z = 0.f;
+  pair.frame1.depth(5, 5) = 1.0f;
+  pair.frame1.depth(40, 20) = 1.5f;
+  pair.frame1.depth(60, 47) = 2.0f;
+  for (SolveBackend* b : {cpu.get(), gpu.get()}) b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, 1, config);
+  compare(0, 20, 10, 0.01, 7u, "three valid points");
+  EXPECT_EQ(gpu->kmeansCentres(0, 20, 10, 0.01, 7u).size(), 3u);
+  for (float& z : pair.frame1.depth.data) z = 0.f;
+  for (SolveBackend* b : {cpu.get(), gpu.get()}) b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, 1, config);
+  EXPECT_TRUE(gpu->kmeansCentres(0, 20, 10, 0.01, 7u).empty());
+  EXPECT_TRUE(cpu->kmeansCentres(0, 20, 10, 0.01, 7u).empty());
 }
 
 // Grow-only buffers: once a solver has seen pairs of a size and label count (cold and warm), solving them again

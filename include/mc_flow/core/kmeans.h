@@ -21,6 +21,12 @@ struct KMeansResult {
 /// by `seed` (same input + seed = same output). Returns fewer centres when fewer distinct points exist.
 KMeansResult kmeansPoints(const ImageF& points, int k, int max_iterations, double tolerance_m, unsigned seed);
 
+/// @brief The k uniform draws in [0, 1) of kmeansPoints' k-means++ seeding from `seed` (draw 0 picks the first centre,
+/// draw j the (j+1)-th), from a std::mt19937 and the raw-output conversion u / 2^32, which, unlike
+/// std::uniform_real_distribution, every standard library computes alike. The CUDA backend's K-means takes them as
+/// an argument, so both seed from the same numbers.
+std::vector<double> kmeansSeedingDraws(unsigned seed, int k);
+
 /// @brief Nearest-centre assignment of each valid point (-1 where invalid).
 ImageI32 assignToNearestCentre(const ImageF& points, const std::vector<Eigen::Vector3f>& centres);
 

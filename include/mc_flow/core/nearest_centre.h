@@ -1,7 +1,8 @@
 /**
  * @file nearest_centre.h
- * @brief K-means' nearest-centre rule, written once for the host (kmeans.cpp) and the CUDA backend's assignment
- * of the label level (cuda/kmeans.cu), with every float operation rounded on its own so both give the same labels.
+ * @brief K-means' per-point rules (the nearest centre, the squared distance of the seeding and of a centre's shift),
+ * written once for the host (kmeans.cpp) and the CUDA backend's K-means and assignment (cuda/kmeans.cu), with every
+ * float operation rounded on its own so both give the same bits.
  */
 #pragma once
 
@@ -24,6 +25,13 @@ MCFLOW_HOST_DEVICE inline int nearestCentreIndex(float x, float y, float z, cons
     }
   }
   return best;
+}
+
+/// @brief |p - c|^2 for the k-means++ seeding's distances and a centre's shift, in the order of Eigen's
+/// (p - c).squaredNorm() of a 3-vector, x^2 + (y^2 + z^2), which the host's K-means used before this was shared.
+MCFLOW_HOST_DEVICE inline float kmeansSquaredDistance(float x, float y, float z, const float* centre) {
+  const float dx = subRn(x, centre[0]), dy = subRn(y, centre[1]), dz = subRn(z, centre[2]);
+  return addRn(mulRn(dx, dx), addRn(mulRn(dy, dy), mulRn(dz, dz)));
 }
 
 }  // namespace mc_flow

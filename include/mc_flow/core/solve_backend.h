@@ -70,6 +70,13 @@ class SolveBackend : public LabelStore {
   /// `hard` holds a motion label in [0, motion_labels) per pixel, or -1 for the outlier label; pixels
   /// without depth go to the outlier label whatever `hard` says. Label count = motion_labels + 1.
   virtual void initialiseLabels(int level, const ImageI32& hard, int motion_labels) = 0;
+  /// @brief K-means' centres on frame 1's valid points at `level`: kmeansPoints (k-means++ seeding from `seed`, at most
+  /// max_iterations Lloyd iterations, stopping when no centre moves further than tolerance_m m); fewer than k where
+  /// fewer distinct points exist, none where no point is valid. This default runs kmeansPoints on
+  /// framePoints(level); the CUDA backend runs it on the device and downloads only the centres (cuda/kmeans.cu says
+  /// where they may differ from the host's).
+  virtual std::vector<Eigen::Vector3f> kmeansCentres(int level, int k, int max_iterations, double tolerance_m,
+                                                     unsigned seed);
   /// @brief Hard initial labels at `level` from K-means' centres (at least one): each valid point takes its nearest
   /// centre (nearest_centre.h), label count = centres + 1. This default is initialiseLabels of
   /// assignToNearestCentre(framePoints(level), centres); the CUDA backend assigns on the device, without
