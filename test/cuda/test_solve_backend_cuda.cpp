@@ -469,12 +469,30 @@ TEST(CudaSolveBackend, KMeansCentresMatchTheHost) {
     }
   }
   std::printf("K-means: %d of %d centres bit-identical to the host's\n", identical, compared);
+}
 
-  // Three valid pixels (depth elsewhere outside [min_depth, max_depth]): three centres out of 20; then none valid.
+// Small inputs (the sanitizers' case): a 64x48 scene at every level, three valid pixels for 20 centres (three centres),
+// and none valid (no centre).
+TEST(CudaSolveBackend, KMeansCentresOfFewOrNoValidPoints) {
+  SKIP_WITHOUT_GPU();
+  Config config;
+  auto cpu = makeCpuSolveBackend();
+  auto gpu = makeCudaSolveBackend();
+  auto compare = [&](int level, int k, int iterations, double tolerance, unsigned seed, const std::string& what) {
+    const std::vector<Eigen::Vector3f> a = cpu->kmeansCentres(level, k, iterations, tolerance, seed);
+    const std::vector<Eigen::Vector3f> b = gpu->kmeansCentres(level, k, iterations, tolerance, seed);
+    ASSERT_EQ(a.size(), b.size()) << what;
+    for (std::size_t c = 0; c < a.size(); ++c) EXPECT_LE((a[c] - b[c]).cwiseAbs().maxCoeff(), 1e-5f) << what << ", centre " << c;
+  };
   SyntheticSceneOptions options;
   options.width = 64;
   options.height = 48;
   SyntheticPair pair = renderSyntheticPair(options);
+  const int levels = pyramidLevelCount(64, 48, config.coarsest_min_width);
+  for (SolveBackend* b : {cpu.get(), gpu.get()}) b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
+  for (int level = 0; level < levels; ++level) compare(level, 20, 10, 0.01, 7u, "64x48 level " + std::to_string(level));
+
+  // Three valid pixels (depth elsewhere outside [min_depth, max_depth]): three centres out of 20; then none valid.
   for (float& z : pair.frame1.depth.data) z = 0.f;
   pair.frame1.depth(5, 5) = 1.0f;
   pair.frame1.depth(40, 20) = 1.5f;
