@@ -130,6 +130,7 @@ __global__ void __launch_bounds__(kKMeansThreads) kmeansKernel(const DeviceImage
       ++offset;
     }
   if (n == 0) {  // uniform: n is the block's total
+    for (int k = t; k < 3 * kMaxCentres; k += kKMeansThreads) outcome->centres.xyz[k] = 0.f;  // all of it comes down
     if (t == 0) {
       outcome->centres.count = 0;
       outcome->iterations = 0;
@@ -226,7 +227,8 @@ __global__ void __launch_bounds__(kKMeansThreads) kmeansKernel(const DeviceImage
     __syncthreads();
     if (s.stop) break;
   }
-  for (int k = t; k < 3 * s.count; k += kKMeansThreads) outcome->centres.xyz[k] = s.centres[k];
+  for (int k = t; k < 3 * kMaxCentres; k += kKMeansThreads)  // the whole answer comes down: no byte left unwritten
+    outcome->centres.xyz[k] = k < 3 * s.count ? s.centres[k] : 0.f;
   if (t == 0) {
     outcome->centres.count = s.count;
     outcome->iterations = iterations;

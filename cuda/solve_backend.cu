@@ -414,14 +414,14 @@ class CudaSolveBackend final : public SolveBackend {
     staged.moved_depth = staged_moved;
     staged.labels = staged_ids;
     staged.occlusion = staged_occlusion;
-    cudaError_t waited[kOutputImages] = {};
     // On OpenMP threads, which may not have used this backend's device yet.
-    staged.wait_for_image = [this, &waited](int i) {
-      waited[i] = cudaSetDevice(device_);
-      if (waited[i] == cudaSuccess) waited[i] = cudaEventSynchronize(image_downloaded_[i].event);
+    staged.wait_for_image = [this](int i) {
+      cudaError_t e = cudaSetDevice(device_);
+      if (e == cudaSuccess) e = cudaEventSynchronize(image_downloaded_[i].event);
+      return int(e);
     };
-    fillOutputImages(staged, result);
-    for (const cudaError_t e : waited) MCFLOW_CUDA_CHECK(e);  // not inside the OpenMP threads: they must not throw
+    // Checked here, not inside the OpenMP threads: they must not throw.
+    MCFLOW_CUDA_CHECK(static_cast<cudaError_t>(fillOutputImages(staged, result)));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));  // the label sums
     result.segments.assign(std::size_t(n), Segment());
     for (int i = 0; i < n; ++i) {

@@ -259,35 +259,52 @@ class CpuSolveBackend final : public SolveBackend {
 
 }  // namespace
 
-void fillOutputImages(const StagedOutputs& s, Result& result) {
+int fillOutputImages(const StagedOutputs& s, Result& result) {
   const int W = s.width, H = s.height;
   const std::size_t p = std::size_t(W) * H;
+  const std::size_t label_values = p * std::size_t(s.label_count);
+  // Sizes first, on this thread: resize() keeps a recycled image's memory as it is where its size is the same.
+  result.soft_labels.width = W, result.soft_labels.height = H, result.soft_labels.count = s.label_count;
+  result.soft_labels.data.resize(label_values);
+  result.scene_flow.width = W, result.scene_flow.height = H, result.scene_flow.channels = 3;
+  result.scene_flow.data.resize(3 * p);
+  result.optical_flow.width = W, result.optical_flow.height = H, result.optical_flow.channels = 2;
+  result.optical_flow.data.resize(2 * p);
+  result.moved_depth.width = W, result.moved_depth.height = H, result.moved_depth.channels = 1;
+  result.moved_depth.data.resize(p);
+  result.labels.width = W, result.labels.height = H, result.labels.channels = 1;
+  result.labels.data.resize(p);
+  result.occlusion.width = W, result.occlusion.height = H, result.occlusion.channels = 1;
+  result.occlusion.data.resize(p);
+  // Tasks: the soft labels (the largest image: label_count planes) in chunks, then the other five images whole.
+  constexpr std::size_t kChunk = std::size_t(1) << 18;  // floats: 1 MiB
+  const int label_chunks = int((label_values + kChunk - 1) / kChunk);
+  const int tasks = label_chunks + 5;
+  std::vector<int> status(std::size_t(tasks), 0);
   auto fill = [&](int task) {
-    if (s.wait_for_image) s.wait_for_image(task);
-    switch (task) {
-      case 0:
-        result.soft_labels.width = W, result.soft_labels.height = H, result.soft_labels.count = s.label_count;
-        result.soft_labels.data.assign(s.soft_labels, s.soft_labels + p * std::size_t(s.label_count));
+    const int image = task < label_chunks ? 0 : task - label_chunks + 1;
+    if (s.wait_for_image) status[std::size_t(task)] = s.wait_for_image(image);
+    if (status[std::size_t(task)] != 0) return;
+    switch (image) {
+      case 0: {
+        const std::size_t begin = std::size_t(task) * kChunk, end = std::min(label_values, begin + kChunk);
+        std::copy(s.soft_labels + begin, s.soft_labels + end, result.soft_labels.data.begin() + std::ptrdiff_t(begin));
         break;
+      }
       case 1:
-        result.scene_flow.width = W, result.scene_flow.height = H, result.scene_flow.channels = 3;
-        result.scene_flow.data.assign(s.scene_flow, s.scene_flow + 3 * p);
+        std::copy_n(s.scene_flow, 3 * p, result.scene_flow.data.begin());
         break;
       case 2:
-        result.optical_flow.width = W, result.optical_flow.height = H, result.optical_flow.channels = 2;
-        result.optical_flow.data.assign(s.optical_flow, s.optical_flow + 2 * p);
+        std::copy_n(s.optical_flow, 2 * p, result.optical_flow.data.begin());
         break;
       case 3:
-        result.moved_depth.width = W, result.moved_depth.height = H, result.moved_depth.channels = 1;
-        result.moved_depth.data.assign(s.moved_depth, s.moved_depth + p);
+        std::copy_n(s.moved_depth, p, result.moved_depth.data.begin());
         break;
       case 4:
-        result.labels.width = W, result.labels.height = H, result.labels.channels = 1;
-        result.labels.data.assign(s.labels, s.labels + p);
+        std::copy_n(s.labels, p, result.labels.data.begin());
         break;
       default:
-        result.occlusion.width = W, result.occlusion.height = H, result.occlusion.channels = 1;
-        result.occlusion.data.assign(s.occlusion, s.occlusion + p);
+        std::copy_n(s.occlusion, p, result.occlusion.data.begin());
         break;
     }
   };
@@ -296,7 +313,10 @@ void fillOutputImages(const StagedOutputs& s, Result& result) {
   const std::size_t bytes = p * (std::size_t(s.label_count) * 4 + 3 * 4 + 2 * 4 + 4 + 4 + 1);
   const bool parallel = bytes >= (std::size_t(2) << 20);
 #pragma omp parallel for schedule(dynamic, 1) if (parallel)
-  for (int task = 0; task < 6; ++task) fill(task);
+  for (int task = 0; task < tasks; ++task) fill(task);
+  for (const int code : status)
+    if (code != 0) return code;
+  return 0;
 }
 
 void stageInputFrames(const RgbdFrame& frame1, const RgbdFrame& frame2, float* staged) {

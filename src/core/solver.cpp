@@ -187,13 +187,8 @@ Result Solver::Impl::emptyResult(const Prepared& p, const Intrinsics& K) {
   result.scene_flow.data.swap(spare.scene_flow.data);
   result.optical_flow.data.swap(spare.optical_flow.data);
   result.moved_depth.data.swap(spare.moved_depth.data);
-  // Empty but with their capacity: a consistent 0x0 image until the outputs stage fills it.
-  result.soft_labels.data.clear();
-  result.labels.data.clear();
-  result.occlusion.data.clear();
-  result.scene_flow.data.clear();
-  result.optical_flow.data.clear();
-  result.moved_depth.data.clear();
+  // 0x0 images (their sizes stay 0 until the outputs stage fills them) whose data keeps the recycled size: a resize
+  // to the same size then leaves the memory as it is, where clearing it made the next resize zero-fill all of it.
   result.width = p.width;
   result.height = p.height;
   result.intrinsics = K;

@@ -393,5 +393,58 @@ TEST(SolveBackend, StagedInputFramesHoldTheFourPlanesInOrder) {
   }
 }
 
+// The CUDA backend's host side of the outputs: every image copied whole (the soft labels in 1 MiB chunks, here 3.5
+// of them), into a recycled result's memory where the sizes match, and a wait's error code returned, not swallowed.
+TEST(SolveBackend, OutputImagesCopiedInChunksIntoRecycledMemory) {
+  const int W = 640, H = 480, count = 3;
+  const std::size_t p = std::size_t(W) * H;
+  std::vector<float> labels(p * count), scene(3 * p), optical(2 * p), moved(p);
+  std::vector<std::int32_t> ids(p);
+  std::vector<std::uint8_t> occlusion(p);
+  for (std::size_t k = 0; k < labels.size(); ++k) labels[k] = float(k % 1001) * 1e-3f;
+  for (std::size_t k = 0; k < scene.size(); ++k) scene[k] = float(k % 37) - 18.f;
+  for (std::size_t k = 0; k < optical.size(); ++k) optical[k] = float(k % 53) * 0.5f;
+  for (std::size_t k = 0; k < p; ++k) {
+    moved[k] = 1.f + float(k % 11);
+    ids[k] = std::int32_t(k % 5);
+    occlusion[k] = std::uint8_t(k % 2);
+  }
+  StagedOutputs staged;
+  staged.width = W;
+  staged.height = H;
+  staged.label_count = count;
+  staged.soft_labels = labels.data();
+  staged.scene_flow = scene.data();
+  staged.optical_flow = optical.data();
+  staged.moved_depth = moved.data();
+  staged.labels = ids.data();
+  staged.occlusion = occlusion.data();
+  std::vector<int> waits(6, 0);
+  staged.wait_for_image = [&waits](int image) {
+#pragma omp atomic
+    ++waits[std::size_t(image)];
+    return 0;
+  };
+  Result result;
+  result.soft_labels.data.assign(p * count, -7.f);  // a recycled result's memory, of the same size
+  const float* recycled = result.soft_labels.data.data();
+  EXPECT_EQ(fillOutputImages(staged, result), 0);
+  EXPECT_EQ(result.soft_labels.data.data(), recycled);
+  EXPECT_EQ(result.soft_labels.width, W);
+  EXPECT_EQ(result.soft_labels.count, count);
+  EXPECT_EQ(result.soft_labels.data, labels);
+  EXPECT_EQ(result.scene_flow.data, scene);
+  EXPECT_EQ(result.scene_flow.channels, 3);
+  EXPECT_EQ(result.optical_flow.data, optical);
+  EXPECT_EQ(result.moved_depth.data, moved);
+  EXPECT_EQ(result.labels.data, ids);
+  EXPECT_EQ(result.occlusion.data, occlusion);
+  EXPECT_EQ(waits[0], 4) << "one wait per soft-label chunk";
+  for (int image = 1; image < 6; ++image) EXPECT_EQ(waits[std::size_t(image)], 1) << "image " << image;
+
+  staged.wait_for_image = [](int image) { return image == 2 ? 719 : 0; };  // the optical flow's transfer failed
+  EXPECT_EQ(fillOutputImages(staged, result), 719);
+}
+
 }  // namespace
 }  // namespace mc_flow

@@ -141,13 +141,16 @@ struct StagedOutputs {
   const std::uint8_t* occlusion = nullptr;
   /// Called before image `i` is read (0 soft labels, 1 scene flow, 2 optical flow, 3 moved depth, 4 labels,
   /// 5 occlusion), so that copying an image that has arrived overlaps the transfer of the next ones; null when every
-  /// image is in host memory already. Runs on OpenMP threads: it must not throw.
-  std::function<void(int)> wait_for_image;
+  /// image is in host memory already. Runs on OpenMP threads, several at once for the same image: it must not throw,
+  /// and returns 0 or an error code (the CUDA backend's cudaError_t).
+  std::function<int(int)> wait_for_image;
 };
 /// @brief Fills result's soft_labels, scene_flow, optical_flow, moved_depth, labels and occlusion from `staged`:
-/// each image allocated and copied in one pass, large images on several OpenMP threads (at 1280x720, ~50 MB
-/// allocated, zero-filled and copied on one thread took most of the CUDA outputs stage).
-void fillOutputImages(const StagedOutputs& staged, Result& result);
+/// each image sized (a recycled image's memory of the same size is neither freed nor zero-filled) and copied once,
+/// the soft labels in chunks of 1 MiB and the other images whole, on several OpenMP threads (at 1280x720, ~50 MB
+/// allocated, zero-filled and copied on one thread took most of the CUDA outputs stage; then the 26 MB of soft labels
+/// on one thread did). Returns the first non-zero code that wait_for_image returned, or 0.
+int fillOutputImages(const StagedOutputs& staged, Result& result);
 /// @brief Copies both frames' intensity and depth planes (`width` x `height` floats each) into `staged` in the order
 /// frame1 intensity, frame1 depth, frame2 intensity, frame2 depth; several OpenMP threads from a few MB on (the CUDA
 /// backend's page-locked upload buffer: the 1280x720 pyramid stage took 3.0-3.5 ms with it against 4.3 ms before, H100
