@@ -141,8 +141,8 @@ struct StagedOutputs {
   const std::uint8_t* occlusion = nullptr;
   /// Called before image `i` is read (0 soft labels, 1 scene flow, 2 optical flow, 3 moved depth, 4 labels,
   /// 5 occlusion), so that copying an image that has arrived overlaps the transfer of the next ones; null when every
-  /// image is in host memory already. Runs on OpenMP threads, several at once for the same image: it must not throw,
-  /// and returns 0 or an error code (the CUDA backend's cudaError_t).
+  /// image is in host memory already. Called once per image, image 0 on the calling thread and the others on OpenMP
+  /// threads: it must not throw, and returns 0 or an error code (the CUDA backend's cudaError_t).
   std::function<int(int)> wait_for_image;
 };
 /// @brief Fills result's soft_labels, scene_flow, optical_flow, moved_depth, labels and occlusion from `staged`:
