@@ -18,6 +18,7 @@
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/motion_estimation.h"
 #include "mc_flow/core/se3.h"
+#include "mc_flow/core/se3_coefficients.h"
 #include "sampling_device.cuh"
 
 namespace mc_flow {
@@ -46,20 +47,11 @@ __device__ __forceinline__ void mul3(const double A[9], const double B[9], doubl
 __device__ __forceinline__ void se3ExpRowsDevice(const double xi[6], double T[12]) {
   const double* v = xi;
   const double* w = xi + 3;
-  const double theta2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2], theta = sqrt(theta2);
   double W[9], W2[9];
   skew3(w, W);
   mul3(W, W, W2);
   double a, b, c;
-  if (theta < 1e-8) {
-    a = 1.0 - theta2 / 6.0;
-    b = 0.5 - theta2 / 24.0;
-    c = 1.0 / 6.0 - theta2 / 120.0;
-  } else {
-    a = sin(theta) / theta;
-    b = (1.0 - cos(theta)) / theta2;
-    c = (theta - sin(theta)) / (theta2 * theta);
-  }
+  se3ExpCoefficients(w[0] * w[0] + w[1] * w[1] + w[2] * w[2], a, b, c);
   for (int r = 0; r < 3; ++r) {
     double t = 0;
     for (int k = 0; k < 3; ++k) {

@@ -108,28 +108,16 @@ __device__ void se3ExpDevice(const double xi[6], float T[12]) {
   for (int k = 0; k < 12; ++k) T[k] = float(Td[k]);
 }
 
-// Left Jacobian of SE(3) (Barfoot eqs. 7.83, 7.86), cast to float (row-major 6x6).
+// Left Jacobian of SE(3) (se3_coefficients.h), cast to float (row-major 6x6).
 __device__ void se3LeftJacobianDevice(const double xi[6], float J[36]) {
   const double* rho = xi;
   const double* phi = xi + 3;
-  const double t2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2], t = sqrt(t2);
   double F[9], F2[9], P[9];
   skew3(phi, F);
   mul3(F, F, F2);
   skew3(rho, P);
   double a, b, c, d;
-  if (t < 1e-3) {
-    a = 0.5 - t2 / 24.0;
-    b = 1.0 / 6.0 - t2 / 120.0;
-    c = 1.0 / 24.0 - t2 / 720.0;
-    d = 1.0 / 120.0 - t2 / 2520.0;
-  } else {
-    const double s = sin(t), co = cos(t);
-    a = (1.0 - co) / t2;
-    b = (t - s) / (t2 * t);
-    c = (t2 + 2.0 * co - 2.0) / (2.0 * t2 * t2);
-    d = (2.0 * t - 3.0 * s + t * co) / (2.0 * t2 * t2 * t);
-  }
+  se3LeftJacobianCoefficients(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2], a, b, c, d);
   double FP[9], PF[9], FPF[9], F2P[9], PF2[9], FPF2[9], F2PF[9];
   mul3(F, P, FP);
   mul3(P, F, PF);

@@ -1,5 +1,7 @@
 #include "mc_flow/core/se3.h"
 
+#include "mc_flow/core/se3_coefficients.h"
+
 #include <cmath>
 
 namespace mc_flow {
@@ -13,18 +15,9 @@ Eigen::Matrix3d skew(const Eigen::Vector3d& w) {
 // Closed forms (Rodrigues); Taylor expansions below 1e-8 rad keep small motions exact in double precision.
 Eigen::Matrix4d se3Exp(const Vector6d& xi) {
   const Eigen::Vector3d v = xi.head<3>(), w = xi.tail<3>();
-  const double theta2 = w.squaredNorm(), theta = std::sqrt(theta2);
   const Eigen::Matrix3d W = skew(w), W2 = W * W;
   double a, b, c;  // R = I + a W + b W^2, V = I + b W + c W^2
-  if (theta < 1e-8) {
-    a = 1.0 - theta2 / 6.0;
-    b = 0.5 - theta2 / 24.0;
-    c = 1.0 / 6.0 - theta2 / 120.0;
-  } else {
-    a = std::sin(theta) / theta;
-    b = (1.0 - std::cos(theta)) / theta2;
-    c = (theta - std::sin(theta)) / (theta2 * theta);
-  }
+  se3ExpCoefficients(w.squaredNorm(), a, b, c);
   Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
   T.topLeftCorner<3, 3>() = Eigen::Matrix3d::Identity() + a * W + b * W2;
   T.topRightCorner<3, 1>() = (Eigen::Matrix3d::Identity() + b * W + c * W2) * v;
@@ -54,22 +47,9 @@ Vector6d se3Log(const Eigen::Matrix4d& T) {
 Matrix6d se3LeftJacobian(const Vector6d& xi) {
   // Barfoot, State Estimation for Robotics (2017), eqs. 7.83 and 7.86: J = [[J_SO3, Q], [0, J_SO3]].
   const Eigen::Vector3d rho = xi.head<3>(), phi = xi.tail<3>();
-  const double t2 = phi.squaredNorm(), t = std::sqrt(t2);
   const Eigen::Matrix3d F = skew(phi), F2 = F * F, P = skew(rho);
   double a, b, c, d;  // J_SO3 = I + a F + b F^2; Q uses b, c, d
-  // Series below 1e-3 rad: the closed forms cancel to ~t^5 there.
-  if (t < 1e-3) {
-    a = 0.5 - t2 / 24.0;
-    b = 1.0 / 6.0 - t2 / 120.0;
-    c = 1.0 / 24.0 - t2 / 720.0;
-    d = 1.0 / 120.0 - t2 / 2520.0;
-  } else {
-    const double s = std::sin(t), co = std::cos(t);
-    a = (1.0 - co) / t2;
-    b = (t - s) / (t2 * t);
-    c = (t2 + 2.0 * co - 2.0) / (2.0 * t2 * t2);
-    d = (2.0 * t - 3.0 * s + t * co) / (2.0 * t2 * t2 * t);
-  }
+  se3LeftJacobianCoefficients(phi.squaredNorm(), a, b, c, d);
   const Eigen::Matrix3d J = Eigen::Matrix3d::Identity() + a * F + b * F2;
   const Eigen::Matrix3d Q = 0.5 * P + b * (F * P + P * F + F * P * F) + c * (F2 * P + P * F2 - 3.0 * F * P * F) +
                             d * (F * P * F2 + F2 * P * F);

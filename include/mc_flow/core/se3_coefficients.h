@@ -1,0 +1,50 @@
+/**
+ * @file se3_coefficients.h
+ * @brief The scalar coefficients of SE(3)'s closed forms (Rodrigues' exp and Barfoot's left Jacobian), with their
+ * series near zero, written once for the host (se3.cpp, which assembles Eigen matrices from them) and the CUDA
+ * kernels (which assemble row-major arrays).
+ */
+#pragma once
+
+#include <cmath>
+
+#include "mc_flow/core/host_device.h"
+
+namespace mc_flow {
+
+/// @brief exp(xi) = [R V v; 0 1] with R = I + a W + b W^2 and V = I + b W + c W^2, W = skew(w), for
+/// theta2 = |w|^2. Taylor series below 1e-8 rad keep small motions exact in double precision.
+MCFLOW_HOST_DEVICE inline void se3ExpCoefficients(double theta2, double& a, double& b, double& c) {
+  const double theta = std::sqrt(theta2);
+  if (theta < 1e-8) {
+    a = 1.0 - theta2 / 6.0;
+    b = 0.5 - theta2 / 24.0;
+    c = 1.0 / 6.0 - theta2 / 120.0;
+  } else {
+    a = std::sin(theta) / theta;
+    b = (1.0 - std::cos(theta)) / theta2;
+    c = (theta - std::sin(theta)) / (theta2 * theta);
+  }
+}
+
+/// @brief Left Jacobian of SE(3) (Barfoot, State Estimation for Robotics, 2017, eqs. 7.83 and 7.86):
+/// J = [[J_SO3, Q], [0, J_SO3]] with J_SO3 = I + a F + b F^2 and
+/// Q = P/2 + b (FP + PF + FPF) + c (F^2 P + P F^2 - 3 FPF) + d (FPF^2 + F^2 PF), F = skew(phi), P = skew(rho), for
+/// t2 = |phi|^2. Series below 1e-3 rad: the closed forms cancel to ~t^5 there.
+MCFLOW_HOST_DEVICE inline void se3LeftJacobianCoefficients(double t2, double& a, double& b, double& c, double& d) {
+  const double t = std::sqrt(t2);
+  if (t < 1e-3) {
+    a = 0.5 - t2 / 24.0;
+    b = 1.0 / 6.0 - t2 / 120.0;
+    c = 1.0 / 24.0 - t2 / 720.0;
+    d = 1.0 / 120.0 - t2 / 2520.0;
+  } else {
+    const double s = std::sin(t), co = std::cos(t);
+    a = (1.0 - co) / t2;
+    b = (t - s) / (t2 * t);
+    c = (t2 + 2.0 * co - 2.0) / (2.0 * t2 * t2);
+    d = (2.0 * t - 3.0 * s + t * co) / (2.0 * t2 * t2 * t);
+  }
+}
+
+}  // namespace mc_flow
