@@ -263,53 +263,57 @@ int fillOutputImages(const StagedOutputs& s, Result& result) {
   const int W = s.width, H = s.height;
   const std::size_t p = std::size_t(W) * H;
   const std::size_t label_values = p * std::size_t(s.label_count);
-  // Sizes first, on this thread: resize() keeps a recycled image's memory as it is where its size is the same.
   result.soft_labels.width = W, result.soft_labels.height = H, result.soft_labels.count = s.label_count;
-  result.soft_labels.data.resize(label_values);
   result.scene_flow.width = W, result.scene_flow.height = H, result.scene_flow.channels = 3;
-  result.scene_flow.data.resize(3 * p);
   result.optical_flow.width = W, result.optical_flow.height = H, result.optical_flow.channels = 2;
-  result.optical_flow.data.resize(2 * p);
   result.moved_depth.width = W, result.moved_depth.height = H, result.moved_depth.channels = 1;
-  result.moved_depth.data.resize(p);
   result.labels.width = W, result.labels.height = H, result.labels.channels = 1;
-  result.labels.data.resize(p);
   result.occlusion.width = W, result.occlusion.height = H, result.occlusion.channels = 1;
-  result.occlusion.data.resize(p);
-  // Tasks: the soft labels (the largest image: label_count planes) in chunks, then the other five images whole.
+  // A recycled result whose soft labels have this size (a stream at one size and label count): copied in 1 MiB chunks
+  // on all threads into the memory as it is. Otherwise one task allocates and copies them in one pass (a resize
+  // first would zero-fill all of it on this thread). The other images: copied in place where their size matches,
+  // else allocated and copied, one task each.
   constexpr std::size_t kChunk = std::size_t(1) << 18;  // floats: 1 MiB
-  const int label_chunks = int((label_values + kChunk - 1) / kChunk);
-  const int tasks = label_chunks + 5;
+  const bool labels_in_place = result.soft_labels.data.size() == label_values;
+  const int label_tasks = labels_in_place ? int((label_values + kChunk - 1) / kChunk) : 1;
+  const int tasks = label_tasks + 5;
   // The soft labels come down first (the others cannot arrive before them): this thread waits for them once, and
   // each of the other images is waited for by the one task that copies it. (Every chunk waiting for the soft
   // labels on its own thread made the outputs stage 2 ms slower for some pairs at 320x240 and 640x480.)
   std::vector<int> status(std::size_t(tasks), 0);
   const int labels_status = s.wait_for_image ? s.wait_for_image(0) : 0;
+  auto copy = [](auto& data, const auto* from, std::size_t count) {
+    if (data.size() == count) std::copy_n(from, count, data.begin());
+    else data.assign(from, from + count);
+  };
   auto fill = [&](int task) {
-    const int image = task < label_chunks ? 0 : task - label_chunks + 1;
+    const int image = task < label_tasks ? 0 : task - label_tasks + 1;
     if (image == 0) status[std::size_t(task)] = labels_status;
     else if (s.wait_for_image) status[std::size_t(task)] = s.wait_for_image(image);
     if (status[std::size_t(task)] != 0) return;
     switch (image) {
-      case 0: {
-        const std::size_t begin = std::size_t(task) * kChunk, end = std::min(label_values, begin + kChunk);
-        std::copy(s.soft_labels + begin, s.soft_labels + end, result.soft_labels.data.begin() + std::ptrdiff_t(begin));
+      case 0:
+        if (labels_in_place) {
+          const std::size_t begin = std::size_t(task) * kChunk, end = std::min(label_values, begin + kChunk);
+          std::copy(s.soft_labels + begin, s.soft_labels + end, result.soft_labels.data.begin() + std::ptrdiff_t(begin));
+        } else {
+          result.soft_labels.data.assign(s.soft_labels, s.soft_labels + label_values);
+        }
         break;
-      }
       case 1:
-        std::copy_n(s.scene_flow, 3 * p, result.scene_flow.data.begin());
+        copy(result.scene_flow.data, s.scene_flow, 3 * p);
         break;
       case 2:
-        std::copy_n(s.optical_flow, 2 * p, result.optical_flow.data.begin());
+        copy(result.optical_flow.data, s.optical_flow, 2 * p);
         break;
       case 3:
-        std::copy_n(s.moved_depth, p, result.moved_depth.data.begin());
+        copy(result.moved_depth.data, s.moved_depth, p);
         break;
       case 4:
-        std::copy_n(s.labels, p, result.labels.data.begin());
+        copy(result.labels.data, s.labels, p);
         break;
       default:
-        std::copy_n(s.occlusion, p, result.occlusion.data.begin());
+        copy(result.occlusion.data, s.occlusion, p);
         break;
     }
   };

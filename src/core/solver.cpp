@@ -187,8 +187,8 @@ Result Solver::Impl::emptyResult(const Prepared& p, const Intrinsics& K) {
   result.scene_flow.data.swap(spare.scene_flow.data);
   result.optical_flow.data.swap(spare.optical_flow.data);
   result.moved_depth.data.swap(spare.moved_depth.data);
-  // 0x0 images (their sizes stay 0 until the outputs stage fills them) whose data keeps the recycled size: a resize
-  // to the same size then leaves the memory as it is, where clearing it made the next resize zero-fill all of it.
+  // 0x0 images (their sizes stay 0 until the outputs stage fills them) whose data keeps the recycled size, so that the
+  // CUDA outputs can copy into it in chunks on several threads where the size is the same (fillOutputImages).
   result.width = p.width;
   result.height = p.height;
   result.intrinsics = K;

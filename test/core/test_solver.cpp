@@ -441,6 +441,16 @@ TEST(SolveBackend, OutputImagesCopiedInChunksIntoRecycledMemory) {
   EXPECT_EQ(result.occlusion.data, occlusion);
   for (int image = 0; image < 6; ++image) EXPECT_EQ(waits[std::size_t(image)], 1) << "image " << image;
 
+  // A result that is not recycled (empty images): the same contents, allocated by the copies.
+  Result fresh;
+  for (int& w : waits) w = 0;
+  EXPECT_EQ(fillOutputImages(staged, fresh), 0);
+  EXPECT_EQ(fresh.soft_labels.data, labels);
+  EXPECT_EQ(fresh.scene_flow.data, scene);
+  EXPECT_EQ(fresh.occlusion.data, occlusion);
+  EXPECT_EQ(fresh.labels.height, H);
+  for (int image = 0; image < 6; ++image) EXPECT_EQ(waits[std::size_t(image)], 1) << "image " << image;
+
   staged.wait_for_image = [](int image) { return image == 2 ? 719 : 0; };  // the optical flow's transfer failed
   EXPECT_EQ(fillOutputImages(staged, result), 719);
   staged.wait_for_image = [](int image) { return image == 0 ? 4 : 0; };  // the soft labels' transfer failed

@@ -146,10 +146,10 @@ struct StagedOutputs {
   std::function<int(int)> wait_for_image;
 };
 /// @brief Fills result's soft_labels, scene_flow, optical_flow, moved_depth, labels and occlusion from `staged`:
-/// each image sized (a recycled image's memory of the same size is neither freed nor zero-filled) and copied once,
-/// the soft labels in chunks of 1 MiB and the other images whole, on several OpenMP threads (at 1280x720, ~50 MB
-/// allocated, zero-filled and copied on one thread took most of the CUDA outputs stage; then the 26 MB of soft labels
-/// on one thread did). Returns the first non-zero code that wait_for_image returned, or 0.
+/// each image copied once, into a recycled image's memory where its size matches (the soft labels then in chunks of
+/// 1 MiB), else allocated and copied in one pass, on several OpenMP threads (at 1280x720, ~50 MB allocated,
+/// zero-filled and copied on one thread took most of the CUDA outputs stage; then the 26 MB of soft labels on one
+/// thread did). Returns the first non-zero code that wait_for_image returned, or 0.
 int fillOutputImages(const StagedOutputs& staged, Result& result);
 /// @brief Copies both frames' intensity and depth planes (`width` x `height` floats each) into `staged` in the order
 /// frame1 intensity, frame1 depth, frame2 intensity, frame2 depth; several OpenMP threads from a few MB on (the CUDA
