@@ -551,81 +551,8 @@ __device__ __forceinline__ void dampedLabelBlock(const double* upper, double dam
     }
 }
 
-// A damped 6x6 block's Cholesky factor as choleskyLower6 gives it, but each diagonal slot holds the reciprocal of the
-// pivot (from rsqrt, as the group factorization's), so that the solve and the coupling strength multiply where the
-// host's divide: shorter serial chains for the one thread that handles a label. Steps and strengths differ from the
-// host's by rounding: in the last bits for well-conditioned blocks, more where a pivot is near its floor (as the
-// device's contracted FMAs already made them differ); a coupling decision differs only for a strength at
-// motion_min_coupling to that rounding.
-__device__ __forceinline__ void choleskyReciprocal6(const double A[36], double F[21]) {
-#pragma unroll
-  for (int j = 0; j < 6; ++j) {
-    double d = A[j * 6 + j];
-    const double floor = 1e-12 * d;
-#pragma unroll
-    for (int k = 0; k < j; ++k) {
-      const double l = F[lowerIndex6(j, k)];
-      d -= l * l;
-    }
-    const double inverse = rsqrt(d > floor ? d : floor);
-    F[lowerIndex6(j, j)] = inverse;
-#pragma unroll
-    for (int i = j + 1; i < 6; ++i) {
-      double v = A[i * 6 + j];
-#pragma unroll
-      for (int k = 0; k < j; ++k) v -= F[lowerIndex6(i, k)] * F[lowerIndex6(j, k)];
-      F[lowerIndex6(i, j)] = v * inverse;
-    }
-  }
-}
-
-// choleskySolve6 over choleskyReciprocal6's factor.
-__device__ __forceinline__ void solveCholeskyReciprocal6(const double F[21], const double b[6], double x[6]) {
-  double y[6];
-#pragma unroll
-  for (int i = 0; i < 6; ++i) {
-    double v = b[i];
-#pragma unroll
-    for (int k = 0; k < i; ++k) v -= F[lowerIndex6(i, k)] * y[k];
-    y[i] = v * F[lowerIndex6(i, i)];
-  }
-#pragma unroll
-  for (int i = 5; i >= 0; --i) {
-    double v = y[i];
-#pragma unroll
-    for (int k = i + 1; k < 6; ++k) v -= F[lowerIndex6(k, i)] * x[k];
-    x[i] = v * F[lowerIndex6(i, i)];
-  }
-}
-
-// motionCouplingStrength over choleskyReciprocal6's factors: || L_a^-1 H_ab L_b^-T ||_F.
-__device__ __forceinline__ double motionCouplingStrengthDevice(const double F_a[21], const double pair[36],
-                                                               const double F_b[21]) {
-  double X[36];  // L_a^-1 H_ab, column by column
-#pragma unroll
-  for (int j = 0; j < 6; ++j)
-#pragma unroll
-    for (int i = 0; i < 6; ++i) {
-      double v = pair[i * 6 + j];
-#pragma unroll
-      for (int k = 0; k < i; ++k) v -= F_a[lowerIndex6(i, k)] * X[k * 6 + j];
-      X[i * 6 + j] = v * F_a[lowerIndex6(i, i)];
-    }
-  double sum = 0.0;
-#pragma unroll
-  for (int i = 0; i < 6; ++i) {
-    double m[6];
-#pragma unroll
-    for (int j = 0; j < 6; ++j) {
-      double v = X[i * 6 + j];
-#pragma unroll
-      for (int k = 0; k < j; ++k) v -= F_b[lowerIndex6(j, k)] * m[k];
-      m[j] = v * F_b[lowerIndex6(j, j)];
-      sum += m[j] * m[j];
-    }
-  }
-  return sqrt(sum);
-}
+// The 6x6 factors, solves and coupling strengths of motion_step_control.h in their reciprocal-pivot form (PivotForm):
+// the one thread that handles a label multiplies where the host's loop divides.
 
 __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   extern __shared__ double shared_matrix[];
@@ -674,7 +601,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     if (q.min_coupling > 0.0 && !frozen[i]) {
       double A[36];
       dampedLabelBlock(label, q.control[i].damping, A, 6, 0);
-      choleskyReciprocal6(A, label_factor + 21 * i);
+      choleskyLower6<PivotForm::Reciprocal>(A, label_factor + 21 * i);
     }
   }
   __syncthreads();
@@ -702,7 +629,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     if (nonzero && q.min_coupling > 0.0) {
       double C[36];
       for (int k = 0; k < kUpper; ++k) C[kUpperRow[k] * 6 + kUpperCol[k]] = C[kUpperCol[k] * 6 + kUpperRow[k]] = block[k];
-      strength = motionCouplingStrengthDevice(label_factor + 21 * a, C, label_factor + 21 * b);
+      strength = motionCouplingStrength<PivotForm::Reciprocal>(label_factor + 21 * a, C, label_factor + 21 * b);
     }
     if (motionLabelsCoupled(strength, nonzero != 0, q.min_coupling)) {
       atomicOr(&coupled[pair / 32], 1u << (pair % 32));
@@ -783,11 +710,11 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
       if (!(q.min_coupling > 0.0)) {
         double M[36];
         dampedLabelBlock(label, q.control[i].damping, M, 6, 0);
-        choleskyReciprocal6(M, F);
+        choleskyLower6<PivotForm::Reciprocal>(M, F);
         factor = F;
       }
       for (int k = 0; k < 6; ++k) b[k] = -label[kUpper + k];
-      solveCholeskyReciprocal6(factor, b, x);
+      choleskySolve6<PivotForm::Reciprocal>(factor, b, x);
     }
     for (int k = 0; k < 6; ++k) delta[6 * i + k] = x[k];
   }

@@ -10,3 +10,10 @@
 #else
 #define MCFLOW_HOST_DEVICE
 #endif
+
+// MCFLOW_UNROLL: unrolls the next loop in device code (the host compiler decides for itself).
+#if defined(__CUDA_ARCH__)
+#define MCFLOW_UNROLL _Pragma("unroll")
+#else
+#define MCFLOW_UNROLL
+#endif

@@ -59,61 +59,106 @@ MCFLOW_HOST_DEVICE inline double dampedDiagonal(double h, double damping, double
 /// @brief Packed lower triangle of a 6x6 matrix, row by row: the index of (r, c), c <= r.
 MCFLOW_HOST_DEVICE inline int lowerIndex6(int r, int c) { return r * (r + 1) / 2 + c; }
 
+/// @brief How a factor from choleskyLower6 keeps its diagonal: the pivots themselves (the host loop, which divides by
+/// them) or their reciprocals from rsqrt (the GPU's device loop, where multiplying shortens the serial chains of the
+/// one thread that handles a label). Steps and coupling strengths of the two forms differ by rounding: in the last bits
+/// for well-conditioned blocks, more where a pivot is near its floor; a coupling decision differs only for a strength
+/// within that rounding of motion_min_coupling.
+enum class PivotForm { Pivot, Reciprocal };
+
+namespace motion_detail {
+template <PivotForm form>
+MCFLOW_HOST_DEVICE inline double storedPivot(double d) {
+  if constexpr (form == PivotForm::Pivot) {
+    return std::sqrt(d);
+  } else {
+#if defined(__CUDA_ARCH__)
+    return rsqrt(d);
+#else
+    return 1.0 / std::sqrt(d);
+#endif
+  }
+}
+template <PivotForm form>
+MCFLOW_HOST_DEVICE inline double byPivot(double v, double stored) {
+  if constexpr (form == PivotForm::Pivot) return v / stored;
+  else return v * stored;
+}
+}  // namespace motion_detail
+
 /// @brief Cholesky factor L (packed lower, 21 values) of a symmetric 6x6 block `A` (row-major), A = L L^T. A pivot
 /// that rounding leaves at or below 1e-12 of its diagonal entry is raised to that floor (a nearly indefinite block
-/// without damping still gives a finite factor).
+/// without damping still gives a finite factor). `form` says how the diagonal slots keep the pivots (PivotForm).
+template <PivotForm form = PivotForm::Pivot>
 MCFLOW_HOST_DEVICE inline void choleskyLower6(const double A[36], double L[21]) {
+  MCFLOW_UNROLL
   for (int j = 0; j < 6; ++j) {
     double d = A[j * 6 + j];
     const double floor = 1e-12 * d;
+    MCFLOW_UNROLL
     for (int k = 0; k < j; ++k) d -= L[lowerIndex6(j, k)] * L[lowerIndex6(j, k)];
-    d = std::sqrt(d > floor ? d : floor);
-    L[lowerIndex6(j, j)] = d;
+    const double pivot = motion_detail::storedPivot<form>(d > floor ? d : floor);
+    L[lowerIndex6(j, j)] = pivot;
+    MCFLOW_UNROLL
     for (int i = j + 1; i < 6; ++i) {
       double v = A[i * 6 + j];
+      MCFLOW_UNROLL
       for (int k = 0; k < j; ++k) v -= L[lowerIndex6(i, k)] * L[lowerIndex6(j, k)];
-      L[lowerIndex6(i, j)] = v / d;
+      L[lowerIndex6(i, j)] = motion_detail::byPivot<form>(v, pivot);
     }
   }
 }
 
-/// @brief Solves L L^T x = b with a factor from choleskyLower6.
+/// @brief Solves L L^T x = b with a factor from choleskyLower6 of the same form.
+template <PivotForm form = PivotForm::Pivot>
 MCFLOW_HOST_DEVICE inline void choleskySolve6(const double L[21], const double b[6], double x[6]) {
   double y[6];
+  MCFLOW_UNROLL
   for (int i = 0; i < 6; ++i) {
     double v = b[i];
+    MCFLOW_UNROLL
     for (int k = 0; k < i; ++k) v -= L[lowerIndex6(i, k)] * y[k];
-    y[i] = v / L[lowerIndex6(i, i)];
+    y[i] = motion_detail::byPivot<form>(v, L[lowerIndex6(i, i)]);
   }
+  MCFLOW_UNROLL
   for (int i = 5; i >= 0; --i) {
     double v = y[i];
+    MCFLOW_UNROLL
     for (int k = i + 1; k < 6; ++k) v -= L[lowerIndex6(k, i)] * x[k];
-    x[i] = v / L[lowerIndex6(i, i)];
+    x[i] = motion_detail::byPivot<form>(v, L[lowerIndex6(i, i)]);
   }
 }
 
 /// @brief How strongly blended pixels couple the steps of labels a and b: the Frobenius norm of
-/// L_a^-1 H_ab L_b^-T, where L_a L_a^T and L_b L_b^T are the damped diagonal blocks (choleskyLower6) and `pair` is the
-/// off-diagonal block H_ab (row-major). Its singular values are the canonical correlations of the two labels' steps,
-/// in every direction of the twists, not only along the axes: a direction that a label's own pixels hardly constrain
-/// and its blended pixels do shows up here (0: independent; the largest singular value is below 1 for a positive
-/// definite system, the norm at most sqrt(6)).
+/// L_a^-1 H_ab L_b^-T, where L_a L_a^T and L_b L_b^T are the damped diagonal blocks (choleskyLower6 of the same form)
+/// and `pair` is the off-diagonal block H_ab (row-major). Its singular values are the canonical correlations of the two
+/// labels' steps, in every direction of the twists, not only along the axes: a direction that a label's own pixels
+/// hardly constrain and its blended pixels do shows up here (0: independent; the largest singular value is below 1 for
+/// a positive definite system, the norm at most sqrt(6)).
+template <PivotForm form = PivotForm::Pivot>
 MCFLOW_HOST_DEVICE inline double motionCouplingStrength(const double L_a[21], const double pair[36],
                                                         const double L_b[21]) {
   double X[36];  // L_a^-1 H_ab, column by column
-  for (int j = 0; j < 6; ++j)
+  MCFLOW_UNROLL
+  for (int j = 0; j < 6; ++j) {
+    MCFLOW_UNROLL
     for (int i = 0; i < 6; ++i) {
       double v = pair[i * 6 + j];
+      MCFLOW_UNROLL
       for (int k = 0; k < i; ++k) v -= L_a[lowerIndex6(i, k)] * X[k * 6 + j];
-      X[i * 6 + j] = v / L_a[lowerIndex6(i, i)];
+      X[i * 6 + j] = motion_detail::byPivot<form>(v, L_a[lowerIndex6(i, i)]);
     }
+  }
   double sum = 0.0;
+  MCFLOW_UNROLL
   for (int i = 0; i < 6; ++i) {  // row i of X L_b^-T: L_b m = (row i of X)^T
     double m[6];
+    MCFLOW_UNROLL
     for (int j = 0; j < 6; ++j) {
       double v = X[i * 6 + j];
+      MCFLOW_UNROLL
       for (int k = 0; k < j; ++k) v -= L_b[lowerIndex6(j, k)] * m[k];
-      m[j] = v / L_b[lowerIndex6(j, j)];
+      m[j] = motion_detail::byPivot<form>(v, L_b[lowerIndex6(j, j)]);
       sum += m[j] * m[j];
     }
   }
