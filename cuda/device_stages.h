@@ -297,7 +297,7 @@ struct KMeansCentres {
 void launchNearestCentreLabels(const DeviceImage& points, const KMeansCentres& centres, int* hard, cudaStream_t stream);
 /// @brief What kmeansPoints is asked for, with its seeding's draws (kmeansSeedingDraws), as a kernel argument.
 struct KMeansRun {
-  double draws[KMeansCentres::kMax];
+  double draws[KMeansCentres::kMax] = {};
   int k = 0;  ///< 1..KMeansCentres::kMax
   int max_iterations = 0;
   double tolerance_m = 0;

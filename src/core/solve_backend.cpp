@@ -275,7 +275,7 @@ int fillOutputImages(const StagedOutputs& s, Result& result) {
   // else allocated and copied, one task each.
   constexpr std::size_t kChunk = std::size_t(1) << 18;  // floats: 1 MiB
   const bool labels_in_place = result.soft_labels.data.size() == label_values;
-  const int label_tasks = labels_in_place ? int((label_values + kChunk - 1) / kChunk) : 1;
+  const int label_tasks = labels_in_place ? std::max(1, int((label_values + kChunk - 1) / kChunk)) : 1;
   const int tasks = label_tasks + 5;
   // The soft labels come down first (the others cannot arrive before them): this thread waits for them once, and
   // each of the other images is waited for by the one task that copies it. (Every chunk waiting for the soft
@@ -324,7 +324,20 @@ int fillOutputImages(const StagedOutputs& s, Result& result) {
 #pragma omp parallel for schedule(dynamic, 1) if (parallel)
   for (int task = 0; task < tasks; ++task) fill(task);
   for (const int code : status)
-    if (code != 0) return code;
+    if (code != 0) {
+      // A transfer failed: 0x0 images (their memory kept), not W x H ones holding whatever the copies left.
+      for (auto* image : {&result.scene_flow, &result.optical_flow, &result.moved_depth}) {
+        image->width = image->height = 0;
+        image->data.clear();
+      }
+      result.soft_labels.width = result.soft_labels.height = result.soft_labels.count = 0;
+      result.soft_labels.data.clear();
+      result.labels.width = result.labels.height = 0;
+      result.labels.data.clear();
+      result.occlusion.width = result.occlusion.height = 0;
+      result.occlusion.data.clear();
+      return code;
+    }
   return 0;
 }
 

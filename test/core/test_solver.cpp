@@ -453,6 +453,10 @@ TEST(SolveBackend, OutputImagesCopiedInChunksIntoRecycledMemory) {
 
   staged.wait_for_image = [](int image) { return image == 2 ? 719 : 0; };  // the optical flow's transfer failed
   EXPECT_EQ(fillOutputImages(staged, result), 719);
+  EXPECT_EQ(result.soft_labels.width, 0) << "a failed fill leaves 0x0 images";
+  EXPECT_TRUE(result.soft_labels.data.empty());
+  EXPECT_TRUE(result.optical_flow.data.empty());
+  EXPECT_EQ(result.occlusion.height, 0);
   staged.wait_for_image = [](int image) { return image == 0 ? 4 : 0; };  // the soft labels' transfer failed
   EXPECT_EQ(fillOutputImages(staged, result), 4);
 }

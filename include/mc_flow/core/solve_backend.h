@@ -149,7 +149,7 @@ struct StagedOutputs {
 /// each image copied once, into a recycled image's memory where its size matches (the soft labels then in chunks of
 /// 1 MiB), else allocated and copied in one pass, on several OpenMP threads (at 1280x720, ~50 MB allocated,
 /// zero-filled and copied on one thread took most of the CUDA outputs stage; then the 26 MB of soft labels on one
-/// thread did). Returns the first non-zero code that wait_for_image returned, or 0.
+/// thread did). Returns the first non-zero code that wait_for_image returned (the six images are then 0x0), or 0.
 int fillOutputImages(const StagedOutputs& staged, Result& result);
 /// @brief Copies both frames' intensity and depth planes (`width` x `height` floats each) into `staged` in the order
 /// frame1 intensity, frame1 depth, frame2 intensity, frame2 depth; several OpenMP threads from a few MB on (the CUDA
