@@ -63,6 +63,15 @@ __device__ __forceinline__ void se3ExpRowsDevice(const double xi[6], double T[12
   }
 }
 
+/// @brief The warp's total in lane 0 (a shuffle-down tree: a fixed order, so the same bits on every run); every lane
+/// of the warp must take part.
+template <typename T>
+__device__ __forceinline__ T warpSum(T v) {
+#pragma unroll
+  for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_down_sync(0xffffffffu, v, offset);
+  return v;
+}
+
 /// @brief A rigid motion as the per-pixel kernels use it: rows 0..2 of exp(xi) in float (row-major 3x4).
 struct DeviceTransform {
   float m[12];

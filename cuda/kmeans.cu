@@ -38,18 +38,6 @@ __global__ void nearestCentreKernel(const DeviceImage points, const KMeansCentre
 
 __device__ __forceinline__ bool validPoint(const float* p) { return isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2]); }
 
-__device__ __forceinline__ double warpSumDouble(double v) {
-#pragma unroll
-  for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_down_sync(0xffffffffu, v, offset);
-  return v;
-}
-
-__device__ __forceinline__ int warpSumInt(int v) {
-#pragma unroll
-  for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_down_sync(0xffffffffu, v, offset);
-  return v;
-}
-
 struct MinInt {
   __device__ __forceinline__ int operator()(int a, int b) const { return b < a ? b : a; }
 };
@@ -85,11 +73,11 @@ __device__ void assignAndSum(const float* points, int n, int* assignment, KMeans
           z += double(points[3 * i + 2]);
         }
       }
-    members = warpSumInt(members);
+    members = warpSum(members);
     if (with_sums) {
-      x = warpSumDouble(x);
-      y = warpSumDouble(y);
-      z = warpSumDouble(z);
+      x = warpSum(x);
+      y = warpSum(y);
+      z = warpSum(z);
     }
     if (lane == 0) {
       s.members[c] = members;

@@ -170,11 +170,7 @@ __device__ __forceinline__ float warpAllSum(float v) {
   return v;
 }
 
-__device__ __forceinline__ double warpSum(double v) {
-#pragma unroll
-  for (int offset = 16; offset > 0; offset >>= 1) v += __shfl_down_sync(0xffffffffu, v, offset);
-  return v;
-}
+using cuda_detail::warpSum;
 
 
 // Three blocks per SM (at most 80 registers, a few spilled): a 320x240 level's 300 blocks then run in one wave instead
