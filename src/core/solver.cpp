@@ -474,4 +474,13 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
   result.timings.outputs += elapsedMs(t);
 }
 
+std::string labelCountTrace(const Result& result, bool changes) {
+  std::string trace = result.iterations.empty() ? "-" : std::to_string(result.iterations.front().labels_before);
+  for (const OuterIterationStats& it : result.iterations) {
+    trace += " > " + std::to_string(it.labels_after);
+    if (changes) trace += "(-" + std::to_string(it.merged + it.removed) + "+" + std::to_string(it.split) + ")";
+  }
+  return trace;
+}
+
 }  // namespace mc_flow

@@ -178,6 +178,7 @@ PairScores scoreRealPair(const RealPair& pair, const PairSolves& solves, Exclusi
     if (result) {
       m.solved = true;
       m.segments = int(result->segments.size());
+      m.label_trace = labelCountTrace(*result, true);
       m.timings = *timings;
     }
     scores.pixels = m.rmse.pixels;
@@ -251,6 +252,13 @@ std::string realBenchTable(const std::vector<PairScores>& scores) {
     out += row("average", first.method, photometric / n, 1000.0 * geometric / n, first.solved ? segs : "-",
                first.solved ? &mean : nullptr);
   }
+  out += "# motion labels over the outer iterations: K-means > after each update (-merged or removed +split)\n";
+  for (const PairScores& p : scores)
+    for (const MethodScore& m : p.methods)
+      if (m.solved && m.method != "one label") {
+        std::snprintf(line, sizeof line, "#   %-20s %-9s %s\n", p.pair.c_str(), m.method.c_str(), m.label_trace.c_str());
+        out += line;
+      }
   return out;
 }
 

@@ -91,6 +91,11 @@ struct Result {
   std::string backend_note;      ///< why Auto chose what it chose
 };
 
+/// @brief The motion labels over a solve's outer iterations: the initial count, then the count after each update
+/// ("20 > 3 > 2"); with `changes`, each update's merges and splits too ("20 > 3(-17+0) > 2(-1+0)"). For benchmarks
+/// and logs: a reader sees the label-count decisions.
+std::string labelCountTrace(const Result& result, bool changes = false);
+
 /// @brief Solver with a fixed Config. Not thread-safe; reuse one per stream.
 class Solver {
  public:

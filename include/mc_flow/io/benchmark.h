@@ -64,6 +64,7 @@ struct MethodScore {
   ResidualRmse rmse;        ///< on the pair's common pixel set
   bool solved = false;      ///< false for zero flow (no segments, no timings)
   int segments = 0;         ///< motion segments of the result
+  std::string label_trace;  ///< labelCountTrace(result, true): the count over the outer iterations
   StageTimings timings;     ///< median over the repetitions [ms], per stage
 };
 
@@ -87,8 +88,8 @@ PairSolves solveRealPair(const RealPair& pair, const Config& base, int repeat);
 /// @brief Scores zero flow and the three solves on the common pixel set chosen by `mask`.
 PairScores scoreRealPair(const RealPair& pair, const PairSolves& solves, ExclusionMask mask);
 
-/// @brief Per-pair table (photometric RMSE, geometric RMSE [mm], segments, time per stage [ms]) and the
-/// average over pairs of each method.
+/// @brief Per-pair table (photometric RMSE, geometric RMSE [mm], segments, time per stage [ms]), the average over
+/// pairs of each method, then each MC-Flow solve's motion labels over the outer iterations.
 std::string realBenchTable(const std::vector<PairScores>& scores);
 
 }  // namespace io

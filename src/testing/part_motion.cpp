@@ -1,0 +1,110 @@
+#include "mc_flow/testing/part_motion.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/se3.h"
+
+namespace mc_flow {
+namespace {
+
+double rotationAngleDeg(const Eigen::Matrix4d& T) {
+  return Eigen::AngleAxisd(Eigen::Matrix3d(T.topLeftCorner<3, 3>())).angle() * 180.0 / M_PI;
+}
+
+// The principal axis of the part's frame-1 points (unit; x when it has fewer than 3 points with depth).
+Eigen::Vector3d longestAxis(const SyntheticPair& pair, int part_id) {
+  const Intrinsics& K = pair.intrinsics;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
+  double count = 0;
+  for (int y = 0; y < pair.gt_parts.height; ++y)
+    for (int x = 0; x < pair.gt_parts.width; ++x) {
+      const float z = pair.frame1.depth(x, y);
+      if (pair.gt_parts(x, y) != part_id || !(z > 0.0f)) continue;
+      const Eigen::Vector3d P((x - K.cx) * z / K.fx, (y - K.cy) * z / K.fy, z);
+      sum += P;
+      outer += P * P.transpose();
+      ++count;
+    }
+  if (count < 3) return Eigen::Vector3d::UnitX();
+  const Eigen::Vector3d mean = sum / count;
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(outer / count - mean * mean.transpose());
+  return eigen.eigenvectors().col(2);
+}
+
+}  // namespace
+
+std::vector<PartMotionError> partMotionErrors(const Result& result, const SyntheticPair& pair) {
+  const int w = pair.gt_parts.width, h = pair.gt_parts.height;
+  if (result.labels.width != w || result.labels.height != h || result.optical_flow.width != w ||
+      result.optical_flow.height != h)
+    throw InputError("partMotionErrors: result of " + std::to_string(result.labels.width) + "x" +
+                     std::to_string(result.labels.height) + " for a scene of " + std::to_string(w) + "x" +
+                     std::to_string(h));
+  std::vector<PartMotionError> out;
+  for (const SyntheticPart& part : pair.parts) {
+    PartMotionError e;
+    e.part_id = part.id;
+    e.name = part.name;
+    e.true_rotation_deg = rotationAngleDeg(se3Exp(part.twist));
+    std::map<int, int> votes;
+    double epe_sum = 0;
+    int epe_pixels = 0;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (pair.gt_parts(x, y) != part.id) continue;
+        const int segment = result.labels(x, y);
+        if (segment > 0) {
+          ++votes[segment];
+          ++e.pixels;
+        }
+        const float u = result.optical_flow(x, y, 0), v = result.optical_flow(x, y, 1);
+        const float gu = pair.gt_optical_flow(x, y, 0), gv = pair.gt_optical_flow(x, y, 1);
+        if (pair.gt_occlusion(x, y) || !std::isfinite(u) || !std::isfinite(v) || !std::isfinite(gu) ||
+            !std::isfinite(gv))
+          continue;
+        epe_sum += std::hypot(double(u - gu), double(v - gv));
+        ++epe_pixels;
+      }
+    e.flow_epe_px = epe_pixels > 0 ? epe_sum / epe_pixels : std::numeric_limits<double>::quiet_NaN();
+    e.rotation_error_deg = e.rotation_error_along_deg = e.rotation_error_across_deg =
+        std::numeric_limits<double>::quiet_NaN();
+    int best_votes = 0;
+    for (const auto& [segment, count] : votes)
+      if (count > best_votes) {
+        best_votes = count;
+        e.segment = segment;
+      }
+    for (const Segment& s : result.segments)
+      if (e.segment > 0 && s.id == e.segment) {
+        e.covered_fraction = double(best_votes) / double(e.pixels);
+        const Eigen::Matrix4d D = se3Exp(s.twist).inverse() * se3Exp(part.twist);
+        e.rotation_error_deg = rotationAngleDeg(D);
+        const Eigen::AngleAxisd error(Eigen::Matrix3d(D.topLeftCorner<3, 3>()));
+        const Eigen::Vector3d error_vector = error.angle() * error.axis() * 180.0 / M_PI;
+        const double along = error_vector.dot(longestAxis(pair, part.id));
+        e.rotation_error_along_deg = std::abs(along);
+        e.rotation_error_across_deg = std::sqrt(std::max(0.0, error_vector.squaredNorm() - along * along));
+      }
+    out.push_back(e);
+  }
+  return out;
+}
+
+bool armLinksApart(const std::vector<PartMotionError>& parts) {
+  int upper = 0, fore = 0;
+  for (const PartMotionError& p : parts) {
+    if (p.name == "upper_arm") upper = p.segment;
+    if (p.name == "forearm") fore = p.segment;
+  }
+  return upper > 0 && fore > 0 && upper != fore;
+}
+
+}  // namespace mc_flow

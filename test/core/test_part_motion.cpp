@@ -1,0 +1,141 @@
+// Tests of the per-part motion errors (mc_flow/testing/part_motion.h) that mcflow_bench --parts prints for issue 7's
+// articulated-arm target: results built from the ground truth itself, so the expected errors are known exactly.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <string>
+#include <vector>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/se3.h"
+#include "mc_flow/testing/part_motion.h"
+#include "mc_flow/testing/synthetic_scene.h"
+
+namespace mc_flow {
+namespace {
+
+SyntheticPair smallScene() {
+  SyntheticSceneOptions o;
+  o.variant = 0;
+  o.width = 160;
+  o.height = 120;
+  return renderSyntheticPair(o);
+}
+
+// A result whose segments are the true parts (segment k+1 = part k, pixels labelled by their true part) with the
+// true twists, and the true optical flow. `merge_arm`: both arm links in the upper arm's segment.
+Result resultFromTruth(const SyntheticPair& pair, bool merge_arm) {
+  Result r;
+  r.width = pair.gt_parts.width;
+  r.height = pair.gt_parts.height;
+  r.optical_flow = pair.gt_optical_flow;
+  r.labels = ImageI32(r.width, r.height, 1);
+  int upper_segment = 0;
+  for (std::size_t k = 0; k < pair.parts.size(); ++k) {
+    Segment s;
+    s.id = int(k) + 1;
+    s.twist = pair.parts[k].twist;
+    r.segments.push_back(s);
+    if (pair.parts[k].name == "upper_arm") upper_segment = s.id;
+  }
+  for (int y = 0; y < r.height; ++y)
+    for (int x = 0; x < r.width; ++x) {
+      int segment = 0;
+      for (std::size_t k = 0; k < pair.parts.size(); ++k)
+        if (pair.gt_parts(x, y) == pair.parts[k].id) segment = int(k) + 1;
+      if (merge_arm && segment > 0 && pair.parts[std::size_t(segment - 1)].name == "forearm") segment = upper_segment;
+      r.labels(x, y) = segment;
+    }
+  return r;
+}
+
+TEST(PartMotion, TheTruthHasNoErrorAndTheArmsLinksApart) {
+  const SyntheticPair pair = smallScene();
+  const std::vector<PartMotionError> parts = partMotionErrors(resultFromTruth(pair, false), pair);
+  ASSERT_EQ(parts.size(), pair.parts.size());
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    const PartMotionError& e = parts[k];
+    EXPECT_EQ(e.name, pair.parts[k].name);
+    EXPECT_EQ(e.segment, int(k) + 1) << e.name;
+    EXPECT_GT(e.pixels, 50) << e.name;
+    EXPECT_DOUBLE_EQ(e.covered_fraction, 1.0) << e.name;
+    EXPECT_NEAR(e.rotation_error_deg, 0.0, 1e-6) << e.name;
+    EXPECT_NEAR(e.flow_epe_px, 0.0, 1e-6) << e.name;
+  }
+  EXPECT_TRUE(armLinksApart(parts));
+}
+
+TEST(PartMotion, ArmLinksInOneSegmentAreNotApartAndTheForearmGetsTheUpperArmsError) {
+  const SyntheticPair pair = smallScene();
+  const std::vector<PartMotionError> parts = partMotionErrors(resultFromTruth(pair, true), pair);
+  EXPECT_FALSE(armLinksApart(parts));
+  const PartMotionError* upper = nullptr;
+  const PartMotionError* fore = nullptr;
+  Vector6d upper_twist = Vector6d::Zero(), fore_twist = Vector6d::Zero();
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    if (parts[k].name == "upper_arm") upper = &parts[k], upper_twist = pair.parts[k].twist;
+    if (parts[k].name == "forearm") fore = &parts[k], fore_twist = pair.parts[k].twist;
+  }
+  ASSERT_TRUE(upper && fore);
+  EXPECT_EQ(upper->segment, fore->segment);
+  EXPECT_NEAR(upper->rotation_error_deg, 0.0, 1e-6);
+  // The forearm is judged against the upper arm's motion: the elbow's rotation.
+  const Eigen::Matrix4d D = se3Exp(upper_twist).inverse() * se3Exp(fore_twist);
+  const double elbow_deg = Eigen::AngleAxisd(Eigen::Matrix3d(D.topLeftCorner<3, 3>())).angle() * 180.0 / M_PI;
+  EXPECT_GT(elbow_deg, 0.5);
+  EXPECT_NEAR(fore->rotation_error_deg, elbow_deg, 1e-6);
+  // Split about the forearm's longest axis and across it, the two parts make up the whole.
+  EXPECT_NEAR(std::hypot(fore->rotation_error_along_deg, fore->rotation_error_across_deg), fore->rotation_error_deg, 1e-6);
+}
+
+TEST(PartMotion, ARotationAboutABarsLengthIsCountedAlongIt) {
+  const SyntheticPair pair = smallScene();
+  Result r = resultFromTruth(pair, false);
+  // Perturb the forearm's segment by 2 degrees about the forearm's own principal axis, through its centroid.
+  std::size_t fore = 0;
+  for (std::size_t k = 0; k < pair.parts.size(); ++k)
+    if (pair.parts[k].name == "forearm") fore = k;
+  const Intrinsics& K = pair.intrinsics;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
+  double count = 0;
+  for (int y = 0; y < r.height; ++y)
+    for (int x = 0; x < r.width; ++x) {
+      const float z = pair.frame1.depth(x, y);
+      if (pair.gt_parts(x, y) != pair.parts[fore].id || !(z > 0.0f)) continue;
+      const Eigen::Vector3d P((x - K.cx) * z / K.fx, (y - K.cy) * z / K.fy, z);
+      sum += P;
+      outer += P * P.transpose();
+      ++count;
+    }
+  ASSERT_GT(count, 10);
+  const Eigen::Vector3d mean = sum / count;
+  const Eigen::Vector3d axis =
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(outer / count - mean * mean.transpose()).eigenvectors().col(2);
+  Eigen::Matrix4d spin = Eigen::Matrix4d::Identity();
+  spin.topLeftCorner<3, 3>() = Eigen::AngleAxisd(2.0 * M_PI / 180.0, axis).toRotationMatrix();
+  spin.topRightCorner<3, 1>() = mean - spin.topLeftCorner<3, 3>() * mean;
+  r.segments[fore].twist = se3Log(se3Exp(pair.parts[fore].twist) * spin);
+  const std::vector<PartMotionError> parts = partMotionErrors(r, pair);
+  EXPECT_NEAR(parts[fore].rotation_error_deg, 2.0, 1e-6);
+  EXPECT_NEAR(parts[fore].rotation_error_along_deg, 2.0, 1e-6);
+  EXPECT_NEAR(parts[fore].rotation_error_across_deg, 0.0, 1e-4);
+}
+
+TEST(PartMotion, AResultOfAnotherSizeIsAnError) {
+  const SyntheticPair pair = smallScene();
+  Result r = resultFromTruth(pair, false);
+  r.labels = ImageI32(80, 60, 1);
+  try {
+    partMotionErrors(r, pair);
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("80x60"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace mc_flow
