@@ -80,6 +80,19 @@ int cameraOnlyBench(const Config& base, int width, int height) {
   return 0;
 }
 
+// One synthetic scene at width x height; `noise`: sensor-like intensity and depth noise (std 0.01, 1.5 mm x Z^2 [m]).
+SyntheticSceneOptions sceneOptions(int variant, int width, int height, bool noise) {
+  SyntheticSceneOptions so;
+  so.width = width;
+  so.height = height;
+  so.variant = variant;
+  if (noise) {
+    so.intensity_noise = 0.01;
+    so.depth_noise = 0.0015;
+  }
+  return so;
+}
+
 // Issue 7's articulated-object target, per rigid part of every synthetic scene: the segment that covers most of the
 // part, that segment's rotation error against the part's true motion and the part's flow error; per scene whether the
 // arm's two links (which move differently: an elbow rotation on top of the upper arm's motion) got a segment each.
@@ -91,15 +104,7 @@ int partsBench(const Config& base, const std::vector<Regularizer>& regs, int wid
   std::printf("%-8s %-5s %-11s %7s %4s %6s %8s %8s %8s %8s %8s\n", "scene", "reg", "part", "pixels", "seg", "cover",
               "rot_deg", "rot_err", "along", "across", "EPE");
   for (int variant = 0; variant < syntheticVariantCount(); ++variant) {
-    SyntheticSceneOptions so;
-    so.width = width;
-    so.height = height;
-    so.variant = variant;
-    if (noise) {
-      so.intensity_noise = 0.01;
-      so.depth_noise = 0.0015;
-    }
-    const SyntheticPair pair = renderSyntheticPair(so);
+    const SyntheticPair pair = renderSyntheticPair(sceneOptions(variant, width, height, noise));
     for (Regularizer reg : regs) {
       Config config = base;
       config.regularizer = reg;
@@ -304,15 +309,7 @@ int main(int argc, char** argv) {
                 "reg", "EPE", "AAE", "EPE3D_mm", "seg", "occ", "rmseI", "rmseZ", "labels", "total_ms", "cpu_ms", "pyr",
                 "init", "motion", "labels", "occl", "output", "launches", "m_acc", "m_lm", "irls");
     for (int variant = 0; variant < syntheticVariantCount(); ++variant) {
-      SyntheticSceneOptions so;
-      so.width = width;
-      so.height = height;
-      so.variant = variant;
-      if (noise) {
-        so.intensity_noise = 0.01;
-        so.depth_noise = 0.0015;
-      }
-      const SyntheticPair pair = renderSyntheticPair(so);
+      const SyntheticPair pair = renderSyntheticPair(sceneOptions(variant, width, height, noise));
       for (Regularizer reg : regs) {
         Config config = base;
         config.regularizer = reg;
