@@ -40,6 +40,12 @@ Vector6d gaussNewtonStep(const Matrix6d& H, const Vector6d& g) {
 
 }  // namespace
 
+Eigen::Vector3d LabelMoments::principalAxis() const {
+  const Eigen::Vector3d centre = mean();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(outer / count - centre * centre.transpose());
+  return eigen.eigenvectors().col(2);
+}
+
 std::vector<Eigen::Vector3d> labelCentroids(const SoftLabels& u, const ImageF& points) {
   const int motion_labels = u.count - 1;
   std::vector<Eigen::Vector3d> sums(std::size_t(motion_labels), Eigen::Vector3d::Zero());
@@ -258,9 +264,7 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
   for (int i = 0; i < n; ++i) {
     const LabelMoments& m = moments[std::size_t(i)];
     if (m.count < 2 * min_half) continue;
-    const Eigen::Vector3d mean = m.sum / m.count;
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(m.outer / m.count - mean * mean.transpose());
-    cuts.push_back({i, mean, eigen.eigenvectors().col(2)});
+    cuts.push_back({i, m.mean(), m.principalAxis()});
     owned.push_back(m.count);
   }
   if (cuts.empty()) return stats;
@@ -399,10 +403,7 @@ std::vector<LabelMoments> HostLabelStore::ownedMoments() {
     LabelMoments& m = out[std::size_t(i)];
     for (std::size_t k = 0; k < plane; ++k) {
       if (ui[k] < 0.5f || !std::isfinite(points.data[k * 3 + 2])) continue;
-      const Eigen::Vector3d P(points.data[k * 3], points.data[k * 3 + 1], points.data[k * 3 + 2]);
-      m.sum += P;
-      m.outer += P * P.transpose();
-      ++m.count;
+      m.add(Eigen::Vector3d(points.data[k * 3], points.data[k * 3 + 1], points.data[k * 3 + 2]));
     }
   }
   return out;

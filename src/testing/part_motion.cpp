@@ -5,10 +5,11 @@
 #include <limits>
 #include <map>
 
-#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/label_adaptation.h"
+#include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/se3.h"
 
 namespace mc_flow {
@@ -16,27 +17,6 @@ namespace {
 
 double rotationAngleDeg(const Eigen::Matrix4d& T) {
   return Eigen::AngleAxisd(Eigen::Matrix3d(T.topLeftCorner<3, 3>())).angle() * 180.0 / M_PI;
-}
-
-// The principal axis of the part's frame-1 points (unit; x when it has fewer than 3 points with depth).
-Eigen::Vector3d longestAxis(const SyntheticPair& pair, int part_id) {
-  const Intrinsics& K = pair.intrinsics;
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
-  double count = 0;
-  for (int y = 0; y < pair.gt_parts.height; ++y)
-    for (int x = 0; x < pair.gt_parts.width; ++x) {
-      const float z = pair.frame1.depth(x, y);
-      if (pair.gt_parts(x, y) != part_id || !(z > 0.0f)) continue;
-      const Eigen::Vector3d P((x - K.cx) * z / K.fx, (y - K.cy) * z / K.fy, z);
-      sum += P;
-      outer += P * P.transpose();
-      ++count;
-    }
-  if (count < 3) return Eigen::Vector3d::UnitX();
-  const Eigen::Vector3d mean = sum / count;
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(outer / count - mean * mean.transpose());
-  return eigen.eigenvectors().col(2);
 }
 
 }  // namespace
@@ -48,6 +28,7 @@ std::vector<PartMotionError> partMotionErrors(const Result& result, const Synthe
     throw InputError("partMotionErrors: result of " + std::to_string(result.labels.width) + "x" +
                      std::to_string(result.labels.height) + " for a scene of " + std::to_string(w) + "x" +
                      std::to_string(h));
+  const ImageF points = backProject(pair.frame1.depth, pair.intrinsics);
   std::vector<PartMotionError> out;
   for (const SyntheticPart& part : pair.parts) {
     PartMotionError e;
@@ -55,11 +36,13 @@ std::vector<PartMotionError> partMotionErrors(const Result& result, const Synthe
     e.name = part.name;
     e.true_rotation_deg = rotationAngleDeg(se3Exp(part.twist));
     std::map<int, int> votes;
+    LabelMoments moments;  // the part's frame-1 points, for its longest axis
     double epe_sum = 0;
     int epe_pixels = 0;
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         if (pair.gt_parts(x, y) != part.id) continue;
+        if (std::isfinite(points(x, y, 2))) moments.add(Eigen::Vector3d(points(x, y, 0), points(x, y, 1), points(x, y, 2)));
         const int segment = result.labels(x, y);
         if (segment > 0) {
           ++votes[segment];
@@ -89,9 +72,11 @@ std::vector<PartMotionError> partMotionErrors(const Result& result, const Synthe
         e.rotation_error_deg = rotationAngleDeg(D);
         const Eigen::AngleAxisd error(Eigen::Matrix3d(D.topLeftCorner<3, 3>()));
         const Eigen::Vector3d error_vector = error.angle() * error.axis() * 180.0 / M_PI;
-        const double along = error_vector.dot(longestAxis(pair, part.id));
-        e.rotation_error_along_deg = std::abs(along);
-        e.rotation_error_across_deg = std::sqrt(std::max(0.0, error_vector.squaredNorm() - along * along));
+        if (moments.count >= 3) {
+          const double along = error_vector.dot(moments.principalAxis());
+          e.rotation_error_along_deg = std::abs(along);
+          e.rotation_error_across_deg = std::sqrt(std::max(0.0, error_vector.squaredNorm() - along * along));
+        }
       }
     out.push_back(e);
   }

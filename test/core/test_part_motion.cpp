@@ -3,13 +3,14 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-
-#include <Eigen/Eigenvalues>
-#include <Eigen/Geometry>
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/label_adaptation.h"
+#include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/se3.h"
 #include "mc_flow/testing/part_motion.h"
 #include "mc_flow/testing/synthetic_scene.h"
@@ -98,23 +99,14 @@ TEST(PartMotion, ARotationAboutABarsLengthIsCountedAlongIt) {
   std::size_t fore = 0;
   for (std::size_t k = 0; k < pair.parts.size(); ++k)
     if (pair.parts[k].name == "forearm") fore = k;
-  const Intrinsics& K = pair.intrinsics;
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
-  double count = 0;
+  const ImageF points = backProject(pair.frame1.depth, pair.intrinsics);
+  LabelMoments moments;
   for (int y = 0; y < r.height; ++y)
-    for (int x = 0; x < r.width; ++x) {
-      const float z = pair.frame1.depth(x, y);
-      if (pair.gt_parts(x, y) != pair.parts[fore].id || !(z > 0.0f)) continue;
-      const Eigen::Vector3d P((x - K.cx) * z / K.fx, (y - K.cy) * z / K.fy, z);
-      sum += P;
-      outer += P * P.transpose();
-      ++count;
-    }
-  ASSERT_GT(count, 10);
-  const Eigen::Vector3d mean = sum / count;
-  const Eigen::Vector3d axis =
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(outer / count - mean * mean.transpose()).eigenvectors().col(2);
+    for (int x = 0; x < r.width; ++x)
+      if (pair.gt_parts(x, y) == pair.parts[fore].id && std::isfinite(points(x, y, 2)))
+        moments.add(Eigen::Vector3d(points(x, y, 0), points(x, y, 1), points(x, y, 2)));
+  ASSERT_GT(moments.count, 10);
+  const Eigen::Vector3d mean = moments.mean(), axis = moments.principalAxis();
   Eigen::Matrix4d spin = Eigen::Matrix4d::Identity();
   spin.topLeftCorner<3, 3>() = Eigen::AngleAxisd(2.0 * M_PI / 180.0, axis).toRotationMatrix();
   spin.topRightCorner<3, 1>() = mean - spin.topLeftCorner<3, 3>() * mean;

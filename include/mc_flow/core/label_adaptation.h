@@ -45,6 +45,14 @@ struct LabelMoments {
   double count = 0;
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
+  void add(const Eigen::Vector3d& P) {
+    count += 1;
+    sum += P;
+    outer += P * P.transpose();
+  }
+  Eigen::Vector3d mean() const { return sum / count; }
+  /// Unit direction of the points' largest spread (the covariance's top eigenvector); needs count >= 1.
+  Eigen::Vector3d principalAxis() const;
 };
 
 /// @brief A cut of label `parent`: its owned pixels (u >= 0.5, valid depth) with (P - centre) . axis > 0

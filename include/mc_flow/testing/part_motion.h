@@ -24,7 +24,8 @@ struct PartMotionError {
   double rotation_error_deg = 0;    ///< angle of exp(segment twist)^-1 exp(part twist); NaN without a segment
   /// That error's rotation vector split about the part's longest 3D axis (the principal axis of its frame-1 points)
   /// and across it: a bar's own pixels hardly constrain a rotation about its length (a 5 cm radius moves by 0.9 mm
-  /// per degree), so the two tell an unobservable error from a wrong motion. NaN without a segment.
+  /// per degree), so the two tell an unobservable error from a wrong motion. NaN without a segment or with fewer than
+  /// 3 points.
   double rotation_error_along_deg = 0, rotation_error_across_deg = 0;
   double flow_epe_px = 0;           ///< mean optical-flow EPE over the part's pixels not occluded in the truth
 };
