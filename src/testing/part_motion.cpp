@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <vector>
 
 #include <Eigen/Geometry>
 
@@ -37,12 +38,21 @@ std::vector<PartMotionError> partMotionErrors(const Result& result, const Synthe
     e.true_rotation_deg = rotationAngleDeg(se3Exp(part.twist));
     std::map<int, int> votes;
     LabelMoments moments;  // the part's frame-1 points, for its longest axis
+    std::vector<Eigen::Vector3d> from, to;  // the part's points and where its true scene flow takes them
     double epe_sum = 0;
     int epe_pixels = 0;
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         if (pair.gt_parts(x, y) != part.id) continue;
-        if (std::isfinite(points(x, y, 2))) moments.add(Eigen::Vector3d(points(x, y, 0), points(x, y, 1), points(x, y, 2)));
+        if (std::isfinite(points(x, y, 2))) {
+          const Eigen::Vector3d P(points(x, y, 0), points(x, y, 1), points(x, y, 2));
+          moments.add(P);
+          const Eigen::Vector3d flow(pair.gt_scene_flow(x, y, 0), pair.gt_scene_flow(x, y, 1), pair.gt_scene_flow(x, y, 2));
+          if (flow.allFinite()) {
+            from.push_back(P);
+            to.push_back(P + flow);
+          }
+        }
         const int segment = result.labels(x, y);
         if (segment > 0) {
           ++votes[segment];
@@ -57,6 +67,16 @@ std::vector<PartMotionError> partMotionErrors(const Result& result, const Synthe
         ++epe_pixels;
       }
     e.flow_epe_px = epe_pixels > 0 ? epe_sum / epe_pixels : std::numeric_limits<double>::quiet_NaN();
+    e.rigid_fit_error_deg = std::numeric_limits<double>::quiet_NaN();
+    if (from.size() >= 3) {
+      Eigen::Matrix3Xd src(3, Eigen::Index(from.size())), dst(3, Eigen::Index(to.size()));
+      for (std::size_t k = 0; k < from.size(); ++k) {
+        src.col(Eigen::Index(k)) = from[k];
+        dst.col(Eigen::Index(k)) = to[k];
+      }
+      const Eigen::Matrix4d fit = Eigen::umeyama(src, dst, false);
+      e.rigid_fit_error_deg = rotationAngleDeg(fit.inverse() * se3Exp(part.twist));
+    }
     e.rotation_error_deg = e.rotation_error_along_deg = e.rotation_error_across_deg =
         std::numeric_limits<double>::quiet_NaN();
     int best_votes = 0;
@@ -81,6 +101,30 @@ std::vector<PartMotionError> partMotionErrors(const Result& result, const Synthe
     out.push_back(e);
   }
   return out;
+}
+
+Result truthSegmentation(const SyntheticPair& pair) {
+  Result r;
+  r.width = pair.gt_parts.width;
+  r.height = pair.gt_parts.height;
+  r.intrinsics = pair.intrinsics;
+  r.labels = ImageI32(r.width, r.height, 1, 0);
+  r.optical_flow = ImageF(r.width, r.height, 2, 0.f);
+  r.scene_flow = ImageF(r.width, r.height, 3, 0.f);
+  r.moved_depth = pair.frame1.depth;
+  for (std::size_t k = 0; k < pair.parts.size(); ++k) {
+    Segment s;
+    s.id = int(k) + 1;
+    r.segments.push_back(s);
+  }
+  for (int y = 0; y < r.height; ++y)
+    for (int x = 0; x < r.width; ++x) {
+      if (!(pair.frame1.depth(x, y) > 0)) continue;
+      for (std::size_t k = 0; k < pair.parts.size(); ++k)
+        if (pair.gt_parts(x, y) == pair.parts[k].id) r.labels(x, y) = int(k) + 1;
+    }
+  r.next_id = int(pair.parts.size()) + 1;
+  return r;
 }
 
 bool armLinksApart(const std::vector<PartMotionError>& parts) {

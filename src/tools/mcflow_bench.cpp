@@ -4,7 +4,7 @@
 // kernel launches per solve (a CUB call counts as one); at the end the device memory in use.
 //
 //   mcflow_bench [--width 320] [--height 240] [--backend auto|cpu|cuda] [--repeat 3] [--noise]
-//                [--regularizer both|quad|tv] [--set name=value ...] [--camera-only] [--parts] [--real DIR]
+//                [--regularizer both|quad|tv] [--set name=value ...] [--camera-only] [--parts [--truth-start]] [--real DIR]
 //
 // --real DIR: the real pairs as `mcflow export-real` writes them (PFM, no OpenCV needed), one row per pair and size.
 // --concurrent N: N solvers (N cameras) in N threads on the same backend, each solving synth-0 `repeat` times: pairs
@@ -96,27 +96,43 @@ SyntheticSceneOptions sceneOptions(int variant, int width, int height, bool nois
 // Issue 7's articulated-object target, per rigid part of every synthetic scene: the segment that covers most of the
 // part, that segment's rotation error against the part's true motion and the part's flow error; per scene whether the
 // arm's two links (which move differently: an elbow rotation on top of the upper arm's motion) got a segment each.
-int partsBench(const Config& base, const std::vector<Regularizer>& regs, int width, int height, bool noise) {
-  std::printf("# mcflow_bench --parts: synthetic scenes %dx%d, noise %s; per rigid part the segment covering most of "
-              "its pixels and that segment's errors\n",
-              width, height, noise ? "on" : "off");
-  std::printf("# rot_err: rotation error [deg]; along / across: its parts about the part's longest axis and across it\n");
-  std::printf("%-8s %-5s %-11s %7s %4s %6s %8s %8s %8s %8s %8s\n", "scene", "reg", "part", "pixels", "seg", "cover",
-              "rot_deg", "rot_err", "along", "across", "EPE");
+// `truth_start`: each solve starts from the true parts instead of K-means (a warm start from truthSegmentation, as many
+// outer iterations and pyramid levels as a cold solve, no splits): how well the motions come out when the segments are
+// right, i.e. what the label count alone cannot improve.
+int partsBench(const Config& base, const std::vector<Regularizer>& regs, int width, int height, bool noise,
+               bool truth_start) {
+  std::printf("# mcflow_bench --parts%s: synthetic scenes %dx%d, noise %s; per rigid part the segment covering most of "
+              "its pixels and that segment's errors%s\n",
+              truth_start ? " --truth-start" : "", width, height, noise ? "on" : "off",
+              truth_start ? " (solves start from the true parts, motions unknown)" : "");
+  std::printf("# rot_err: rotation error [deg]; along / across: its parts about the part's longest axis and across it; "
+              "fit_err: that of the best rigid motion for the part's true scene flow\n");
+  std::printf("%-8s %-5s %-11s %7s %4s %6s %8s %8s %8s %8s %8s %8s\n", "scene", "reg", "part", "pixels", "seg", "cover",
+              "rot_deg", "rot_err", "along", "across", "fit_err", "EPE");
   for (int variant = 0; variant < syntheticVariantCount(); ++variant) {
     const SyntheticPair pair = renderSyntheticPair(sceneOptions(variant, width, height, noise));
     for (Regularizer reg : regs) {
       Config config = base;
       config.regularizer = reg;
+      if (truth_start) {
+        config.max_splits_per_iteration = 0;
+        config.warm_outer_iterations = config.outer_iterations;
+        config.warm_motion_coarse_levels = 6;  // the whole pyramid (clamped to its levels), as a cold solve
+        config.warm_label_iterations = config.label_iterations;
+        config.warm_label_iterations_final = config.label_iterations_final;
+      }
       Solver solver(config);
-      const Result r = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+      const Result r = truth_start ? solver.solve(pair.frame1, pair.frame2, pair.intrinsics, truthSegmentation(pair))
+                                   : solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+      if (truth_start && r.start != StartKind::Warm)
+        throw std::runtime_error("--truth-start: the solve did not start from the true parts: " + r.start_note);
       const std::vector<PartMotionError> parts = partMotionErrors(r, pair);
       const std::string counts = labelCountTrace(r);
       for (const PartMotionError& e : parts)
-        std::printf("synth-%-2d %-5s %-11s %7d %4d %6.3f %8.2f %8.2f %8.2f %8.2f %8.3f\n", variant,
+        std::printf("synth-%-2d %-5s %-11s %7d %4d %6.3f %8.2f %8.2f %8.2f %8.2f %8.2f %8.3f\n", variant,
                     reg == Regularizer::Quadratic ? "quad" : "tv", e.name.c_str(), e.pixels, e.segment,
                     e.covered_fraction, e.true_rotation_deg, e.rotation_error_deg, e.rotation_error_along_deg,
-                    e.rotation_error_across_deg, e.flow_epe_px);
+                    e.rotation_error_across_deg, e.rigid_fit_error_deg, e.flow_epe_px);
       std::printf("# synth-%d %s: %zu segments, arm links apart: %s; motion labels over the outer iterations: %s\n",
                   variant, reg == Regularizer::Quadratic ? "quad" : "tv", r.segments.size(),
                   armLinksApart(parts) ? "yes" : "no", counts.c_str());
@@ -266,6 +282,9 @@ int main(int argc, char** argv) {
                                    {"parts", false,
                                     "per rigid part of the synthetic scenes: covering segment, rotation error and "
                                     "flow error; whether the arm's two links got a segment each"},
+                                   {"truth-start", false,
+                                    "with --parts: every solve starts from the true parts (motions unknown, no "
+                                    "splits): the motions' errors when the segments are right"},
                                    {"concurrent", true, "N solvers in N threads on synth-0: throughput against one"},
                                    {"match", true, "with --real: only the folders whose name contains this text"},
                                    {"real", true,
@@ -296,7 +315,8 @@ int main(int argc, char** argv) {
       if (regs.size() == 1) real.regularizer = regs.front();
       return realBench(cli.text("real", ""), cli.text("match", ""), real, repeat);
     }
-    if (cli.has("parts")) return partsBench(base, regs, width, height, noise);
+    if (cli.has("truth-start") && !cli.has("parts")) throw CommandLineError("--truth-start needs --parts");
+    if (cli.has("parts")) return partsBench(base, regs, width, height, noise, cli.has("truth-start"));
     if (cli.has("camera-only")) {
       Config camera_only = base;
       if (regs.size() == 1) camera_only.regularizer = regs.front();  // "both": the default regulariser

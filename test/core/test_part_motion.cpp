@@ -29,27 +29,17 @@ SyntheticPair smallScene() {
 // A result whose segments are the true parts (segment k+1 = part k, pixels labelled by their true part) with the
 // true twists, and the true optical flow. `merge_arm`: both arm links in the upper arm's segment.
 Result resultFromTruth(const SyntheticPair& pair, bool merge_arm) {
-  Result r;
-  r.width = pair.gt_parts.width;
-  r.height = pair.gt_parts.height;
+  Result r = truthSegmentation(pair);
   r.optical_flow = pair.gt_optical_flow;
-  r.labels = ImageI32(r.width, r.height, 1);
-  int upper_segment = 0;
+  int upper_segment = 0, fore_segment = 0;
   for (std::size_t k = 0; k < pair.parts.size(); ++k) {
-    Segment s;
-    s.id = int(k) + 1;
-    s.twist = pair.parts[k].twist;
-    r.segments.push_back(s);
-    if (pair.parts[k].name == "upper_arm") upper_segment = s.id;
+    r.segments[k].twist = pair.parts[k].twist;
+    if (pair.parts[k].name == "upper_arm") upper_segment = r.segments[k].id;
+    if (pair.parts[k].name == "forearm") fore_segment = r.segments[k].id;
   }
-  for (int y = 0; y < r.height; ++y)
-    for (int x = 0; x < r.width; ++x) {
-      int segment = 0;
-      for (std::size_t k = 0; k < pair.parts.size(); ++k)
-        if (pair.gt_parts(x, y) == pair.parts[k].id) segment = int(k) + 1;
-      if (merge_arm && segment > 0 && pair.parts[std::size_t(segment - 1)].name == "forearm") segment = upper_segment;
-      r.labels(x, y) = segment;
-    }
+  if (merge_arm)
+    for (int& id : r.labels.data)
+      if (id == fore_segment) id = upper_segment;
   return r;
 }
 
@@ -115,6 +105,55 @@ TEST(PartMotion, ARotationAboutABarsLengthIsCountedAlongIt) {
   EXPECT_NEAR(parts[fore].rotation_error_deg, 2.0, 1e-6);
   EXPECT_NEAR(parts[fore].rotation_error_along_deg, 2.0, 1e-6);
   EXPECT_NEAR(parts[fore].rotation_error_across_deg, 0.0, 1e-4);
+}
+
+TEST(PartMotion, TruthSegmentationLabelsEveryPixelWithDepthByItsPart) {
+  const SyntheticPair pair = smallScene();
+  const Result r = truthSegmentation(pair);
+  ASSERT_EQ(r.segments.size(), pair.parts.size());
+  int labelled = 0;
+  for (int y = 0; y < r.height; ++y)
+    for (int x = 0; x < r.width; ++x) {
+      const int id = r.labels(x, y);
+      if (!(pair.frame1.depth(x, y) > 0)) {
+        EXPECT_EQ(id, 0) << x << "," << y;
+        continue;
+      }
+      ASSERT_GT(id, 0) << x << "," << y;
+      EXPECT_EQ(pair.parts[std::size_t(id - 1)].id, pair.gt_parts(x, y)) << x << "," << y;
+      ++labelled;
+    }
+  EXPECT_GT(labelled, r.width * r.height / 2);
+}
+
+TEST(PartMotion, AWarmSolveFromTheTruthStartsFromTheTrueParts) {
+  const SyntheticPair pair = smallScene();
+  Config config;
+  config.backend = Backend::Cpu;
+  config.max_splits_per_iteration = 0;
+  Solver solver(config);
+  const Result r = solver.solve(pair.frame1, pair.frame2, pair.intrinsics, truthSegmentation(pair));
+  EXPECT_EQ(r.start, StartKind::Warm) << r.start_note;
+  const std::vector<PartMotionError> parts = partMotionErrors(r, pair);
+  ASSERT_EQ(parts.size(), pair.parts.size());
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    EXPECT_GT(parts[k].covered_fraction, 0.5) << parts[k].name;  // its own segment holds most of it
+    EXPECT_EQ(parts[k].segment, int(k) + 1) << parts[k].name;  // each part keeps its segment: none merged
+  }
+  EXPECT_TRUE(armLinksApart(parts));
+}
+
+TEST(PartMotion, OneRigidMotionFitsTheBoxesExactlyAndTheBendingLinksClosely) {
+  const SyntheticPair pair = smallScene();
+  const std::vector<PartMotionError> parts = partMotionErrors(resultFromTruth(pair, false), pair);
+  for (const PartMotionError& e : parts) {
+    ASSERT_TRUE(std::isfinite(e.rigid_fit_error_deg)) << e.name;
+    if (e.name == "upper_arm" || e.name == "forearm") {
+      EXPECT_LT(e.rigid_fit_error_deg, 0.5) << e.name;  // the bend around the elbow stays within the links' ends
+    } else {
+      EXPECT_LT(e.rigid_fit_error_deg, 0.01) << e.name;
+    }
+  }
 }
 
 TEST(PartMotion, AResultOfAnotherSizeIsAnError) {

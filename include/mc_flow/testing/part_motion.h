@@ -28,11 +28,21 @@ struct PartMotionError {
   /// 3 points.
   double rotation_error_along_deg = 0, rotation_error_across_deg = 0;
   double flow_epe_px = 0;           ///< mean optical-flow EPE over the part's pixels not occluded in the truth
+  /// Rotation error of the best rigid motion for the part's own true scene flow (least squares over its pixels,
+  /// Umeyama): what one rigid motion per part can reach at all. Near 0 but for the arm's links, which bend around
+  /// the elbow in the generator (synthetic_scene.cpp). NaN with fewer than 3 points.
+  double rigid_fit_error_deg = 0;
 };
 
 /// @brief One entry per part of `pair` (the background first), in the order of pair.parts. Throws InputError when
 /// the result's size differs from the pair's.
 std::vector<PartMotionError> partMotionErrors(const Result& result, const SyntheticPair& pair);
+
+/// @brief The true segmentation of frame 1 as a previous result, for a warm-started solve of the pair that starts
+/// from the true parts (Solver::solve(frame1, frame2, K, previous)): segment k+1 = part k with a zero twist, pixels
+/// with valid depth labelled by their part, the rest 0; zero flow and frame 1's own depth as the moved depth, so that
+/// carrying it into frame 1 leaves the labels where they are. The solve still has to find every motion.
+Result truthSegmentation(const SyntheticPair& pair);
 
 /// @brief Whether the scene's articulated arm ("upper_arm", "forearm") comes out as two segments: both links have a
 /// covering segment and the two differ. False when the scene has no arm.
