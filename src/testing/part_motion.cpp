@@ -119,7 +119,7 @@ Result truthSegmentation(const SyntheticPair& pair) {
   }
   for (int y = 0; y < r.height; ++y)
     for (int x = 0; x < r.width; ++x) {
-      if (!(pair.frame1.depth(x, y) > 0)) continue;
+      if (!(pair.frame1.depth(x, y) > 0)) continue;  // gt_parts says 0 (the background) where there is no surface
       for (std::size_t k = 0; k < pair.parts.size(); ++k)
         if (pair.gt_parts(x, y) == pair.parts[k].id) r.labels(x, y) = int(k) + 1;
     }

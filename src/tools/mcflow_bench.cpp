@@ -96,9 +96,11 @@ SyntheticSceneOptions sceneOptions(int variant, int width, int height, bool nois
 // Issue 7's articulated-object target, per rigid part of every synthetic scene: the segment that covers most of the
 // part, that segment's rotation error against the part's true motion and the part's flow error; per scene whether the
 // arm's two links (which move differently: an elbow rotation on top of the upper arm's motion) got a segment each.
-// `truth_start`: each solve starts from the true parts instead of K-means (a warm start from truthSegmentation, as many
-// outer iterations and pyramid levels as a cold solve, no splits): how well the motions come out when the segments are
-// right, i.e. what the label count alone cannot improve.
+// `truth_start`: each solve starts from the true parts instead of K-means: a warm start from truthSegmentation with a
+// cold solve's outer iterations, pyramid levels and label iterations, and no splits (these warm_* settings override any
+// --set). It stays a warm solve otherwise: every motion starts from zero (no dominant-motion start), each level's motion
+// step runs motion_iterations_refine iterations, and warm_switch_cost holds the pixels in their true parts. How well the
+// motions come out when the segments are right, i.e. what the label count alone cannot improve.
 int partsBench(const Config& base, const std::vector<Regularizer>& regs, int width, int height, bool noise,
                bool truth_start) {
   std::printf("# mcflow_bench --parts%s: synthetic scenes %dx%d, noise %s; per rigid part the segment covering most of "
@@ -115,9 +117,12 @@ int partsBench(const Config& base, const std::vector<Regularizer>& regs, int wid
       Config config = base;
       config.regularizer = reg;
       if (truth_start) {
+        config.warm_start = true;
         config.max_splits_per_iteration = 0;
         config.warm_outer_iterations = config.outer_iterations;
-        config.warm_motion_coarse_levels = 6;  // the whole pyramid (clamped to its levels), as a cold solve
+        // The setting's maximum: the whole pyramid wherever it has at most 6 levels above the processing level (320x240
+        // has 4 at the default coarsest_min_width of 20 px, 640x480 has 5).
+        config.warm_motion_coarse_levels = 6;
         config.warm_label_iterations = config.label_iterations;
         config.warm_label_iterations_final = config.label_iterations_final;
       }
@@ -125,7 +130,8 @@ int partsBench(const Config& base, const std::vector<Regularizer>& regs, int wid
       const Result r = truth_start ? solver.solve(pair.frame1, pair.frame2, pair.intrinsics, truthSegmentation(pair))
                                    : solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
       if (truth_start && r.start != StartKind::Warm)
-        throw std::runtime_error("--truth-start: the solve did not start from the true parts: " + r.start_note);
+        throw std::runtime_error("--truth-start: the solve started " + toString(r.start) +
+                                 ", not from the true parts: " + r.start_note);
       const std::vector<PartMotionError> parts = partMotionErrors(r, pair);
       const std::string counts = labelCountTrace(r);
       for (const PartMotionError& e : parts)
@@ -307,6 +313,7 @@ int main(int argc, char** argv) {
     Config base;
     base.backend = parseBackend(cli.text("backend", "auto"));
     cli.applySettings(base);
+    if (cli.has("truth-start") && !cli.has("parts")) throw CommandLineError("--truth-start needs --parts");
     const std::vector<Regularizer> regs = regularizerChoice(cli.text("regularizer", "both"));
     if (cli.has("concurrent"))
       return concurrentBench(base, width, height, cli.integer("concurrent", 2, 1, 64), repeat);
@@ -315,7 +322,6 @@ int main(int argc, char** argv) {
       if (regs.size() == 1) real.regularizer = regs.front();
       return realBench(cli.text("real", ""), cli.text("match", ""), real, repeat);
     }
-    if (cli.has("truth-start") && !cli.has("parts")) throw CommandLineError("--truth-start needs --parts");
     if (cli.has("parts")) return partsBench(base, regs, width, height, noise, cli.has("truth-start"));
     if (cli.has("camera-only")) {
       Config camera_only = base;

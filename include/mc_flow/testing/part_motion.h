@@ -18,7 +18,7 @@ struct PartMotionError {
   int part_id = 0;
   std::string name;
   int pixels = 0;                   ///< pixels of the part with a motion segment in the result (labels > 0)
-  int segment = 0;                  ///< the segment (1..m) covering most of them; 0 when none does
+  int segment = 0;                  ///< id of the segment covering most of them (Segment::id); 0 when none does
   double covered_fraction = 0;      ///< share of those pixels in that segment
   double true_rotation_deg = 0;     ///< the part's rotation over the pair
   double rotation_error_deg = 0;    ///< angle of exp(segment twist)^-1 exp(part twist); NaN without a segment
@@ -41,7 +41,9 @@ std::vector<PartMotionError> partMotionErrors(const Result& result, const Synthe
 /// @brief The true segmentation of frame 1 as a previous result, for a warm-started solve of the pair that starts
 /// from the true parts (Solver::solve(frame1, frame2, K, previous)): segment k+1 = part k with a zero twist, pixels
 /// with valid depth labelled by their part, the rest 0; zero flow and frame 1's own depth as the moved depth, so that
-/// carrying it into frame 1 leaves the labels where they are. The solve still has to find every motion.
+/// carrying it into frame 1 leaves the labels where they are. The solve still has to find every motion. Its energy and
+/// valid_pixels stay 0, which keeps the warm solve from being re-solved cold on the energy test
+/// (Config::warm_max_energy_ratio needs a previous energy per pixel).
 Result truthSegmentation(const SyntheticPair& pair);
 
 /// @brief Whether the scene's articulated arm ("upper_arm", "forearm") comes out as two segments: both links have a
