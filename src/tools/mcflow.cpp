@@ -675,10 +675,7 @@ int cmdSynth(const Arguments& args) {
   if (args.has("width")) options.width = parseInteger("width", args.get("width"));
   if (args.has("height")) options.height = parseInteger("height", args.get("height"));
   if (args.has("seed")) options.seed = unsigned(parseInteger("seed", args.get("seed")));
-  if (args.has("noise")) {
-    options.intensity_noise = 0.01;  // about 2.5 grey levels
-    options.depth_noise = 0.0015;    // [m] at 1 m, Kinect-like
-  }
+  if (args.has("noise")) options.addSensorNoise();
   if (options.variant < 0 || options.variant >= syntheticVariantCount())
     throw InputError("--variant " + std::to_string(options.variant) + ": expected 0.." +
                      std::to_string(syntheticVariantCount() - 1));

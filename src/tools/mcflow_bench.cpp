@@ -35,6 +35,16 @@ using namespace mc_flow;
 
 namespace {
 
+// One synthetic scene at width x height; `noise`: sensor-like intensity and depth noise (std 0.01, 1.5 mm x Z^2 [m]).
+SyntheticSceneOptions sceneOptions(int variant, int width, int height, bool noise) {
+  SyntheticSceneOptions so;
+  so.width = width;
+  so.height = height;
+  so.variant = variant;
+  if (noise) so.addSensorNoise();
+  return so;
+}
+
 // Issue 7's camera-only scenes: every variant's room, boxes and arm static, the camera moving by each of a few
 // motions per frame up to 10 cm and 8 degrees, with sensor-like noise. A static scene is one rigid motion: the
 // default solve should give one segment and the EPE of a solve with a single motion label.
@@ -55,12 +65,7 @@ int cameraOnlyBench(const Config& base, int width, int height) {
               "segs_1", "total_ms", "total_ms_1", "motion labels over the outer iterations (K-means > after each)");
   for (int variant = 0; variant < syntheticVariantCount(); ++variant)
     for (const CameraMotion& m : motions) {
-      SyntheticSceneOptions so;
-      so.width = width;
-      so.height = height;
-      so.variant = variant;
-      so.intensity_noise = 0.01;
-      so.depth_noise = 0.0015;
+      SyntheticSceneOptions so = sceneOptions(variant, width, height, true);
       so.camera_only = true;
       so.camera_only_translation_m = m.translation_m;
       so.camera_only_rotation_deg = m.rotation_deg;
@@ -78,19 +83,6 @@ int cameraOnlyBench(const Config& base, int width, int height) {
       std::fflush(stdout);
     }
   return 0;
-}
-
-// One synthetic scene at width x height; `noise`: sensor-like intensity and depth noise (std 0.01, 1.5 mm x Z^2 [m]).
-SyntheticSceneOptions sceneOptions(int variant, int width, int height, bool noise) {
-  SyntheticSceneOptions so;
-  so.width = width;
-  so.height = height;
-  so.variant = variant;
-  if (noise) {
-    so.intensity_noise = 0.01;
-    so.depth_noise = 0.0015;
-  }
-  return so;
 }
 
 // Issue 7's articulated-object target, per rigid part of every synthetic scene: the segment that covers most of the

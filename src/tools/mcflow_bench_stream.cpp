@@ -167,10 +167,7 @@ int main(int argc, char** argv) {
       so.variant = variant;
       so.first_frame = t;
       so.stream_events = true;
-      if (opt.noise) {
-        so.intensity_noise = 0.01;
-        so.depth_noise = 0.0015;
-      }
+      if (opt.noise) so.addSensorNoise();
       pairs.push_back(renderSyntheticPair(so));
     }
     for (const bool warm : opt.warm_modes) {

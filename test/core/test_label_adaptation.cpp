@@ -429,8 +429,7 @@ namespace {
 TEST(LabelAdaptation, APartThatNoMotionSeesMergesIntoTheMotionThatSeesItOccluded) {
   SyntheticSceneOptions so;
   so.variant = 0;
-  so.intensity_noise = 0.01;
-  so.depth_noise = 0.0015;
+  so.addSensorNoise();
   so.camera_only = true;
   so.camera_only_translation_m = Eigen::Vector3d(0.06, -0.03, 0.07);
   so.camera_only_rotation_deg = Eigen::Vector3d(4.0, -6.5, 2.0);

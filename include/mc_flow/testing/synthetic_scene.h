@@ -24,6 +24,12 @@ struct SyntheticSceneOptions {
   double intensity_noise = 0.0; ///< std dev added to intensity (0..1 units)
   double depth_noise = 0.0;     ///< [m] std dev at 1 m, growing with depth^2 (Kinect-like)
   unsigned seed = 1;            ///< noise seed
+  /// @brief The tools' --noise: Kinect-like sensor noise, intensity std 0.01 (about 2.5 grey levels) and depth 1.5 mm
+  /// at 1 m.
+  void addSensorNoise() {
+    intensity_noise = 0.01;
+    depth_noise = 0.0015;
+  }
   int first_frame = 0;          ///< renderSyntheticPair renders frames (first_frame, first_frame + 1) of the sequence
   bool stream_events = false;   ///< adds a box that starts moving at frame 10 (part 10) and one that moves straight
                                 ///< out of the view (part 11), for sequences
