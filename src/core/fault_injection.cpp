@@ -2,7 +2,9 @@
 #include "mc_flow/core/fault_injection.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
+#include <thread>
 #include <utility>
 
 #include "mc_flow/core/error.h"
@@ -149,16 +151,41 @@ std::unique_ptr<SolveBackend> withBackendFault(std::unique_ptr<SolveBackend> bac
   return std::make_unique<FaultInjectingBackend>(std::move(backend), std::move(fault));
 }
 
+namespace {
+
+bool allDigits(const std::string& text) {
+  return !text.empty() && text.size() <= 9 &&
+         std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
+}  // namespace
+
 BackendFault parseBackendFault(const std::string& text) {
-  const std::string bad = "backend fault '" + text + "' is invalid: expected SOLVE or SOLVE:STAGE (e.g. 3 or 3:labelStep)";
+  const std::string bad = "backend fault '" + text +
+                          "' is invalid: expected SOLVE, SOLVE:STAGE or SOLVE:STAGE:hold=MS (e.g. 3, 3:labelStep or "
+                          "2:labelStep:hold=1500)";
   const std::size_t colon = text.find(':');
   const std::string number = text.substr(0, colon);
-  if (number.empty() || number.size() > 9 ||
-      !std::all_of(number.begin(), number.end(), [](char c) { return c >= '0' && c <= '9'; }))
-    throw ConfigError(bad);
+  if (!allDigits(number)) throw ConfigError(bad);
   BackendFault fault;
   fault.solve = std::stol(number);
-  if (colon != std::string::npos) fault.stage = text.substr(colon + 1);
+  if (colon != std::string::npos) {
+    const std::string rest = text.substr(colon + 1);
+    const std::size_t second = rest.find(':');
+    fault.stage = rest.substr(0, second);
+    if (second != std::string::npos) {
+      // A hold instead of a fault: the stage waits, then runs (a solve made slow on purpose, so that a test of what
+      // happens while solving does not depend on how fast the machine is).
+      const std::string action = rest.substr(second + 1);
+      const std::string prefix = "hold=";
+      const std::string ms = action.rfind(prefix, 0) == 0 ? action.substr(prefix.size()) : "";
+      if (!allDigits(ms)) throw ConfigError(bad + ": '" + action + "' is not hold=MS");
+      const long hold_ms = std::stol(ms);
+      fault.action = [hold_ms](const std::string&) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(hold_ms));
+      };
+    }
+  }
   const std::string problem = faultProblem(fault);
   if (!problem.empty()) throw ConfigError(bad + ": " + problem);
   return fault;

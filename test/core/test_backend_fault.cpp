@@ -3,6 +3,7 @@
 // the stream goes on there. test/cuda/test_backend_fault_cuda.cpp does the same with a real CUDA fault.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cstdlib>
 #include <string>
 #include <vector>
@@ -98,7 +99,8 @@ TEST(BackendFault, TheEnvironmentHookFaultsThePipelinesFirstBackendOnly) {
 
 TEST(BackendFault, MalformedHookValuesAreRefusedByName) {
   Config config;
-  for (const char* bad : {"x", "0", "-1", "3:", "3:noSuchStage", ":labelStep"}) {
+  for (const char* bad : {"x", "0", "-1", "3:", "3:noSuchStage", ":labelStep", "3:labelStep:", "3:labelStep:hold=",
+                          "3:labelStep:hold=-5", "3:labelStep:wait=5", "3:noSuchStage:hold=5"}) {
     ScopedEnvironment hook("MCFLOW_INJECT_BACKEND_FAULT", bad);
     try {
       SequencePipeline pipeline(config, 1, 0.5);
@@ -112,6 +114,14 @@ TEST(BackendFault, MalformedHookValuesAreRefusedByName) {
   EXPECT_EQ(parsed.solve, 12);
   EXPECT_EQ(parsed.stage, "trialCuts");
   EXPECT_EQ(parseBackendFault("4").stage, "labelStep");
+  EXPECT_FALSE(parsed.action);  // a fault: the stage throws
+  const BackendFault hold = parseBackendFault("2:outputs:hold=30");
+  EXPECT_EQ(hold.solve, 2);
+  EXPECT_EQ(hold.stage, "outputs");
+  ASSERT_TRUE(hold.action);
+  const auto before = std::chrono::steady_clock::now();
+  hold.action("outputs");  // returns (the stage then runs) after at least the hold
+  EXPECT_GE(std::chrono::steady_clock::now() - before, std::chrono::milliseconds(30));
   EXPECT_THROW(withBackendFault(nullptr, BackendFault{}), ConfigError);
 }
 

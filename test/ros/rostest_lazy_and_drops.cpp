@@ -55,7 +55,8 @@ TEST(LazyAndDrops, FramesArrivingWhileSolvingAreDroppedAndCounted) {
   ASSERT_TRUE(waitFor([&] { return camera.inputSubscribers() >= 3; }, 30.0));
   ros::WallDuration(1.0).sleep();
 
-  // 12 frames at 30 Hz: far faster than one solve, so the worker must drop most of them.
+  // 12 frames at 30 Hz (0.37 s) while the first solve is held for 2 s (lazy_and_drops.test): every frame after the
+  // second arrives while solving, so the worker must drop all but the last one, on any machine.
   const int frames = 12;
   const ros::Time start(4000.0);
   std::vector<std::tuple<sensor_msgs::ImagePtr, sensor_msgs::ImagePtr, sensor_msgs::CameraInfoPtr>> triples;
@@ -86,6 +87,8 @@ TEST(LazyAndDrops, FramesArrivingWhileSolvingAreDroppedAndCounted) {
   const long solved = diagnosticCount(diagnostics, "pairs solved");
   EXPECT_GT(dropped, 0);
   EXPECT_LT(solved, frames - 1);
+  // Only the frame waiting when the held solve ends is solved after it (frames lost in transport aside).
+  EXPECT_LE(solved, 2);
   EXPECT_EQ(diagnosticCount(diagnostics, "frames skipped (bad input)"), 0);
   ASSERT_TRUE(waitFor([&] { return long(segments.count()) == solved; }, 10.0));
 

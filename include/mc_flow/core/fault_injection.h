@@ -36,7 +36,9 @@ const std::vector<std::string>& backendFaultStages();
 /// stage or a null backend.
 std::unique_ptr<SolveBackend> withBackendFault(std::unique_ptr<SolveBackend> backend, BackendFault fault);
 
-/// @brief Parses "SOLVE" or "SOLVE:STAGE" (e.g. "3" or "3:motionAccumulator"); throws ConfigError naming the text.
+/// @brief Parses "SOLVE", "SOLVE:STAGE" (e.g. "3" or "3:motionAccumulator": a BackendError there) or
+/// "SOLVE:STAGE:hold=MS" (that stage waits MS milliseconds once, then runs: a deliberately slow solve); throws
+/// ConfigError naming the text.
 BackendFault parseBackendFault(const std::string& text);
 
 /// @brief The fault MCFLOW_INJECT_BACKEND_FAULT asks for (parseBackendFault of its value), nothing when it is unset
