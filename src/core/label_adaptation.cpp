@@ -20,6 +20,11 @@ namespace {
 // Relative ridge on the 6x6 solves: a planar or textureless segment leaves directions unconstrained.
 constexpr double kRidge = 1e-6;
 
+// mergeWhereOneMotionExplains refits a pair only where the quadratic model predicts an increase below this many times
+// what the pair may pay: the model is exact near the optima and errs by a small factor away from them (measured on
+// the TUM excerpt: docs/ALGORITHM.md), while distinct motions are priced hundreds of times above.
+constexpr double kRefitCandidateRatio = 20.0;
+
 Matrix6d regularised(const Matrix6d& H) {
   const double scale = std::max(H.diagonal().maxCoeff(), 1e-12);
   return H + kRidge * scale * Matrix6d::Identity();
@@ -88,10 +93,12 @@ LabelCostModel costModelFromEquations(const MotionNormalEquations& equations, in
   model.curvature.resize(std::size_t(motion_labels));
   model.gradient.resize(std::size_t(motion_labels));
   model.cost.resize(std::size_t(motion_labels));
+  model.pixels.resize(std::size_t(motion_labels));
   for (int i = 0; i < motion_labels; ++i) {
     model.curvature[std::size_t(i)] = equations.H.block<6, 6>(6 * i, 6 * i);
     model.gradient[std::size_t(i)] = equations.g.segment<6>(6 * i);
     model.cost[std::size_t(i)] = equations.label_cost(i);
+    model.pixels[std::size_t(i)] = equations.label_pixels.size() > i ? equations.label_pixels(i) : 0.0;
   }
   return model;
 }
@@ -141,6 +148,7 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
   AdaptationStats stats;
   stats.smallest_refused_merge = std::numeric_limits<double>::infinity();
   const int n0 = labels.labelCount() - 1;
+  model.pixels.resize(std::size_t(n0), 0.0);  // a model built by hand may leave the pixel counts out
   if (int(twists.size()) != n0 || int(model.curvature.size()) != n0 || int(model.gradient.size()) != n0 ||
       int(model.cost.size()) != n0)
     throw InputError("adaptLabelCount: " + std::to_string(twists.size()) + " twists and cost models of " +
@@ -205,6 +213,8 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
     model.cost[std::size_t(keep)] += model.cost[std::size_t(drop)] + data_increase +
                                      priceFor(price, model.cost[std::size_t(keep)], model.cost[std::size_t(drop)], config);
     support[std::size_t(keep)] += support[std::size_t(drop)];
+    model.pixels[std::size_t(keep)] += model.pixels[std::size_t(drop)];
+    model.pixels.erase(model.pixels.begin() + drop);
     if (carried) {
       (*carried)[std::size_t(keep)] = (*carried)[std::size_t(keep)] || (*carried)[std::size_t(drop)];
       carried->erase(carried->begin() + drop);
@@ -234,6 +244,7 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
         model.curvature.erase(model.curvature.begin() + i);
         model.gradient.erase(model.gradient.begin() + i);
         model.cost.erase(model.cost.begin() + i);
+        model.pixels.erase(model.pixels.begin() + i);
         if (carried) carried->erase(carried->begin() + i);
         ++stats.removed;
       }
@@ -363,6 +374,212 @@ AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vecto
   twists.swap(kept_twists);
   if (carried) carried->swap(kept_carried);
   backend.updateOcclusion(twists, config);  // the mask of the merged labels
+  return stats;
+}
+
+std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d>& twists,
+                                  const std::vector<std::vector<int>>& groups, const std::vector<Vector6d>& starts,
+                                  int iterations, bool use_occlusion, const Config& config) {
+  const int n = labels.labelCount() - 1;
+  if (int(twists.size()) != n || starts.size() != groups.size())
+    throw InputError("refitUnions: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
+                     " motion labels, " + std::to_string(starts.size()) + " starts for " +
+                     std::to_string(groups.size()) + " groups");
+  std::vector<int> owner(std::size_t(n), -1);
+  for (std::size_t g = 0; g < groups.size(); ++g)
+    for (const int i : groups[g]) {
+      if (i < 0 || i >= n) throw InputError("refitUnions: label " + std::to_string(i) + " outside [0, " + std::to_string(n) + ")");
+      if (owner[std::size_t(i)] >= 0) throw InputError("refitUnions: label " + std::to_string(i) + " is in two groups");
+      owner[std::size_t(i)] = int(g);
+    }
+  std::vector<UnionFit> fits(groups.size());
+  std::vector<Vector6d> gradient(groups.size(), Vector6d::Zero());
+  std::vector<double> damping(groups.size(), config.motion_damping);
+  std::vector<Vector6d> trial = twists;
+  // Sums a pass's model over each group into the fits (the union's cost, H and g at its trial twist).
+  auto gather = [&](const LabelCostModel& model, std::vector<UnionFit>& out, std::vector<Vector6d>& out_gradient) {
+    for (std::size_t g = 0; g < groups.size(); ++g) {
+      UnionFit& f = out[g];
+      f.member_cost.assign(groups[g].size(), 0.0);
+      f.cost = 0;
+      f.pixels = 0;
+      f.curvature.setZero();
+      out_gradient[g].setZero();
+      for (std::size_t m = 0; m < groups[g].size(); ++m) {
+        const std::size_t i = std::size_t(groups[g][m]);
+        f.member_cost[m] = model.cost[i];
+        f.cost += model.cost[i];
+        f.pixels += model.pixels[i];
+        f.curvature += model.curvature[i];
+        out_gradient[g] += model.gradient[i];
+      }
+    }
+  };
+  auto setTrial = [&](const std::vector<Vector6d>& group_twists) {
+    for (std::size_t g = 0; g < groups.size(); ++g)
+      for (const int i : groups[g]) trial[std::size_t(i)] = group_twists[g];
+  };
+  std::vector<Vector6d> current = starts;
+  setTrial(current);
+  gather(labels.costModel(trial, use_occlusion, config), fits, gradient);
+  for (std::size_t g = 0; g < groups.size(); ++g) fits[g].twist = current[g];
+  std::vector<UnionFit> next(groups.size());
+  std::vector<Vector6d> next_gradient(groups.size());
+  for (int it = 0; it < iterations && !groups.empty(); ++it) {
+    std::vector<Vector6d> proposed = current;
+    for (std::size_t g = 0; g < groups.size(); ++g) {
+      const Matrix6d& H = fits[g].curvature;
+      const double scale = std::max(H.diagonal().maxCoeff(), 1e-12);
+      const Matrix6d damped = H + (damping[g] + kRidge) * scale * Matrix6d::Identity();
+      Vector6d d = -damped.ldlt().solve(gradient[g]);
+      d /= std::max({1.0, d.head<3>().norm() / 0.1, d.tail<3>().norm() / 0.1});
+      if (d.allFinite()) proposed[g] += d;
+    }
+    setTrial(proposed);
+    gather(labels.costModel(trial, use_occlusion, config), next, next_gradient);
+    for (std::size_t g = 0; g < groups.size(); ++g) {
+      if (next[g].cost <= fits[g].cost) {  // accepted: the union's model at the new twist
+        const int accepted = fits[g].iterations + 1;
+        current[g] = proposed[g];
+        fits[g] = next[g];
+        fits[g].iterations = accepted;
+        gradient[g] = next_gradient[g];
+        fits[g].twist = current[g];
+        damping[g] = std::max(config.motion_damping, damping[g] / 3.0);
+      } else {  // rejected: keep the last accepted twist and its model, damp harder
+        damping[g] = std::max(1e-3, damping[g] * 4.0);
+      }
+    }
+  }
+  return fits;
+}
+
+bool oneMotionExplains(const MergeEvidence& e, double own_tolerance, double noise_tolerance) {
+  if (own_tolerance <= 0 || noise_tolerance <= 0) return false;
+  const double noise = std::max(0.0, e.noise_per_pixel);
+  auto side = [&](double increase, double own, double pixels) {
+    return increase <= own_tolerance * std::max(0.0, own) && increase <= noise_tolerance * noise * pixels;
+  };
+  return side(e.increase_a, e.own_a, e.pixels_a) && side(e.increase_b, e.own_b, e.pixels_b);
+}
+
+AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
+                                            bool use_occlusion, const Config& config, std::vector<bool>* carried) {
+  AdaptationStats stats;
+  if (int(twists.size()) != labels.labelCount() - 1)
+    throw InputError("mergeWhereOneMotionExplains: " + std::to_string(twists.size()) + " twists for " +
+                     std::to_string(labels.labelCount() - 1) + " motion labels");
+  if (carried && carried->size() != twists.size())
+    throw InputError("mergeWhereOneMotionExplains: " + std::to_string(carried->size()) + " carried flags for " +
+                     std::to_string(twists.size()) + " motion labels");
+  if (config.merge_refit_tolerance <= 0 || config.merge_refit_noise_tolerance <= 0) return stats;
+  (void)valid_pixels;
+  // Pairs refused since the labels last changed: the next round tests the others (the dominant label takes part in
+  // one pair per round).
+  std::vector<std::pair<int, int>> refused;
+  for (;;) {
+    const int n = int(twists.size());
+    if (n < 2) break;
+    const LabelCostModel own = labels.costModel(twists, use_occlusion, config);
+    // The data term's noise level: what a pixel of the widest label (usually the static world) pays under its own
+    // motion: sensor noise, blur, rolling shutter, colour and depth out of step, all that one rigid motion leaves.
+    const int widest = int(std::max_element(own.pixels.begin(), own.pixels.end()) - own.pixels.begin());
+    const double noise = own.cost[std::size_t(widest)] / std::max(1.0, own.pixels[std::size_t(widest)]);
+    // What sensor effects make a rigid thing look non-rigid grows with its extent in the image: the widest label is
+    // judged with merge_refit_tolerance, two smaller ones (parts, which must stay apart when they move) with
+    // merge_refit_tolerance_parts.
+    auto ownTolerance = [&](int a, int b) {
+      return a == widest || b == widest ? config.merge_refit_tolerance : config.merge_refit_tolerance_parts;
+    };
+    // Candidates, most alike first: the quadratic model's predicted increase against what the pair may pay. A pair
+    // the model prices far beyond that (a distinct motion) is not refitted.
+    std::vector<std::pair<double, std::pair<int, int>>> candidates;
+    for (int a = 0; a < n; ++a)
+      for (int b = a + 1; b < n; ++b) {
+        const double allowed =
+            std::min(ownTolerance(a, b) * std::max(0.0, std::min(own.cost[std::size_t(a)], own.cost[std::size_t(b)])),
+                     config.merge_refit_noise_tolerance * noise *
+                         std::min(own.pixels[std::size_t(a)], own.pixels[std::size_t(b)]));
+        const double predicted = mergeCostIncrease(own.curvature[std::size_t(a)], own.curvature[std::size_t(b)],
+                                                   twists[std::size_t(a)], twists[std::size_t(b)]);
+        const double ratio = predicted / std::max(allowed, 1e-9);
+        if (ratio < kRefitCandidateRatio && std::find(refused.begin(), refused.end(), std::make_pair(a, b)) == refused.end())
+          candidates.push_back({ratio, {a, b}});
+      }
+    if (candidates.empty()) break;
+    std::sort(candidates.begin(), candidates.end());
+    std::vector<bool> used(std::size_t(n), false);
+    std::vector<std::pair<int, int>> pairs;
+    for (const auto& c : candidates) {
+      const auto [a, b] = c.second;
+      if (used[std::size_t(a)] || used[std::size_t(b)]) continue;
+      used[std::size_t(a)] = used[std::size_t(b)] = true;
+      pairs.push_back({a, b});
+    }
+    // Each side under the other's motion (one pass for every pair): the union's cost at either start.
+    std::vector<Vector6d> swapped = twists;
+    for (const auto& [a, b] : pairs) {
+      swapped[std::size_t(a)] = twists[std::size_t(b)];
+      swapped[std::size_t(b)] = twists[std::size_t(a)];
+    }
+    const LabelCostModel cross = labels.costModel(swapped, use_occlusion, config);
+    std::vector<std::vector<int>> groups;
+    std::vector<Vector6d> starts;
+    for (const auto& [a, b] : pairs) {
+      const double at_a = own.cost[std::size_t(a)] + cross.cost[std::size_t(b)];
+      const double at_b = cross.cost[std::size_t(a)] + own.cost[std::size_t(b)];
+      groups.push_back({a, b});
+      starts.push_back(at_a <= at_b ? twists[std::size_t(a)] : twists[std::size_t(b)]);
+    }
+    const std::vector<UnionFit> fits =
+        refitUnions(labels, twists, groups, starts, config.merge_refit_iterations, use_occlusion, config);
+    // Merges of this round: each pair into its larger label, which takes the union's motion.
+    std::vector<int> group(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) group[std::size_t(i)] = i;
+    std::vector<Vector6d> merged_twists = twists;
+    int merged = 0;
+    for (std::size_t p = 0; p < pairs.size(); ++p) {
+      const auto [a, b] = pairs[p];
+      const UnionFit& f = fits[p];
+      MergeEvidence evidence;
+      evidence.own_a = own.cost[std::size_t(a)];
+      evidence.own_b = own.cost[std::size_t(b)];
+      evidence.increase_a = f.member_cost[0] - evidence.own_a;
+      evidence.increase_b = f.member_cost[1] - evidence.own_b;
+      evidence.pixels_a = own.pixels[std::size_t(a)];
+      evidence.pixels_b = own.pixels[std::size_t(b)];
+      evidence.noise_per_pixel = noise;
+      if (!oneMotionExplains(evidence, ownTolerance(a, b), config.merge_refit_noise_tolerance)) {
+        refused.push_back({a, b});
+        continue;
+      }
+      const int keep = own.pixels[std::size_t(a)] >= own.pixels[std::size_t(b)] ? a : b;
+      const int drop = keep == a ? b : a;
+      group[std::size_t(drop)] = keep;
+      merged_twists[std::size_t(keep)] = f.twist;
+      if (carried) (*carried)[std::size_t(keep)] = (*carried)[std::size_t(keep)] || (*carried)[std::size_t(drop)];
+      ++merged;
+    }
+    if (merged == 0) continue;  // the same labels: the refused pairs stay refused, the others get their turn
+    refused.clear();
+    std::vector<int> target(std::size_t(n) + 1);
+    std::vector<Vector6d> kept_twists;
+    std::vector<bool> kept_carried;
+    for (int i = 0; i < n; ++i) {
+      if (group[std::size_t(i)] != i) continue;
+      target[std::size_t(i)] = int(kept_twists.size());
+      kept_twists.push_back(merged_twists[std::size_t(i)]);
+      if (carried) kept_carried.push_back((*carried)[std::size_t(i)]);
+    }
+    for (int i = 0; i < n; ++i)
+      if (group[std::size_t(i)] != i) target[std::size_t(i)] = target[std::size_t(group[std::size_t(i)])];
+    const int kept = int(kept_twists.size());
+    target[std::size_t(n)] = kept;  // the outlier label stays last
+    labels.remap(target, kept + 1);
+    twists.swap(kept_twists);
+    if (carried) carried->swap(kept_carried);
+    stats.merged += merged;
+  }
   return stats;
 }
 

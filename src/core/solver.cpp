@@ -430,6 +430,11 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.smallest_refused_merge = as.smallest_refused_merge;
+    // One rigid thing, one segment: pairs that one refitted motion explains within their noise merge, carried
+    // segments too (no switching cost), so that a stream's splits cannot accumulate.
+    const AdaptationStats explained =
+        mergeWhereOneMotionExplains(labels, twists, p.valid_label_level, occlusions, config, carried_or_null);
+    stats.merged += explained.merged;
     if (k + 1 < most_outer) {
       stats.split = proposeSplits(labels, twists, occlusions, p.valid_label_level, config).split;
       carried.resize(twists.size(), false);  // split-off halves are new segments
@@ -442,7 +447,8 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     progress("outer iteration %d: %d motion labels (merged %d, removed %d, split %d; cheapest refused merge %.1f, label cost %.1f), label change %.5f",
              k, stats.labels_after, stats.merged, stats.removed, stats.split, stats.smallest_refused_merge,
              labelCost(config, p.valid_label_level), stats.label_change);
-    if (k > 0 && as.merged + as.removed + stats.split == 0 && stats.label_change < config.outer_convergence) break;
+    if (k > 0 && as.merged + explained.merged + as.removed + stats.split == 0 && stats.label_change < config.outer_convergence)
+      break;
   }
 
   // ---- final label step at the processing level (also when that is the label level: labels removed in the

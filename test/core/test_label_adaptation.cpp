@@ -456,3 +456,115 @@ TEST(LabelAdaptation, APartThatNoMotionSeesMergesIntoTheMotionThatSeesItOccluded
 }
 
 }  // namespace
+
+// ---------------------------------------------------------------- one rigid thing, one segment (merge_refit_tolerance)
+
+TEST(OneMotionMerge, EachSideIsJudgedByItsOwnCostAndByTheNoiseLevel) {
+  MergeEvidence e;
+  e.own_a = 500;
+  e.pixels_a = 1000;
+  e.own_b = 40;
+  e.pixels_b = 100;
+  e.noise_per_pixel = 0.5;
+  e.increase_a = 100;
+  e.increase_b = 20;
+  // Own bound: 100 <= 1.0 * 500 and 20 <= 1.0 * 40; noise bound: 100 <= 2 * 0.5 * 1000 and 20 <= 2 * 0.5 * 100.
+  EXPECT_TRUE(oneMotionExplains(e, 1.0, 2.0));
+  EXPECT_FALSE(oneMotionExplains(e, 0.4, 2.0));  // the small side rose by 50 % of its own cost
+  EXPECT_FALSE(oneMotionExplains(e, 1.0, 0.3));  // ... by 0.2 per pixel, above 0.3 x 0.5
+  e.increase_a = 0;  // a large side's zero increase hides nothing
+  e.increase_b = 50;
+  EXPECT_FALSE(oneMotionExplains(e, 1.0, 2.0));
+  e.increase_a = -5;  // the union explains both better
+  e.increase_b = -1;
+  EXPECT_TRUE(oneMotionExplains(e, 0.001, 0.001));
+  EXPECT_FALSE(oneMotionExplains(e, 0.0, 2.0));  // 0: the test is off
+  EXPECT_FALSE(oneMotionExplains(e, 1.0, 0.0));
+}
+
+namespace {
+
+// The arm scene's labels at the label level: the static background cut into a left and a right half (labels 0 and 1),
+// the box (label 2), everything else outlier.
+SoftLabels backgroundHalvesAndBox(const ArmScene& s, int& background, int& box) {
+  background = partId(s.pair, "background");
+  box = partId(s.pair, "box");
+  const ImageF& points = s.pyr1[s.level].points;
+  SoftLabels u(points.width, points.height, 4, 0.f);
+  for (std::size_t k = 0; k < s.parts.size(); ++k) {
+    const int x = int(k % std::size_t(points.width));
+    int label = 3;
+    if (s.parts[k] == background) label = x < points.width / 2 ? 0 : 1;
+    if (s.parts[k] == box) label = 2;
+    u.plane(label)[k] = 1.f;
+  }
+  return u;
+}
+
+}  // namespace
+
+TEST(OneMotionMerge, RefitOnTheUnionFindsTheMotionOfBoth) {
+  const ArmScene s = renderArmScene();
+  int background = -1, box = -1;
+  SoftLabels u = backgroundHalvesAndBox(s, background, box);
+  ASSERT_GE(background, 0);
+  ASSERT_GE(box, 0);
+  const Vector6d truth = trueTwist(s.pair, "background");
+  Vector6d off = truth;
+  off(4) += 0.01;  // 0.6 degrees about y, 3 px at the image's edge
+  std::vector<Vector6d> twists{off, truth, trueTwist(s.pair, "box")};
+  Config config;
+  HostLabelStore store(u, s.pyr1[s.level], s.pyr2[s.level], nullptr);
+  const std::vector<UnionFit> fits = refitUnions(store, twists, {{0, 1}}, {off}, 4, false, config);
+  ASSERT_EQ(fits.size(), 1u);
+  EXPECT_GE(fits[0].iterations, 1);
+  // Closer to the truth than the start (measured: a quarter of the start's error; the optimum at the label level is not
+  // exactly the true motion).
+  EXPECT_LT((fits[0].twist - truth).norm(), 0.5 * (off - truth).norm());
+  // The union's cost at the fit: below its cost at the start, the two halves' costs summed.
+  std::vector<Vector6d> at_start = twists;
+  at_start[0] = at_start[1] = off;
+  const LabelCostModel start_model = store.costModel(at_start, false, config);
+  EXPECT_LT(fits[0].cost, start_model.cost[0] + start_model.cost[1]);
+  EXPECT_NEAR(fits[0].member_cost[0] + fits[0].member_cost[1], fits[0].cost, 1e-9 * fits[0].cost);
+  EXPECT_GT(fits[0].pixels, 0.0);
+  EXPECT_THROW(refitUnions(store, twists, {{0, 1}, {1, 2}}, {off, off}, 1, false, config), InputError);
+  EXPECT_THROW(refitUnions(store, twists, {{0, 7}}, {off}, 1, false, config), InputError);
+  EXPECT_THROW(refitUnions(store, twists, {{0, 1}}, {}, 1, false, config), InputError);
+}
+
+TEST(OneMotionMerge, TheHalvesOfTheStaticWorldMergeAndTheSmallMovingBoxStaysApart) {
+  const ArmScene s = renderArmScene();
+  int background = -1, box = -1;
+  SoftLabels u = backgroundHalvesAndBox(s, background, box);
+  const Vector6d truth = trueTwist(s.pair, "background");
+  Vector6d off = truth;
+  off(3) += 0.004;  // the halves' motions differ a little, as on real data
+  std::vector<Vector6d> twists{off, truth, trueTwist(s.pair, "box")};
+  // Stream mode, all three carried: the switching cost does not keep apart what one motion explains.
+  std::vector<bool> carried{true, true, true};
+  Config config;
+  HostLabelStore store(u, s.pyr1[s.level], s.pyr2[s.level], nullptr);
+  const AdaptationStats st =
+      mergeWhereOneMotionExplains(store, twists, s.pyr1[s.level].validCount(), false, config, &carried);
+  EXPECT_EQ(st.merged, 1);
+  ASSERT_EQ(u.count, 3);
+  ASSERT_EQ(twists.size(), 2u);
+  ASSERT_EQ(carried.size(), 2u);
+  EXPECT_TRUE(carried[0]);
+  // Label 0 is the whole background now (with a motion near the truth), label 1 the box with its own motion.
+  for (std::size_t k = 0; k < s.parts.size(); ++k) {
+    if (s.parts[k] == background) EXPECT_EQ(u.plane(0)[k], 1.f);
+    if (s.parts[k] == box) EXPECT_EQ(u.plane(1)[k], 1.f);
+  }
+  EXPECT_LT((twists[0] - truth).norm(), 0.5 * (off - truth).norm());
+  EXPECT_EQ(twists[1], trueTwist(s.pair, "box"));
+
+  // Off: nothing merges.
+  SoftLabels u2 = backgroundHalvesAndBox(s, background, box);
+  std::vector<Vector6d> twists2{off, truth, trueTwist(s.pair, "box")};
+  config.merge_refit_tolerance = 0;
+  HostLabelStore store2(u2, s.pyr1[s.level], s.pyr2[s.level], nullptr);
+  EXPECT_EQ(mergeWhereOneMotionExplains(store2, twists2, s.pyr1[s.level].validCount(), false, config).merged, 0);
+  EXPECT_EQ(u2.count, 4);
+}

@@ -272,13 +272,17 @@ TEST(SolverStream, WarmStartKeepsIdsAndAccuracy) {
 }
 
 // Synthetic variant 0 at 320x240: around frame 6 the parts' velocities pass through zero together, so for a pair or two
-// they move like the background. On this pair's data alone MC-Flow merges them (and they lose their ids); the switching
-// cost (warm_switch_cost) keeps the segments the previous pairs found. Measured at 320x240: with the default every part
-// keeps its id in pairs 4-7; with warm_switch_cost 0, parts merge into the background in pairs 5 and 6.
-TEST(SolverStream, PartsThatMoveAlikeForAMomentKeepTheirSegments) {
-  auto idChanges = [](double switch_cost) {
+// they move like the background. The switching cost (warm_switch_cost) keeps the segments the previous pairs found
+// against the label price; but where one motion explains a part and the background within the noise
+// (merge_refit_tolerance), they merge, switching cost or not: one rigid motion, one segment, as a static scene must stay
+// one segment in a stream (the decision of the issue that introduced the merge test; docs/decisions). Measured at
+// 320x240: with the merge test off every part keeps its id in pairs 4-7; with it the resting parts merge; without the
+// switching cost either way they merge.
+TEST(SolverStream, PartsThatMoveAlikeForAMomentKeepTheirSegmentsOnlyUntilOneMotionExplainsThem) {
+  auto idChanges = [](double switch_cost, double merge_refit_tolerance) {
     Config config;
     config.warm_switch_cost = switch_cost;
+    config.merge_refit_tolerance = merge_refit_tolerance;
     Solver solver(config);
     Result previous;
     std::map<int, int> previous_ids;
@@ -296,8 +300,10 @@ TEST(SolverStream, PartsThatMoveAlikeForAMomentKeepTheirSegments) {
     }
     return changes;
   };
-  EXPECT_EQ(idChanges(Config().warm_switch_cost), 0);
-  EXPECT_GT(idChanges(0.0), 0);  // the test can fail: without the switching cost the parts merge
+  const Config defaults;
+  EXPECT_EQ(idChanges(defaults.warm_switch_cost, 0.0), 0);
+  EXPECT_GT(idChanges(0.0, 0.0), 0);  // the test can fail: without the switching cost the parts merge
+  EXPECT_GT(idChanges(defaults.warm_switch_cost, defaults.merge_refit_tolerance), 0);
 }
 
 TEST(SolverStream, ColdStartsKeepIdsByOverlap) {

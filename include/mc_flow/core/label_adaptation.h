@@ -38,6 +38,17 @@ struct LabelCostModel {
   std::vector<Matrix6d> curvature;  ///< H_i
   std::vector<Vector6d> gradient;   ///< g_i
   std::vector<double> cost;         ///< E_i, the data cost the label pays now (robust cost shared by weight)
+  std::vector<double> pixels;       ///< the label's weighted pixel count in the pass [px]
+};
+
+/// @brief One rigid motion refitted on the union of a group of motion labels' pixels (refitUnions).
+struct UnionFit {
+  Vector6d twist = Vector6d::Zero();  ///< the union's motion
+  std::vector<double> member_cost;    ///< each member's data cost under `twist` [normalised Cauchy cost]
+  double cost = 0;                    ///< their sum
+  double pixels = 0;                  ///< the members' weighted pixels [px]
+  Matrix6d curvature = Matrix6d::Zero();  ///< the union's Gauss-Newton curvature H at `twist`
+  int iterations = 0;                 ///< accepted Gauss-Newton steps
 };
 
 /// @brief What a label owns (u_i >= 0.5, valid depth): pixel count, sum of P, sum of P P^T [m, m^2].
@@ -145,6 +156,41 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
 /// Throws InputError on mismatched sizes.
 AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vector6d>& twists, int valid_pixels,
                                         const Config& config, std::vector<bool>* carried = nullptr);
+
+/// @brief For each group of motion labels (disjoint lists of label indices), one rigid motion for the union of their
+/// pixels: Gauss-Newton with per-group Levenberg-Marquardt backtracking from `starts` (one per group), the other labels
+/// keeping `twists`. One accumulator pass per iteration serves every group (labels that share a twist form one label of
+/// the interpolation model), plus one at the starts. Steps are capped at 0.1 m / 0.1 rad. Throws InputError on
+/// mismatched sizes, a label outside [0, n) or in two groups.
+std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d>& twists,
+                                  const std::vector<std::vector<int>>& groups, const std::vector<Vector6d>& starts,
+                                  int iterations, bool use_occlusion, const Config& config);
+
+/// @brief What the merge test of two labels a and b measured: each one's data cost under its own motion (own_*), how
+/// much more its pixels pay under the motion refitted on the union (increase_*), its weighted pixels, and the data
+/// term's noise level (the cost per pixel of the widest label under its own motion).
+struct MergeEvidence {
+  double own_a = 0, own_b = 0, increase_a = 0, increase_b = 0, pixels_a = 0, pixels_b = 0, noise_per_pixel = 0;
+};
+
+/// @brief Whether one rigid motion explains two labels: each side's increase is at most own_tolerance times what it
+/// pays under its own motion AND at most noise_tolerance times the noise level per pixel of its own. Each side is
+/// judged by its own pixels (a small part whose pixels one motion explains badly is not hidden by a large background);
+/// the first bound scales with the side's own fit, the second with the scene's (neither alone separated the moving
+/// parts of the synthetic scenes from the pieces of a real static office: docs/decisions). A tolerance <= 0: never.
+/// The absolute label price plays no part here: it is adaptLabelCount's, where a stream's switching cost applies too.
+bool oneMotionExplains(const MergeEvidence& evidence, double own_tolerance, double noise_tolerance);
+
+/// @brief Config::merge_refit_tolerance, merge_refit_tolerance_parts and merge_refit_noise_tolerance: pairs of motion
+/// labels, most alike first (by the quadratic model), tested by
+/// refitting one motion on each pair's union (refitUnions from the better of the two motions, merge_refit_iterations
+/// steps; disjoint pairs share passes) and merged when oneMotionExplains; repeated on the merged labels until no pair
+/// merges. No switching cost: a stream's carried segments that one motion explains merge like any others. The merged
+/// label takes the refitted motion and is carried if either was. Costs 3 + merge_refit_iterations accumulator passes
+/// per round (none when no pair is a candidate). Throws InputError on mismatched sizes.
+AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
+                                            bool use_occlusion, const Config& config,
+                                            std::vector<bool>* carried = nullptr);
 
 /// @brief A LabelStore over host soft labels at one pyramid level (the CPU backend's, and the tests').
 class HostLabelStore final : public LabelStore {
