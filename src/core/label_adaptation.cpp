@@ -477,10 +477,13 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
   // Pairs refused since the labels last changed: the next round tests the others (the dominant label takes part in
   // one pair per round).
   std::vector<std::pair<int, int>> refused;
+  LabelCostModel own;  // the labels' models under their own motions; kept while no merge changes the labels
+  bool own_current = false;
   for (;;) {
     const int n = int(twists.size());
     if (n < 2) break;
-    const LabelCostModel own = labels.costModel(twists, use_occlusion, config);
+    if (!own_current) own = labels.costModel(twists, use_occlusion, config);
+    own_current = true;
     // The data term's noise level: what a pixel of the widest label (usually the static world) pays under its own
     // motion: sensor noise, blur, rolling shutter, colour and depth out of step, all that one rigid motion leaves.
     const int widest = int(std::max_element(own.pixels.begin(), own.pixels.end()) - own.pixels.begin());
@@ -562,6 +565,7 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
     }
     if (merged == 0) continue;  // the same labels: the refused pairs stay refused, the others get their turn
     refused.clear();
+    own_current = false;
     std::vector<int> target(std::size_t(n) + 1);
     std::vector<Vector6d> kept_twists;
     std::vector<bool> kept_carried;
