@@ -186,12 +186,38 @@ SequenceStep SequencePipeline::push(StreamFrame input) {
   last_result_ = std::make_unique<Result>(std::move(result));
   next_id_ = std::max(next_id_, last_result_->next_id);
   updateTracks(*last_result_);
+  const double interval = previous_frame_->stamp - pair_first_->stamp;
+  updateOdometry(*last_result_, interval, previous_frame_->stamp);
+  for (const Segment& s : last_result_->segments) {
+    const bool is_world = std::find(last_result_->world.ids.begin(), last_result_->world.ids.end(), s.id) !=
+                          last_result_->world.ids.end();
+    step.world_velocities.push_back(worldVelocity(s, s.covariance, last_result_->world, is_world, interval, config_));
+  }
   step.outcome = SequenceStep::Outcome::Solved;
   step.first = pair_first_.get();
   step.second = previous_frame_.get();
   step.result = last_result_.get();
   step.pair_index = pairs_solved_++;
   return step;
+}
+
+void SequencePipeline::updateOdometry(const Result& result, double interval_s, double stamp) {
+  // The camera moved by the inverse of the world's motion: C2 = C1 exp(-world.twist).
+  const Eigen::Matrix4d step = se3Exp(-result.world.twist);
+  // A right perturbation carried through the step: d2 = Ad(step^-1) d1 + e, e the step's own uncertainty (log of the
+  // inverse is minus the twist, so the world fit's covariance is the step's).
+  const Eigen::Matrix4d back = step.inverse();
+  const Eigen::Matrix3d R = back.topLeftCorner<3, 3>();
+  Matrix6d adjoint = Matrix6d::Zero();
+  adjoint.topLeftCorner<3, 3>() = R;
+  adjoint.topRightCorner<3, 3>() = skew(back.topRightCorner<3, 1>()) * R;
+  adjoint.bottomRightCorner<3, 3>() = R;
+  odometry_.pose = odometry_.pose * step;
+  odometry_.pose_covariance = adjoint * odometry_.pose_covariance * adjoint.transpose() + result.world.covariance;
+  odometry_.velocity = -result.world.twist / interval_s;
+  odometry_.velocity_covariance = result.world.covariance / (interval_s * interval_s);
+  odometry_.stamp = stamp;
+  ++odometry_.pairs;
 }
 
 void SequencePipeline::updateTracks(const Result& result) {

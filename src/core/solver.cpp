@@ -17,6 +17,7 @@
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/scene_flow.h"
 #include "mc_flow/core/solve_backend.h"
+#include "mc_flow/core/static_world.h"
 #include "mc_flow/core/warm_start.h"
 
 #ifdef _OPENMP
@@ -105,7 +106,8 @@ struct Solver::Impl {
     std::fprintf(stderr, "\n");
   }
 
-  Result run(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous);
+  Result run(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous,
+             const Eigen::Matrix4d* camera_motion_prior = nullptr);
   // Checks the input, picks the levels and has the backend build both pyramids.
   Prepared prepare(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K);
   // A result with the sizes, levels and backend of a solve filled in.
@@ -148,6 +150,13 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
 
 Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result& previous) {
   return impl_->run(frame1, frame2, K, &previous);
+}
+
+Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous,
+                     const Eigen::Matrix4d& camera_motion_prior) {
+  if (!camera_motion_prior.allFinite())
+    throw InputError("camera motion prior: not finite");
+  return impl_->run(frame1, frame2, K, previous, &camera_motion_prior);
 }
 
 Prepared Solver::Impl::prepare(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K) {
@@ -202,7 +211,8 @@ Result Solver::Impl::emptyResult(const Prepared& p, const Intrinsics& K) {
   return result;
 }
 
-Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous) {
+Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous,
+                         const Eigen::Matrix4d* camera_motion_prior) {
   const auto start_time = Clock::now();
   const ThreadCountScope thread_scope(config.threads);
   backend->activate();  // this thread may not have used the backend's device before
@@ -263,6 +273,15 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   // (The labels themselves merge and split during the solve; what persists is the region a person sees.)
   if (previous)
     assignStreamIds(result, carried_ids, carried_dormant, *previous, config.id_min_overlap, config.id_memory_pairs);
+
+  // The static world (by the stream's world ids, which need the ids above) and its motion on the union of its segments,
+  // on the labels the outputs came from.
+  t = Clock::now();
+  std::vector<Matrix6d> covariances;
+  result.world = estimateStaticWorld(*backend, result.segments, previous ? previous->world.ids : std::vector<int>(),
+                                     camera_motion_prior, config.detect_occlusions, config, covariances);
+  for (std::size_t i = 0; i < result.segments.size(); ++i) result.segments[i].covariance = covariances[i];
+  result.timings.adaptation += elapsedMs(t);
   result.timings.total = elapsedMs(start_time);
   return result;
 }

@@ -275,6 +275,7 @@ void offsetSegmentIds(Result& result, int first_id) {
   const int offset = first_id - 1;
   if (offset == 0) return;
   for (Segment& s : result.segments) s.id += offset;
+  for (int& id : result.world.ids) id += offset;
   for (int& label : result.labels.data)
     if (label > 0) label += offset;
   for (int& id : result.dormant_regions.data)

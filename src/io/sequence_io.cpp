@@ -3,12 +3,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
 
+#include <Eigen/Geometry>
 #include <opencv2/imgproc.hpp>
 
 #include "mc_flow/core/error.h"
@@ -129,17 +131,81 @@ std::vector<SequenceFrameFiles> listNumberedFrames(const std::string& dir, doubl
   return frames;
 }
 
-std::string trajectoryCsvHeader() { return "pair,stamp,id,vx,vy,vz,wx,wy,wz,support\n"; }
+std::string trajectoryCsvHeader() {
+  return "pair,stamp,id,vx,vy,vz,wx,wy,wz,support,world,moving,world_vx,world_vy,world_vz,world_wx,world_wy,world_wz\n";
+}
 
-std::string trajectoryCsvRows(long pair, double stamp, const Result& result) {
+std::string trajectoryCsvRows(long pair, double stamp, const Result& result, const std::vector<WorldVelocity>* world) {
+  if (world && world->size() != result.segments.size())
+    throw InputError("trajectory rows: " + std::to_string(world->size()) + " world velocities for " +
+                     std::to_string(result.segments.size()) + " segments");
   std::ostringstream out;
   out.precision(9);
-  for (const Segment& s : result.segments) {
+  for (std::size_t i = 0; i < result.segments.size(); ++i) {
+    const Segment& s = result.segments[i];
     out << pair << ',' << std::fixed << stamp << std::defaultfloat << ',' << s.id;
     for (int k = 0; k < 6; ++k) out << ',' << s.twist[k];
-    out << ',' << s.support << '\n';
+    out << ',' << s.support;
+    if (world) {
+      const bool is_world = std::find(result.world.ids.begin(), result.world.ids.end(), s.id) != result.world.ids.end();
+      const WorldVelocity& v = (*world)[i];
+      out << ',' << (is_world ? 1 : 0) << ',' << (v.moving ? 1 : 0);
+      for (int k = 0; k < 3; ++k) out << ',' << v.linear[k];
+      for (int k = 0; k < 3; ++k) out << ',' << v.angular[k];
+    } else {
+      out << ",,,,,,,,";
+    }
+    out << '\n';
   }
   return out.str();
+}
+
+std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose) {
+  const Eigen::Quaterniond q(Eigen::Matrix3d(pose.topLeftCorner<3, 3>()));
+  char line[256];
+  std::snprintf(line, sizeof(line), "%.6f %.6f %.6f %.6f %.6f %.6f %.6f %.6f\n", stamp, pose(0, 3), pose(1, 3),
+                pose(2, 3), q.x(), q.y(), q.z(), q.w());
+  return line;
+}
+
+std::vector<std::pair<double, Eigen::Matrix4d>> readTumTrajectory(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError("trajectory '" + path + "': cannot be opened");
+  std::vector<std::pair<double, Eigen::Matrix4d>> out;
+  std::string line;
+  int number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    if (line.empty() || line[0] == '#' || line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    std::istringstream fields(line);
+    double v[8];
+    for (double& x : v)
+      if (!(fields >> x) || !std::isfinite(x))
+        throw InputError("trajectory '" + path + "', line " + std::to_string(number) +
+                         ": expected 'stamp tx ty tz qx qy qz qw', got '" + line + "'");
+    const Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);
+    if (std::fabs(q.norm() - 1.0) > 1e-2)
+      throw InputError("trajectory '" + path + "', line " + std::to_string(number) + ": quaternion of norm " +
+                       std::to_string(q.norm()) + ", expected 1");
+    Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+    T.topLeftCorner<3, 3>() = q.normalized().toRotationMatrix();
+    T.topRightCorner<3, 1>() = Eigen::Vector3d(v[1], v[2], v[3]);
+    out.emplace_back(v[0], T);
+  }
+  return out;
+}
+
+ImageU8 movingMask(const Result& result, const std::vector<WorldVelocity>& world) {
+  if (world.size() != result.segments.size())
+    throw InputError("moving mask: " + std::to_string(world.size()) + " world velocities for " +
+                     std::to_string(result.segments.size()) + " segments");
+  std::set<int> moving;
+  for (std::size_t i = 0; i < world.size(); ++i)
+    if (world[i].moving) moving.insert(result.segments[i].id);
+  ImageU8 mask(result.labels.width, result.labels.height, 1, 0);
+  for (std::size_t k = 0; k < result.labels.data.size(); ++k)
+    if (moving.count(result.labels.data[k])) mask.data[k] = 255;
+  return mask;
 }
 
 cv::Mat idsOverTimeImage(const std::vector<std::vector<std::pair<int, double>>>& ids_per_pair) {

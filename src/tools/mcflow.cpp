@@ -37,6 +37,7 @@
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
 #include "mc_flow/io/resources.h"
+#include "mc_flow/io/trajectory_eval.h"
 #include "mc_flow/io/result_io.h"
 #include "mc_flow/io/sequence_io.h"
 #include "mc_flow/io/visualization.h"
@@ -101,8 +102,11 @@ std::vector<Command> commands() {
                   "[--intrinsics FX,FY,CX,CY | --camera-info F] [--cold] --out DIR",
                   "Solves every consecutive pair of an RGB-D sequence as a stream: each pair warm-starts from the "
                   "previous one (unless --cold) and segments keep their ids. Writes DIR/pair_NNNN/ (the files of "
-                  "`mcflow run`; labels.png and segments.json hold the persistent ids), DIR/trajectories.csv (pair, "
-                  "stamp, id, vx, vy, vz, wx, wy, wz, support per segment and pair), DIR/ids_over_time.png and "
+                  "`mcflow run`; labels.png and segments.json hold the persistent ids; moving.png: 255 on pixels of "
+                  "segments that move relative to the static world), DIR/trajectories.csv (pair, stamp, id, vx, vy, "
+                  "vz, wx, wy, wz, support per segment and pair, then world, moving and the velocity relative to the "
+                  "static world), DIR/trajectory.txt (the camera's path in the TUM RGB-D format, the first frame at "
+                  "the identity: `mcflow eval-traj` scores it), DIR/ids_over_time.png and "
                   "DIR/sequence.json (per pair: start kind, timings, ids, merges, resets). A rosbag (--bag, ROS build "
                   "only) is read as the nodelet reads its topics: colour and depth paired by the nearest header stamp, "
                   "intrinsics from the first camera_info, frames with no valid depth skipped.",
@@ -190,6 +194,19 @@ std::vector<Command> commands() {
                    {"mask", true, "union (default: occlusions of all three solves excluded) | mcflow (MC-Flow's only)"},
                    {"repeat", true, "solves per method and pair; times are the median (default 1)"},
                    {"verbose", false, "progress of the solver on stderr"},
+                   {"help", false, "this help"}}});
+
+  list.push_back({"eval-traj", "mcflow eval-traj --gt FILE --est FILE [--max-difference S] [--offset S] [--plot PNG]",
+                  "Scores a camera trajectory (TUM RGB-D format: 'stamp tx ty tz qx qy qz qw' per line, e.g. run-seq's "
+                  "trajectory.txt) against ground truth (e.g. a TUM groundtruth.txt) as the TUM RGB-D benchmark does: "
+                  "ATE (RMSE of the positions after the rigid alignment that minimises it) and RPE (translation and "
+                  "rotation of the relative motion per frame and over about one second, RMSE). Estimated poses are "
+                  "matched to the nearest ground-truth stamp.",
+                  {{"gt", true, "ground-truth trajectory file"},
+                   {"est", true, "estimated trajectory file"},
+                   {"max-difference", true, "[s] largest stamp difference of a match (default 0.02)"},
+                   {"offset", true, "[s] added to the estimate's stamps before matching (default 0)"},
+                   {"plot", true, "PNG of both paths seen from above (x, z), the estimate aligned"},
                    {"help", false, "this help"}}});
 
   list.push_back({"export-real", "mcflow export-real --data DIR --out DIR",
@@ -556,6 +573,7 @@ int cmdRunSeq(const Arguments& args) {
   SequencePipeline pipeline(config, source.pipeline_downsample, max_interval);
 
   std::string csv = io::trajectoryCsvHeader();
+  std::string trajectory;  // TUM RGB-D format: the camera's optical frame in the first frame's
   std::vector<std::vector<std::pair<int, double>>> ids_per_pair;
   std::ostringstream log;
   log << "[\n";
@@ -597,7 +615,11 @@ int cmdRunSeq(const Arguments& args) {
                           std::any_cast<const ImageU8&>(step.second->extra)};
     io::RunInfo info{first_rgb, first_depth, in.rgb_name, in.depth_name, source.depth_scale, 0, 0};
     io::writeResultDirectory((std::filesystem::path(out) / name).string(), r, config, loaded, info);
-    csv += io::trajectoryCsvRows(step.pair_index, step.second->stamp, r);
+    csv += io::trajectoryCsvRows(step.pair_index, step.second->stamp, r, &step.world_velocities);
+    io::saveMask((std::filesystem::path(out) / name / "moving.png").string(), io::movingMask(r, step.world_velocities));
+    // The camera's path: its first frame at the identity, then each solved pair's frame 2.
+    if (trajectory.empty()) trajectory = io::tumTrajectoryLine(step.first->stamp, Eigen::Matrix4d::Identity());
+    trajectory += io::tumTrajectoryLine(step.second->stamp, pipeline.odometry().pose);
     std::vector<std::pair<int, double>> ids;
     for (const Segment& s : r.segments) ids.emplace_back(s.id, s.support);
     ids_per_pair.push_back(ids);
@@ -619,6 +641,10 @@ int cmdRunSeq(const Arguments& args) {
   std::fprintf(stderr, "\n");
   log << "\n]\n";
   io::writeTextFile((std::filesystem::path(out) / "trajectories.csv").string(), csv);
+  io::writeTextFile((std::filesystem::path(out) / "trajectory.txt").string(),
+                    "# mcflow run-seq: the colour camera's optical frame (x right, y down, z forward) in the first "
+                    "frame's, from the static world's motion per pair\n# timestamp tx ty tz qx qy qz qw\n" +
+                        trajectory);
   io::writeTextFile((std::filesystem::path(out) / "sequence.json").string(), log.str());
   if (!ids_per_pair.empty())
     io::writeImage((std::filesystem::path(out) / "ids_over_time.png").string(), io::idsOverTimeImage(ids_per_pair));
@@ -835,6 +861,23 @@ int cmdBenchReal(const Arguments& args) {
 
 }  // namespace
 
+int cmdEvalTraj(const Arguments& args) {
+  if (!args.has("gt") || !args.has("est")) throw UsageError("eval-traj needs --gt FILE and --est FILE");
+  const double max_difference = args.has("max-difference") ? parseNumber("max-difference", args.get("max-difference")) : 0.02;
+  const double offset = args.has("offset") ? parseNumber("offset", args.get("offset")) : 0.0;
+  const io::StampedPoses gt = io::readTumTrajectory(args.get("gt"));
+  const io::StampedPoses est = io::readTumTrajectory(args.get("est"));
+  const io::TrajectoryErrors e = io::evaluateTrajectory(gt, est, max_difference, offset);
+  std::printf("# mcflow eval-traj: %s against %s (%d of %zu poses matched within %.3f s, offset %.3f s)\n",
+              args.get("est").c_str(), args.get("gt").c_str(), e.matched, est.size(), max_difference, offset);
+  std::printf("ate_rmse_m %.4f\nrpe_frame_trans_m %.4f\nrpe_frame_rot_deg %.3f\nrpe_second_trans_m %.4f\n"
+              "rpe_second_rot_deg %.3f\n",
+              e.ate_rmse_m, e.rpe_frame_trans_m, e.rpe_frame_rot_deg, e.rpe_second_trans_m, e.rpe_second_rot_deg);
+  if (e.rpe_second_pairs == 0) std::printf("# the trajectory spans less than 1 s: no per-second RPE\n");
+  if (args.has("plot")) io::writeImage(args.get("plot"), io::trajectoryPlot(e));
+  return 0;
+}
+
 int main(int argc, char** argv) {
   const std::vector<Command> all = commands();
   if (argc < 2) {
@@ -866,6 +909,7 @@ int main(int argc, char** argv) {
     if (name == "eval") return cmdEval(args);
     if (name == "bench-real") return cmdBenchReal(args);
     if (name == "export-real") return cmdExportReal(args);
+    if (name == "eval-traj") return cmdEvalTraj(args);
     return cmdDemo(args);
   } catch (const UsageError& e) {
     std::cerr << "mcflow " << name << ": " << e.what() << "\n\n";

@@ -558,3 +558,33 @@ TEST(CudaSolveBackend, SolverMatchesCpuOnSyntheticScenes) {
 
 }  // namespace
 }  // namespace mc_flow
+
+// The static world (static_world.h) on the device: the same segments and, within the parity tolerance, the same
+// motion and covariance as the CPU's, chosen the same way; its fit runs on the labels at the processing level.
+TEST(CudaSolveBackend, TheStaticWorldMatchesTheCpus) {
+  SKIP_WITHOUT_GPU();
+  mc_flow::SyntheticSceneOptions so;
+  so.variant = 1;
+  so.camera_only = true;
+  so.camera_only_translation_m = Eigen::Vector3d(0.03, -0.01, 0.02);
+  so.camera_only_rotation_deg = Eigen::Vector3d(1.0, -2.5, 0.5);
+  const mc_flow::SyntheticPair pair = mc_flow::renderSyntheticPair(so);
+  mc_flow::Config config;
+  config.threads = 2;
+  config.backend = mc_flow::Backend::Cpu;
+  mc_flow::Solver cpu(config);
+  config.backend = mc_flow::Backend::Cuda;
+  mc_flow::Solver cuda(config);
+  const Eigen::Matrix4d camera = mc_flow::se3Exp(pair.parts.front().twist).inverse();
+  for (const bool prior : {false, true}) {
+    const mc_flow::Result a = prior ? cpu.solve(pair.frame1, pair.frame2, pair.intrinsics, nullptr, camera)
+                                    : cpu.solve(pair.frame1, pair.frame2, pair.intrinsics);
+    const mc_flow::Result b = prior ? cuda.solve(pair.frame1, pair.frame2, pair.intrinsics, nullptr, camera)
+                                    : cuda.solve(pair.frame1, pair.frame2, pair.intrinsics);
+    ASSERT_TRUE(b.world.found);
+    EXPECT_EQ(b.world.chosen_by, a.world.chosen_by);
+    EXPECT_EQ(b.world.ids, a.world.ids);
+    EXPECT_LT((b.world.twist - a.world.twist).norm(), 1e-4) << a.world.twist.transpose() << "\n" << b.world.twist.transpose();
+    EXPECT_TRUE(b.world.covariance.isApprox(a.world.covariance, 0.05)) << a.world.covariance << "\n" << b.world.covariance;
+  }
+}

@@ -21,6 +21,7 @@
 #include "mc_flow/io/flow_io.h"
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
+#include "mc_flow/io/sequence_io.h"
 #include "temp_dir.h"
 
 #ifndef MCFLOW_CLI_PATH
@@ -439,12 +440,26 @@ TEST(Cli, SynthSequenceThenRunSeqKeepsIdsAndWritesTheSequenceFiles) {
   const CliRun run = runCli("run-seq --tum " + quote(seq.string()) + " --out " + quote(out.string()));
   ASSERT_EQ(run.code, 0) << run.err;
   EXPECT_NE(run.out.find("3 pair(s) solved"), std::string::npos) << run.out;
-  for (const char* f : {"pair_0000/labels.png", "pair_0002/segments.json", "trajectories.csv", "sequence.json",
-                        "ids_over_time.png"})
+  for (const char* f : {"pair_0000/labels.png", "pair_0002/segments.json", "pair_0002/moving.png", "trajectories.csv",
+                        "sequence.json", "ids_over_time.png", "trajectory.txt"})
     EXPECT_TRUE(fs::exists(out / f)) << f;
   EXPECT_TRUE(pythonJsonValid((out / "sequence.json").string()));
   const std::string csv = io::readTextFile((out / "trajectories.csv").string());
-  EXPECT_EQ(csv.rfind("pair,stamp,id,vx,vy,vz,wx,wy,wz,support\n", 0), 0u) << csv.substr(0, 80);
+  EXPECT_EQ(csv.rfind("pair,stamp,id,vx,vy,vz,wx,wy,wz,support,world,moving,", 0), 0u) << csv.substr(0, 80);
+  // The camera's path: the first frame at the identity, one pose per frame; scored against itself it has no error.
+  const auto path = io::readTumTrajectory((out / "trajectory.txt").string());
+  ASSERT_EQ(path.size(), 4u);
+  EXPECT_TRUE(path[0].second.isIdentity());
+  const CliRun self = runCli("eval-traj --gt " + quote((out / "trajectory.txt").string()) + " --est " +
+                             quote((out / "trajectory.txt").string()) + " --plot " +
+                             quote((workDir() / "traj.png").string()));
+  ASSERT_EQ(self.code, 0) << self.err;
+  EXPECT_NE(self.out.find("ate_rmse_m 0.0000"), std::string::npos) << self.out;
+  EXPECT_TRUE(fs::exists(workDir() / "traj.png"));
+  const CliRun no_match = runCli("eval-traj --gt " + quote((out / "trajectory.txt").string()) + " --est " +
+                                 quote((out / "trajectory.txt").string()) + " --offset 100");
+  EXPECT_EQ(no_match.code, 1) << no_match.out;
+  EXPECT_NE(no_match.err.find("0 of 4"), std::string::npos) << no_match.err;
   const std::string log = io::readTextFile((out / "sequence.json").string());
   EXPECT_NE(log.find("\"start\": \"warm\""), std::string::npos) << log;
   // The background keeps its id: the same id covers the most pixels in the first and the last pair.

@@ -2,12 +2,17 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
+#include <Eigen/Geometry>
+
 #include "temp_dir.h"
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/solver.h"
 #include "mc_flow/io/sequence_io.h"
+#include "mc_flow/io/trajectory_eval.h"
 
 namespace fs = std::filesystem;
 using namespace mc_flow;
@@ -75,10 +80,99 @@ TEST(SequenceIo, TrajectoryRowsHoldEverySegment) {
   const std::string rows = io::trajectoryCsvRows(4, 1.5, r);
   EXPECT_EQ(std::count(rows.begin(), rows.end(), '\n'), 2);
   EXPECT_NE(rows.find("4,1.5"), std::string::npos) << rows;
-  EXPECT_NE(rows.find(",8,0.01,0,0,0,0,0.02,12\n"), std::string::npos) << rows;
+  EXPECT_NE(rows.find(",8,0.01,0,0,0,0,0.02,12,,,,,,,,\n"), std::string::npos) << rows;  // no world: empty columns
+  // With the world: segment 8 is the world, segment 3 moves at 0.5 m/s along x.
+  r.world.ids = {8};
+  std::vector<WorldVelocity> world(2);
+  world[0].moving = true;
+  world[0].linear = Eigen::Vector3d(0.5, 0, 0);
+  const std::string with_world = io::trajectoryCsvRows(4, 1.5, r, &world);
+  EXPECT_NE(with_world.find(",3,0,0,0,0,0,0,0,0,1,0.5,0,0,0,0,0\n"), std::string::npos) << with_world;
+  EXPECT_NE(with_world.find(",12,1,0,0,0,0,0,0,0\n"), std::string::npos) << with_world;
+  world.pop_back();
+  EXPECT_THROW(io::trajectoryCsvRows(4, 1.5, r, &world), InputError);
   const cv::Mat picture = io::idsOverTimeImage({{{3, 10.0}}, {{3, 10.0}, {8, 12.0}}});
   EXPECT_EQ(picture.cols, 2 * 8);
   EXPECT_EQ(picture.rows, 2 * 8);
+}
+
+TEST(SequenceIo, TumTrajectoriesRoundTripAndBadLinesNameTheirLine) {
+  const test::TempDir dir("mcflow_traj_io_");
+  Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();
+  pose.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  pose.topRightCorner<3, 1>() = Eigen::Vector3d(0.1, -0.2, 1.5);
+  const fs::path file = dir.path() / "trajectory.txt";
+  write(file, "# a comment\n\n" + io::tumTrajectoryLine(12.5, Eigen::Matrix4d::Identity()) +
+                  io::tumTrajectoryLine(12.6, pose));
+  const auto poses = io::readTumTrajectory(file.string());
+  ASSERT_EQ(poses.size(), 2u);
+  EXPECT_DOUBLE_EQ(poses[0].first, 12.5);
+  EXPECT_TRUE(poses[1].second.isApprox(pose, 1e-5)) << poses[1].second;
+  write(file, io::tumTrajectoryLine(1.0, pose) + "2.0 0 0 0 0 0 0\n");
+  try {
+    io::readTumTrajectory(file.string());
+    FAIL() << "a line of 7 numbers was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("line 2"), std::string::npos) << e.what();
+  }
+  write(file, "1.0 0 0 0 0 0 0 2\n");  // a quaternion of norm 2
+  EXPECT_THROW(io::readTumTrajectory(file.string()), InputError);
+  EXPECT_THROW(io::readTumTrajectory((dir.path() / "missing.txt").string()), InputError);
+}
+
+TEST(SequenceIo, ATrajectoryThatIsTheTruthMovedRigidlyHasNoErrorAndANoisyOneHas) {
+  io::StampedPoses truth, moved;
+  const Eigen::Matrix4d frame = [] {
+    Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+    m.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    m.topRightCorner<3, 1>() = Eigen::Vector3d(1, 2, 3);
+    return m;
+  }();
+  for (int i = 0; i < 90; ++i) {  // 3 s at 30 Hz along a curve
+    Eigen::Matrix4d p = Eigen::Matrix4d::Identity();
+    p.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.01 * i, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    p.topRightCorner<3, 1>() = Eigen::Vector3d(0.01 * i, 0.002 * i * i / 30.0, 0.005 * i);
+    truth.emplace_back(100.0 + i / 30.0, p);
+    moved.emplace_back(100.0 + i / 30.0 + 0.005, frame * p);  // another frame, stamps 5 ms late
+  }
+  const io::TrajectoryErrors exact = io::evaluateTrajectory(truth, moved, 0.02, -0.005);
+  EXPECT_EQ(exact.matched, 90);
+  EXPECT_LT(exact.ate_rmse_m, 1e-9);
+  EXPECT_LT(exact.rpe_frame_trans_m, 1e-9);
+  EXPECT_LT(exact.rpe_frame_rot_deg, 1e-5);
+  EXPECT_EQ(exact.rpe_frame_pairs, 89);
+  EXPECT_GT(exact.rpe_second_pairs, 0);
+  // One pose 3 cm off: the frame-to-frame RPE sees it twice, the ATE about 3 cm / sqrt(90) after the alignment.
+  moved[45].second(0, 3) += 0.03;
+  const io::TrajectoryErrors noisy = io::evaluateTrajectory(truth, moved, 0.02, -0.005);
+  EXPECT_NEAR(noisy.rpe_frame_trans_m, std::sqrt(2 * 0.03 * 0.03 / 89), 1e-3);
+  EXPECT_GT(noisy.ate_rmse_m, 0.002);
+  EXPECT_LT(noisy.ate_rmse_m, 0.004);
+  // Stamps that do not match: an error naming the counts.
+  try {
+    io::evaluateTrajectory(truth, moved, 0.02, 50.0);
+    FAIL() << "no match was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("0 of 90"), std::string::npos) << e.what();
+  }
+  const cv::Mat plot = io::trajectoryPlot(noisy, 200);
+  EXPECT_EQ(plot.rows, 200);
+}
+
+TEST(SequenceIo, TheMovingMaskHoldsThePixelsOfMovingSegments) {
+  Result r;
+  Segment a, b;
+  a.id = 3;
+  b.id = 8;
+  r.segments = {a, b};
+  r.labels = ImageI32(3, 1, 1, 0);
+  r.labels.data = {3, 8, 0};
+  std::vector<WorldVelocity> world(2);
+  world[1].moving = true;
+  const ImageU8 mask = io::movingMask(r, world);
+  EXPECT_EQ(mask.data, (std::vector<std::uint8_t>{0, 255, 0}));
+  world.pop_back();
+  EXPECT_THROW(io::movingMask(r, world), InputError);
 }
 
 }  // namespace

@@ -19,6 +19,7 @@
 #include "mc_flow/core/fault_injection.h"
 #include "mc_flow/core/image.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/core/static_world.h"
 
 namespace mc_flow {
 
@@ -67,6 +68,19 @@ struct SegmentTrack {
   long first_pair = 0, last_pair = 0;
 };
 
+/// @brief The camera's own motion, integrated over the stream from the static world's motion of each solved pair.
+/// Convention (docs/ALGORITHM.md, "Static world and odometry"): `pose` is the camera's optical frame (REP 103: x right,
+/// y down, z forward) in the odometry frame, which is the optical frame of the pipeline's first frame (identity there).
+/// A stream reset or a failed pair holds the pose (no motion is known over the gap; odometry stays continuous, REP 105).
+struct Odometry {
+  Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();
+  Matrix6d pose_covariance = Matrix6d::Zero();  ///< of a perturbation exp(d) on the right of `pose` (camera frame)
+  Vector6d velocity = Vector6d::Zero();  ///< the camera's (v [m/s], w [rad/s]) over the last pair, camera frame
+  Matrix6d velocity_covariance = Matrix6d::Zero();
+  double stamp = 0;  ///< [s] of the frame `pose` belongs to
+  long pairs = 0;    ///< solved pairs integrated
+};
+
 /// @brief What one frame did.
 struct SequenceStep {
   enum class Outcome {
@@ -84,6 +98,8 @@ struct SequenceStep {
   const PreparedFrame* second = nullptr;
   const Result* result = nullptr;         ///< Solved (valid until the next push)
   long pair_index = -1;                   ///< Solved: 0, 1, ... over the pipeline's life
+  /// Solved: each segment's motion relative to the static world (result->segments order).
+  std::vector<WorldVelocity> world_velocities;
 };
 
 /// @brief Pairs consecutive frames of one stream and solves them (see the file comment). Not thread-safe.
@@ -114,6 +130,8 @@ class SequencePipeline {
   const Solver& solver() const { return *solver_; }
   /// @brief Tracks of the segments alive after the last solved pair, by id.
   const std::map<int, SegmentTrack>& tracks() const { return tracks_; }
+  /// @brief The camera's odometry after the last solved pair (identity before any).
+  const Odometry& odometry() const { return odometry_; }
   long pairsSolved() const { return pairs_solved_; }
   /// @brief The id the next new segment gets: above every id of every pair solved so far, across resets.
   int nextId() const { return next_id_; }
@@ -124,6 +142,7 @@ class SequencePipeline {
  private:
   PreparedFrame prepare(StreamFrame frame) const;
   void updateTracks(const Result& result);
+  void updateOdometry(const Result& result, double interval_s, double stamp);
   // A solver on a backend from the factory; `why`, when given, replaces the factory's note (Result::backend_note).
   std::unique_ptr<Solver> makeSolver(const Config& config, const std::string& why = "");
 
@@ -137,6 +156,7 @@ class SequencePipeline {
   std::unique_ptr<PreparedFrame> previous_frame_;  // the next pair's first frame
   std::unique_ptr<Result> last_result_;            // the prior of the next pair (only while it ends at previous_frame_)
   std::map<int, SegmentTrack> tracks_;
+  Odometry odometry_;
   int next_id_ = 1;  // above every id handed out: a pair solved without a prior is numbered from here
   long pairs_solved_ = 0, resets_ = 0, backend_fallbacks_ = 0;
 };

@@ -15,6 +15,7 @@
 #include "mc_flow/core/motion_estimation.h"
 #include "mc_flow/core/se3.h"
 #include "mc_flow/core/soft_labels.h"
+#include "mc_flow/core/static_world.h"
 
 namespace mc_flow {
 
@@ -29,6 +30,7 @@ struct Segment {
   Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();  ///< exp(twist)
   double support = 0;           ///< sum of u over the pixels (input resolution)
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  ///< [m] support-weighted centroid of its points
+  Matrix6d covariance = Matrix6d::Zero();  ///< of `twist` (twistCovariance of its pixels' fit at the processing level)
 };
 
 /// @brief Wall-clock time per stage [ms].
@@ -84,6 +86,9 @@ struct Result {
   /// frame 1 (0 = none), carried forward with the scene, so that such a segment can take its id back.
   std::vector<std::pair<int, int>> dormant_ids;
   ImageI32 dormant_regions;
+  /// The static world: its segments (persistent over a stream through their ids) and its motion, fitted once on their
+  /// union (static_world.h); the camera moved by the inverse of world.twist.
+  StaticWorld world;
   int processing_width = 0, processing_height = 0;
   int pyramid_levels = 0;
   Backend backend_kind = Backend::Cpu;  ///< the backend that ran (Cpu or Cuda, never Auto)
@@ -122,6 +127,12 @@ class Solver {
   /// warm_max_energy_ratio times the previous pair's and a cold solve does better. Segment ids persist
   /// either way (a cold solve matches them by overlap with the carried segments).
   Result solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result& previous);
+
+  /// @brief As solve(frame1, frame2, K[, *previous]) (`previous` may be null), with the camera's motion over the pair
+  /// from another source (frame 1 -> frame 2 in the camera frame of frame 1, e.g. wheel odometry through TF): the
+  /// static world is then the segments whose pixels that motion explains (Result::world, chosen_by "prior"), when any.
+  Result solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous,
+               const Eigen::Matrix4d& camera_motion_prior);
 
   /// @brief Hands back a result the caller no longer needs: the next solve fills its output images into that
   /// result's memory instead of fresh allocations (at 1280x720 about 50 MB, whose first touch cost 5-20 ms of page

@@ -35,8 +35,23 @@ std::vector<SequenceFrameFiles> listNumberedFrames(const std::string& dir, doubl
 /// @brief Header of trajectories.csv.
 std::string trajectoryCsvHeader();
 /// @brief One row per segment of a solved pair: pair, stamp, id, vx, vy, vz [m], wx, wy, wz [rad] (over the
-/// pair interval), support [px].
-std::string trajectoryCsvRows(long pair, double stamp, const Result& result);
+/// pair interval, relative to the camera), support [px], then relative to the static world: world (1: a world
+/// segment), moving (1: faster than moving_min_speed / moving_min_rate), world_vx, world_vy, world_vz [m/s, the
+/// centroid's velocity], world_wx, world_wy, world_wz [rad/s] (camera frame of the pair's first frame). Without
+/// `world` (one per segment) those columns are empty.
+std::string trajectoryCsvRows(long pair, double stamp, const Result& result,
+                              const std::vector<WorldVelocity>* world = nullptr);
+
+/// @brief One line of a TUM RGB-D trajectory file: "stamp tx ty tz qx qy qz qw" (the pose's translation [m] and
+/// rotation as a unit quaternion).
+std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose);
+
+/// @brief A trajectory in the TUM RGB-D format: stamp -> pose. Lines starting with '#' and empty lines are skipped.
+/// Throws InputError naming the file and line of a malformed line or a quaternion far from unit length.
+std::vector<std::pair<double, Eigen::Matrix4d>> readTumTrajectory(const std::string& path);
+
+/// @brief Pixels of moving segments (WorldVelocity::moving) in `result.labels`: 255, else 0 (input resolution).
+ImageU8 movingMask(const Result& result, const std::vector<WorldVelocity>& world);
 
 /// @brief The segment ids over time: one column per pair, one row per id (ascending), a cell in the id's
 /// colour where the id exists in that pair, darker for smaller support. `ids_per_pair[p]` = (id, support).

@@ -1,0 +1,66 @@
+/**
+ * @file static_world.h
+ * @brief The static world of a pair: which segments it is, and its motion, fitted once on the union of their pixels;
+ * from it the camera's own motion (odometry) and each segment's motion relative to the world. Design:
+ * docs/ALGORITHM.md, "Static world and odometry".
+ */
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "mc_flow/core/config.h"
+#include "mc_flow/core/se3.h"
+
+namespace mc_flow {
+
+class LabelStore;
+struct Segment;
+
+/// @brief Which segments of a pair are the static world, and how its points moved.
+struct StaticWorld {
+  bool found = false;            ///< false: no segment (a pair with no motion label)
+  std::vector<int> ids;          ///< the world's segment ids (Segment::id)
+  std::vector<int> labels;       ///< their label indices (Result::segments order)
+  /// Motion of the world's points over the interval in the camera frame of frame 1 (P2 = exp(twist) P1): one robust
+  /// rigid fit on the union of the world segments' pixels. The camera moved by its inverse.
+  Vector6d twist = Vector6d::Zero();
+  Matrix6d covariance = Matrix6d::Zero();  ///< of `twist` [m^2, m rad, rad^2]
+  double pixels = 0;                       ///< weighted pixels of the fit (processing level)
+  std::string chosen_by;  ///< "prior" (agrees with the camera-motion prior), "previous" (the previous pair's world ids)
+                          ///< or "widest" (the segment of most pixels)
+};
+
+/// @brief The covariance of a twist fitted by the motion step's Gauss-Newton model: (E / (2 N - 6)) H^-1 with H the
+/// curvature (the normalised Cauchy cost E(xi + d) ~ E + 2 g^T d + d^T H d), E the cost and N the pixels (two residuals
+/// each): the inverse normal equations scaled by the residual variance, times Config::world_covariance_scale (the
+/// residuals of neighbouring pixels are not independent). A ridge keeps planar scenes' unconstrained directions finite.
+Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, const Config& config);
+
+/// @brief Chooses the static world among `segments` (labels 0..n-1 of `labels`, whose twists they hold) and fits its
+/// motion on the union of the chosen segments' pixels (refitUnions, world_fit_iterations steps from the widest world
+/// segment's twist). In this order: the segments whose pixels `camera_motion_prior` (the camera's motion over the
+/// pair, frame 1 -> frame 2, e.g. from wheel odometry; null: none) explains as well as their own motions up to
+/// merge_refit_tolerance (oneMotionExplains, against the widest segment's noise level); else the segments carrying an
+/// id of `previous_world_ids` (a stream keeps its world); else the widest segment. Also fills each segment's twist
+/// covariance (`segment_covariances`, in `segments` order). Passes over the label level's pixels: one, one more with a
+/// prior, and one per fit iteration.
+StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& segments,
+                                const std::vector<int>& previous_world_ids, const Eigen::Matrix4d* camera_motion_prior,
+                                bool use_occlusion, const Config& config, std::vector<Matrix6d>& segment_covariances);
+
+/// @brief A segment's motion relative to the static world over the interval, in the camera frame of frame 1:
+/// exp(-world.twist) exp(segment twist), as a velocity [m/s at the segment's centroid, rad/s] with its covariance
+/// (the two fits' covariances added, first order).
+struct WorldVelocity {
+  Eigen::Vector3d linear = Eigen::Vector3d::Zero();   ///< [m/s] of the centroid
+  Eigen::Vector3d angular = Eigen::Vector3d::Zero();  ///< [rad/s]
+  Matrix6d covariance = Matrix6d::Zero();             ///< of (linear, angular) [(m/s)^2, ...]
+  bool moving = false;  ///< faster than moving_min_speed or moving_min_rate (never for a world segment)
+};
+WorldVelocity worldVelocity(const Segment& segment, const Matrix6d& segment_covariance, const StaticWorld& world,
+                            bool is_world, double interval_s, const Config& config);
+
+}  // namespace mc_flow

@@ -1,0 +1,112 @@
+// The static world of a pair: its segments (a prior's agreement, the stream's memory, or the widest), its motion fitted
+// once on their union, and what follows from it (each segment's motion relative to the world). docs/ALGORITHM.md,
+// "Static world and odometry".
+#include "mc_flow/core/static_world.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Cholesky>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/label_adaptation.h"
+#include "mc_flow/core/solver.h"
+
+namespace mc_flow {
+
+Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, const Config& config) {
+  const double dof = std::max(1.0, 2.0 * pixels - 6.0);
+  const double variance = std::max(0.0, cost) / dof;
+  // A relative ridge, as the label-count update's solves: a plane leaves directions its pixels do not constrain.
+  const double scale = std::max(curvature.diagonal().maxCoeff(), 1e-12);
+  const Matrix6d H = curvature + 1e-6 * scale * Matrix6d::Identity();
+  const Matrix6d inverse = H.ldlt().solve(Matrix6d::Identity());
+  const Matrix6d covariance = config.world_covariance_scale * variance * inverse;
+  return 0.5 * (covariance + covariance.transpose());
+}
+
+StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& segments,
+                                const std::vector<int>& previous_world_ids, const Eigen::Matrix4d* camera_motion_prior,
+                                bool use_occlusion, const Config& config, std::vector<Matrix6d>& segment_covariances) {
+  StaticWorld world;
+  const int n = int(segments.size());
+  if (n != labels.labelCount() - 1)
+    throw InputError("estimateStaticWorld: " + std::to_string(n) + " segments for " +
+                     std::to_string(labels.labelCount() - 1) + " motion labels");
+  segment_covariances.assign(std::size_t(n), Matrix6d::Zero());
+  if (n == 0) return world;
+  std::vector<Vector6d> twists;
+  for (const Segment& s : segments) twists.push_back(s.twist);
+  const LabelCostModel own = labels.costModel(twists, use_occlusion, config);
+  for (int i = 0; i < n; ++i)
+    segment_covariances[std::size_t(i)] = twistCovariance(own.curvature[std::size_t(i)], own.cost[std::size_t(i)],
+                                                          own.pixels[std::size_t(i)], config);
+  const int widest = int(std::max_element(own.pixels.begin(), own.pixels.end()) - own.pixels.begin());
+  const double noise = own.cost[std::size_t(widest)] / std::max(1.0, own.pixels[std::size_t(widest)]);
+
+  // 1. A prior: the segments whose pixels the prior's world motion explains as well as their own motions do.
+  if (camera_motion_prior) {
+    const Vector6d prior_twist = se3Log(Eigen::Matrix4d(camera_motion_prior->inverse()));
+    const LabelCostModel under_prior =
+        labels.costModel(std::vector<Vector6d>(std::size_t(n), prior_twist), use_occlusion, config);
+    for (int i = 0; i < n; ++i) {
+      MergeEvidence e;
+      e.own_a = e.own_b = own.cost[std::size_t(i)];
+      e.increase_a = e.increase_b = under_prior.cost[std::size_t(i)] - own.cost[std::size_t(i)];
+      e.pixels_a = e.pixels_b = own.pixels[std::size_t(i)];
+      e.noise_per_pixel = noise;
+      if (oneMotionExplains(e, config.merge_refit_tolerance, config.merge_refit_noise_tolerance))
+        world.labels.push_back(i);
+    }
+    if (!world.labels.empty()) world.chosen_by = "prior";
+  }
+  // 2. The stream's memory: the segments that carry an id of the previous pair's world.
+  if (world.labels.empty() && !previous_world_ids.empty()) {
+    for (int i = 0; i < n; ++i)
+      if (std::find(previous_world_ids.begin(), previous_world_ids.end(), segments[std::size_t(i)].id) !=
+          previous_world_ids.end())
+        world.labels.push_back(i);
+    if (!world.labels.empty()) world.chosen_by = "previous";
+  }
+  // 3. The widest segment.
+  if (world.labels.empty()) {
+    world.labels.push_back(widest);
+    world.chosen_by = "widest";
+  }
+
+  // One robust rigid fit on the union, from the motion of its widest member: a world split into segments gives one
+  // motion, not the widest piece's.
+  int start = world.labels.front();
+  for (const int i : world.labels)
+    if (own.pixels[std::size_t(i)] > own.pixels[std::size_t(start)]) start = i;
+  const std::vector<UnionFit> fit = refitUnions(labels, twists, {world.labels}, {twists[std::size_t(start)]},
+                                                config.world_fit_iterations, use_occlusion, config);
+  world.twist = fit[0].twist;
+  world.pixels = fit[0].pixels;
+  world.covariance = twistCovariance(fit[0].curvature, fit[0].cost, fit[0].pixels, config);
+  for (const int i : world.labels) world.ids.push_back(segments[std::size_t(i)].id);
+  world.found = true;
+  return world;
+}
+
+WorldVelocity worldVelocity(const Segment& segment, const Matrix6d& segment_covariance, const StaticWorld& world,
+                            bool is_world, double interval_s, const Config& config) {
+  if (!(interval_s > 0))
+    throw InputError("worldVelocity: the interval must be > 0 s, got " + std::to_string(interval_s));
+  WorldVelocity v;
+  // Relative to the world: undo the camera's motion (the world's points moved by exp(world.twist)).
+  const Eigen::Matrix4d relative = se3Exp(-world.twist) * segment.transform;
+  const Eigen::Vector3d c = segment.centroid;
+  v.linear = (relative.topLeftCorner<3, 3>() * c + relative.topRightCorner<3, 1>() - c) / interval_s;
+  v.angular = se3Log(relative).tail<3>() / interval_s;
+  // First order: the two fits' covariances add; the centroid's velocity takes the rotation's part through c x.
+  Matrix6d twist_cov = segment_covariance + world.covariance;
+  Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
+  J.topRightCorner<3, 3>() = -skew(c);  // d(v + w x c) / dw = -[c]x
+  v.covariance = J * twist_cov * J.transpose() / (interval_s * interval_s);
+  const double rate_deg = v.angular.norm() * 180.0 / M_PI;
+  v.moving = !is_world && (v.linear.norm() > config.moving_min_speed || rate_deg > config.moving_min_rate);
+  return v;
+}
+
+}  // namespace mc_flow

@@ -1,0 +1,154 @@
+// The static world of a pair (static_world.h): which segments it is (prior, the stream's memory, the widest), its motion
+// fitted on their union, its covariance, each segment's motion relative to it, and the pipeline's odometry.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include <Eigen/Eigenvalues>
+
+#include "mc_flow/core/error.h"
+#include "mc_flow/core/sequence.h"
+#include "mc_flow/core/solver.h"
+#include "mc_flow/core/static_world.h"
+#include "mc_flow/testing/synthetic_scene.h"
+
+using namespace mc_flow;
+
+namespace {
+
+// A static scene seen by a camera that moves 4 cm and 3 degrees (its points move by the inverse: the parts' twist).
+SyntheticPair cameraOnlyPair() {
+  SyntheticSceneOptions so;
+  so.variant = 0;
+  so.camera_only = true;
+  so.camera_only_translation_m = Eigen::Vector3d(0.03, -0.01, 0.02);
+  so.camera_only_rotation_deg = Eigen::Vector3d(1.0, -2.5, 0.5);
+  return renderSyntheticPair(so);
+}
+
+Config cpuConfig() {
+  Config config;
+  config.backend = Backend::Cpu;
+  config.threads = 2;
+  return config;
+}
+
+bool symmetricPositiveDefinite(const Matrix6d& m) {
+  if (!m.isApprox(m.transpose(), 1e-9)) return false;
+  return Eigen::SelfAdjointEigenSolver<Matrix6d>(m).eigenvalues().minCoeff() > 0;
+}
+
+}  // namespace
+
+TEST(StaticWorld, AStaticSceneIsTheWorldAndItsMotionIsTheInverseOfTheCamera) {
+  const SyntheticPair pair = cameraOnlyPair();
+  Solver solver(cpuConfig());
+  const Result r = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  ASSERT_TRUE(r.world.found);
+  EXPECT_EQ(r.world.chosen_by, "widest");
+  ASSERT_EQ(r.world.ids.size(), 1u);
+  EXPECT_EQ(r.world.ids[0], r.segments[std::size_t(r.world.labels[0])].id);
+  const Vector6d truth = pair.parts.front().twist;
+  EXPECT_LT((r.world.twist.head<3>() - truth.head<3>()).norm(), 2e-3) << r.world.twist.transpose();  // < 2 mm
+  EXPECT_LT((r.world.twist.tail<3>() - truth.tail<3>()).norm(), 1e-3) << r.world.twist.transpose();  // < 0.06 deg
+  EXPECT_TRUE(symmetricPositiveDefinite(r.world.covariance)) << r.world.covariance;
+  // Millimetre-level standard deviations, not metres: the normal equations of tens of thousands of pixels.
+  EXPECT_LT(std::sqrt(r.world.covariance(0, 0)), 0.01);
+  for (const Segment& s : r.segments) EXPECT_TRUE(symmetricPositiveDefinite(s.covariance));
+}
+
+TEST(StaticWorld, APriorChoosesTheSegmentsItExplainsAndAWrongOneIsNotTaken) {
+  const SyntheticPair pair = cameraOnlyPair();
+  Solver solver(cpuConfig());
+  // The camera's motion is the inverse of the scene's.
+  const Eigen::Matrix4d camera = se3Exp(pair.parts.front().twist).inverse();
+  const Result with_prior = solver.solve(pair.frame1, pair.frame2, pair.intrinsics, nullptr, camera);
+  EXPECT_EQ(with_prior.world.chosen_by, "prior");
+  EXPECT_EQ(with_prior.world.ids.size(), with_prior.segments.size());
+  Eigen::Matrix4d wrong = camera;
+  wrong(0, 3) += 0.10;  // 10 cm off
+  const Result with_wrong = solver.solve(pair.frame1, pair.frame2, pair.intrinsics, nullptr, wrong);
+  EXPECT_EQ(with_wrong.world.chosen_by, "widest");
+  Eigen::Matrix4d bad = camera;
+  bad(0, 0) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(solver.solve(pair.frame1, pair.frame2, pair.intrinsics, nullptr, bad), InputError);
+}
+
+TEST(StaticWorld, AStreamKeepsItsWorldAndFlagsTheMovingParts) {
+  // The synthetic stream (static camera, parts moving): the pipeline's world keeps its id, its odometry stays at the
+  // identity (the camera does not move), and the box moving at 0.3-1 m/s is flagged while the background is not.
+  Config config = cpuConfig();
+  SequencePipeline pipeline(config, 0, 0.5);
+  SyntheticSceneOptions o;
+  o.width = 160;
+  o.height = 120;
+  o.variant = 0;
+  int world_id = -1;
+  double previous_trace = -1;
+  for (int t = 0; t < 4; ++t) {
+    StreamFrame f;
+    ImageU8 colour;
+    renderSyntheticFrame(o, t, f.frame, colour, f.K);
+    f.stamp = 10.0 + t / 30.0;
+    f.source = "camera";
+    const SequenceStep step = pipeline.push(std::move(f));
+    if (t == 0) continue;
+    ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
+    const Result& r = *step.result;
+    ASSERT_TRUE(r.world.found);
+    EXPECT_EQ(r.world.chosen_by, t == 1 ? "widest" : "previous");
+    if (t == 1) world_id = r.world.ids.front();
+    EXPECT_NE(std::find(r.world.ids.begin(), r.world.ids.end(), world_id), r.world.ids.end()) << "pair " << t;
+    ASSERT_EQ(step.world_velocities.size(), r.segments.size());
+    int moving = 0;
+    for (std::size_t i = 0; i < r.segments.size(); ++i) {
+      const bool is_world = std::find(r.world.ids.begin(), r.world.ids.end(), r.segments[i].id) != r.world.ids.end();
+      if (is_world) EXPECT_FALSE(step.world_velocities[i].moving);
+      moving += step.world_velocities[i].moving ? 1 : 0;
+    }
+    EXPECT_GE(moving, 1) << "pair " << t;
+    const Odometry& odometry = pipeline.odometry();
+    EXPECT_EQ(odometry.pairs, t);
+    const Eigen::Vector3d position = odometry.pose.topRightCorner<3, 1>();
+    EXPECT_LT(position.norm(), 0.01) << "pair " << t;  // a static camera
+    const Eigen::Vector3d velocity = odometry.velocity.head<3>();
+    EXPECT_LT(velocity.norm(), 0.1) << "pair " << t;  // < 10 cm/s
+    EXPECT_DOUBLE_EQ(odometry.stamp, 10.0 + t / 30.0);
+    const double trace = odometry.pose_covariance.trace();
+    EXPECT_GT(trace, previous_trace);  // uncertainty grows as poses are chained
+    previous_trace = trace;
+  }
+}
+
+TEST(StaticWorld, WorldVelocityIsTheMotionRelativeToTheWorldAtTheCentroid) {
+  StaticWorld world;
+  world.twist << 0.01, 0, 0, 0, 0, 0;  // the camera moved 1 cm along -x: the world's points moved +1 cm
+  Segment s;
+  s.centroid = Eigen::Vector3d(0, 0, 2);
+  // The segment moved 1 cm along +x in the image, like the world, and 2 cm along z of its own.
+  s.twist << 0.01, 0, 0.02, 0, 0, 0;
+  s.transform = se3Exp(s.twist);
+  Config config;
+  const WorldVelocity v = worldVelocity(s, Matrix6d::Identity() * 1e-6, world, false, 0.1, config);
+  EXPECT_NEAR(v.linear.x(), 0.0, 1e-9);
+  EXPECT_NEAR(v.linear.z(), 0.2, 1e-9);  // 2 cm in 0.1 s
+  EXPECT_NEAR(v.angular.norm(), 0.0, 1e-12);
+  EXPECT_TRUE(v.moving);  // 0.2 m/s > moving_min_speed
+  EXPECT_FALSE(worldVelocity(s, Matrix6d::Zero(), world, true, 0.1, config).moving);  // a world segment never moves
+  // Turning about its centroid: no centroid velocity, but the rate flags it.
+  Segment turning;
+  turning.centroid = Eigen::Vector3d(0, 0, 2);
+  turning.transform = Eigen::Matrix4d::Identity();
+  turning.transform.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  const Eigen::Matrix3d R = turning.transform.topLeftCorner<3, 3>();
+  turning.transform.topRightCorner<3, 1>() = turning.centroid - R * turning.centroid;
+  turning.twist = se3Log(turning.transform);
+  StaticWorld still;
+  const WorldVelocity w = worldVelocity(turning, Matrix6d::Zero(), still, false, 1.0, config);
+  EXPECT_NEAR(w.linear.norm(), 0.0, 1e-9);
+  EXPECT_NEAR(w.angular.y(), 0.1, 1e-9);
+  EXPECT_TRUE(w.moving);  // 5.7 deg/s > moving_min_rate
+  EXPECT_THROW(worldVelocity(s, Matrix6d::Zero(), world, false, 0.0, config), InputError);
+}
