@@ -1,7 +1,7 @@
 # catkin, messages, dynamic_reconfigure and catkin_package(). Included before any target is declared.
 set(MCFLOW_CATKIN_COMPONENTS
   roscpp nodelet pluginlib message_filters image_transport cv_bridge sensor_msgs geometry_msgs std_msgs
-  visualization_msgs tf2 tf2_ros tf2_eigen tf2_msgs dynamic_reconfigure diagnostic_updater diagnostic_msgs
+  visualization_msgs nav_msgs tf2 tf2_ros tf2_eigen tf2_msgs dynamic_reconfigure diagnostic_updater diagnostic_msgs
   message_generation rosbag rosgraph_msgs)
 find_package(catkin REQUIRED COMPONENTS ${MCFLOW_CATKIN_COMPONENTS})
 
@@ -19,4 +19,4 @@ catkin_package(
   INCLUDE_DIRS include
   LIBRARIES mc_flow_nodelet
   CATKIN_DEPENDS roscpp nodelet message_filters image_transport cv_bridge sensor_msgs geometry_msgs std_msgs
-    visualization_msgs tf2_ros dynamic_reconfigure diagnostic_updater message_runtime)
+    visualization_msgs nav_msgs tf2_ros dynamic_reconfigure diagnostic_updater message_runtime)

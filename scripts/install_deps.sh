@@ -18,6 +18,7 @@ PACKAGES=(
   catkin libroscpp-dev libnodeletlib-dev libnodeletlib-tools pluginlib-dev libmessage-filters-dev
   libcv-bridge-dev libimage-transport-dev libsensor-msgs-dev libgeometry-msgs-dev libstd-msgs-dev
   libvisualization-msgs-dev ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-visualization-msgs
+  libnav-msgs-dev ros-nav-msgs python3-nav-msgs
   ros-message-generation ros-message-runtime libdynamic-reconfigure-config-init-mutex-dev
   python3-dynamic-reconfigure libtf2-ros-dev libtf2-eigen-dev libdiagnostic-updater-dev
   libpcl-conversions-dev librosbag-dev librostest-dev python3-rostest python3-roslaunch python3-rosmaster

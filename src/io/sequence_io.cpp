@@ -195,18 +195,7 @@ std::vector<std::pair<double, Eigen::Matrix4d>> readTumTrajectory(const std::str
   return out;
 }
 
-ImageU8 movingMask(const Result& result, const std::vector<WorldVelocity>& world) {
-  if (world.size() != result.segments.size())
-    throw InputError("moving mask: " + std::to_string(world.size()) + " world velocities for " +
-                     std::to_string(result.segments.size()) + " segments");
-  std::set<int> moving;
-  for (std::size_t i = 0; i < world.size(); ++i)
-    if (world[i].moving) moving.insert(result.segments[i].id);
-  ImageU8 mask(result.labels.width, result.labels.height, 1, 0);
-  for (std::size_t k = 0; k < result.labels.data.size(); ++k)
-    if (moving.count(result.labels.data[k])) mask.data[k] = 255;
-  return mask;
-}
+
 
 cv::Mat idsOverTimeImage(const std::vector<std::vector<std::pair<int, double>>>& ids_per_pair) {
   std::set<int> all;

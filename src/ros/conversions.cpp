@@ -274,6 +274,19 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
     out.color.g = c.g / 255.f;
     out.color.b = c.b / 255.f;
     out.color.a = 1.f;
+    if (pair.world && i < pair.world->size()) {
+      const mc_flow::WorldVelocity& w = (*pair.world)[i];
+      out.world = std::find(result.world.ids.begin(), result.world.ids.end(), s.id) != result.world.ids.end();
+      out.moving = w.moving;
+      out.world_velocity.linear.x = w.linear.x();
+      out.world_velocity.linear.y = w.linear.y();
+      out.world_velocity.linear.z = w.linear.z();
+      out.world_velocity.angular.x = w.angular.x();
+      out.world_velocity.angular.y = w.angular.y();
+      out.world_velocity.angular.z = w.angular.z();
+      for (int r = 0; r < 6; ++r)
+        for (int c = 0; c < 6; ++c) out.world_velocity_covariance[std::size_t(6 * r + c)] = w.covariance(r, c);
+    }
     msg.segments.push_back(out);
   }
   long outliers = 0;
@@ -301,6 +314,59 @@ sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairC
   for (std::size_t i = 0; i < result.labels.pixelCount(); ++i) {
     out[i] = std::uint16_t(std::min<std::uint32_t>(std::uint32_t(std::max(0, result.labels.data[i])), 65535u));
   }
+  return msg;
+}
+
+nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Time& stamp, const std::string& odom_frame,
+                                const std::string& child_frame, const Eigen::Isometry3d& base_from_camera) {
+  const Eigen::Matrix4d M = base_from_camera.matrix();
+  const Eigen::Matrix4d pose = M * odometry.pose * M.inverse();
+  // Twists and right perturbations of the camera, expressed in the base frame: the adjoint of the mount.
+  auto adjoint = [](const Eigen::Matrix4d& T) {
+    Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+    const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
+    A.topLeftCorner<3, 3>() = R;
+    A.topRightCorner<3, 3>() = mc_flow::skew(T.topRightCorner<3, 1>()) * R;
+    A.bottomRightCorner<3, 3>() = R;
+    return A;
+  };
+  const Eigen::Matrix<double, 6, 6> mount = adjoint(M);
+  // The pose's covariance is of a perturbation on the right (the child frame): in odom_frame it is Ad(pose) of it.
+  const Eigen::Matrix<double, 6, 6> to_odom = adjoint(pose) * mount;
+  const Eigen::Matrix<double, 6, 6> pose_cov = to_odom * odometry.pose_covariance * to_odom.transpose();
+  const mc_flow::Vector6d velocity = mount * odometry.velocity;
+  const Eigen::Matrix<double, 6, 6> velocity_cov = mount * odometry.velocity_covariance * mount.transpose();
+  nav_msgs::Odometry msg;
+  msg.header.stamp = stamp;
+  msg.header.frame_id = odom_frame;
+  msg.child_frame_id = child_frame;
+  msg.pose.pose.position.x = pose(0, 3);
+  msg.pose.pose.position.y = pose(1, 3);
+  msg.pose.pose.position.z = pose(2, 3);
+  const Eigen::Quaterniond q(Eigen::Matrix3d(pose.topLeftCorner<3, 3>()));
+  msg.pose.pose.orientation.x = q.x();
+  msg.pose.pose.orientation.y = q.y();
+  msg.pose.pose.orientation.z = q.z();
+  msg.pose.pose.orientation.w = q.w();
+  msg.twist.twist.linear.x = velocity(0);
+  msg.twist.twist.linear.y = velocity(1);
+  msg.twist.twist.linear.z = velocity(2);
+  msg.twist.twist.angular.x = velocity(3);
+  msg.twist.twist.angular.y = velocity(4);
+  msg.twist.twist.angular.z = velocity(5);
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) {
+      msg.pose.covariance[std::size_t(6 * r + c)] = pose_cov(r, c);
+      msg.twist.covariance[std::size_t(6 * r + c)] = velocity_cov(r, c);
+    }
+  return msg;
+}
+
+sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result, const std::vector<mc_flow::WorldVelocity>& world,
+                                          const PairContext& pair) {
+  const mc_flow::ImageU8 mask = mc_flow::movingMask(result, world);
+  auto msg = emptyImage(pair, mask.width, mask.height, enc::MONO8, 1);
+  std::copy(mask.data.begin(), mask.data.end(), msg->data.begin());
   return msg;
 }
 

@@ -16,6 +16,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <pluginlib/class_list_macros.hpp>
+#include <tf2_eigen/tf2_eigen.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include "mc_flow/SegmentArray.h"
@@ -94,7 +95,11 @@ void MCFlowNodelet::onInit() {
   updater_->setHardwareID("mc_flow:" + rgb_topic_);
   updater_->add("MC-Flow", this, &MCFlowNodelet::diagnose);
 
-  if (params_.publish_tf) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+  if (params_.publish_tf || params_.publish_odom_tf) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+  if (!params_.base_frame.empty()) {
+    tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+    tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_);
+  }
 
   worker_ = std::thread(&MCFlowNodelet::workerLoop, this);
 
@@ -111,6 +116,8 @@ void MCFlowNodelet::onInit() {
     cloud_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("scene_flow", 1, connect, connect);
     markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("motion_markers", 1, connect, connect);
     info_pub_ = pnh_.advertise<sensor_msgs::CameraInfo>("camera_info", 1, connect, connect);
+    odom_pub_ = pnh_.advertise<nav_msgs::Odometry>("odom", 5, connect, connect);
+    moving_mask_pub_ = it_out_->advertise("moving_mask", 1, image_connect, image_connect);
   }
   logStartup();
   connectCb();  // demo options (print_summary, save_dir, publish_tf) need results without listeners
@@ -194,6 +201,9 @@ void MCFlowNodelet::readParameters() {
   pnh_.param("no_input_warning_after", params_.no_input_warning_after, params_.no_input_warning_after);
   pnh_.param("publish_tf", params_.publish_tf, params_.publish_tf);
   pnh_.param("segment_frame_prefix", params_.segment_frame_prefix, params_.segment_frame_prefix);
+  pnh_.param("odom_frame", params_.odom_frame, params_.odom_frame);
+  pnh_.param("base_frame", params_.base_frame, params_.base_frame);
+  pnh_.param("publish_odom_tf", params_.publish_odom_tf, params_.publish_odom_tf);
   pnh_.param("cloud_colour", params_.cloud_colour, params_.cloud_colour);
   const std::string& cloud_colour = params_.cloud_colour;
   pnh_.param("marker_seconds_ahead", params_.marker_seconds_ahead, params_.marker_seconds_ahead);
@@ -241,12 +251,15 @@ void MCFlowNodelet::logStartup() {
     << ", " << depth_topic_ << ", " << info_topic_ << " (image_transport, parameter image_transport selects the transport)\n"
     << "  outputs: " << segments_pub_.getTopic() << ", " << soft_labels_pub_.getTopic() << ", " << labels_pub_.getTopic()
     << ", " << segmentation_pub_.getTopic() << ", " << occlusion_pub_.getTopic() << ", " << cloud_pub_.getTopic()
-    << ", " << markers_pub_.getTopic() << ", " << info_pub_.getTopic() << (params_.publish_tf ? ", /tf" : "") << "\n"
+    << ", " << markers_pub_.getTopic() << ", " << info_pub_.getTopic() << ", " << odom_pub_.getTopic() << ", "
+    << moving_mask_pub_.getTopic() << (params_.publish_tf || params_.publish_odom_tf ? ", /tf" : "") << "\n"
     << "  node parameters: queue_size=" << params_.queue_size << " max_input_pixels=" << params_.max_input_pixels << " approximate_sync=" << params_.approximate_sync
     << " approximate_sync_max_interval=" << params_.approximate_sync_max_interval << " s downsample=" << params_.downsample
     << (params_.downsample == 0 ? " (automatic)" : "") << " max_stamp_difference=" << params_.max_stamp_difference
     << " s max_pair_interval=" << params_.max_pair_interval << " s no_input_warning_after=" << params_.no_input_warning_after
     << " s publish_tf=" << params_.publish_tf << " segment_frame_prefix=" << params_.segment_frame_prefix
+    << " odom_frame=" << params_.odom_frame << " base_frame='" << params_.base_frame
+    << "' publish_odom_tf=" << params_.publish_odom_tf
     << " cloud_colour=" << (cloud_colour_ == CloudColour::Image ? "image" : "segment")
     << " marker_seconds_ahead=" << params_.marker_seconds_ahead << " s segmentation_blend=" << params_.segmentation_blend
     << " print_summary=" << params_.print_summary << " save_dir='"
@@ -268,7 +281,8 @@ bool MCFlowNodelet::anyListener() const {
 
 void MCFlowNodelet::connectCb() {
   std::lock_guard<std::mutex> lock(connect_mutex_);
-  const bool needed = anyListener() || params_.print_summary || !params_.save_dir.empty() || params_.publish_tf;
+  const bool needed = anyListener() || params_.print_summary || !params_.save_dir.empty() || params_.publish_tf ||
+                      params_.publish_odom_tf;
   if (needed && !subscribed_) {
     // The transport comes from ~image_transport. One whose plug-in is not installed would throw inside
     // image_transport and take the manager (and the camera) down: check first, fall back to raw.
@@ -486,6 +500,7 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   pair.previous = &first;
   pair.current = &second;
   pair.solve_time_ms = solve_ms;
+  pair.world = &step.world_velocities;
   pair_index_ = step.pair_index;
 
   publish(result, pair);
@@ -540,8 +555,42 @@ void MCFlowNodelet::publish(const mc_flow::Result& result, const PairContext& pa
     sensor_msgs::CameraInfo info = processingCameraInfo(*pair.current);
     info_pub_.publish(info);
   }
+  if (moving_mask_pub_.getNumSubscribers() > 0 && pair.world) {
+    moving_mask_pub_.publish(makeMovingMaskImage(result, *pair.world, pair));
+  }
   if (params_.publish_tf) publishTf(result, pair);
+  if (odom_pub_.getNumSubscribers() > 0 || params_.publish_odom_tf) publishOdometry(pair);
   if (params_.print_summary || !params_.save_dir.empty()) saveAndSummarise(result, pair, segmentation);
+}
+
+void MCFlowNodelet::publishOdometry(const PairContext& pair) {
+  // The camera's mount on the base (REP 105: odometry of base_frame); without base_frame, the camera's optical frame.
+  Eigen::Isometry3d base_from_camera = Eigen::Isometry3d::Identity();
+  std::string child = pair.header.frame_id;
+  if (!params_.base_frame.empty()) {
+    try {
+      base_from_camera = tf2::transformToEigen(
+          tf_buffer_->lookupTransform(params_.base_frame, pair.header.frame_id, pair.header.stamp, ros::Duration(0.05)));
+      child = params_.base_frame;
+    } catch (const tf2::TransformException& e) {
+      warnThrottled("odom_mount", "~odom not published: no transform from base_frame '" + params_.base_frame +
+                                      "' to the camera frame '" + pair.header.frame_id + "': " + e.what());
+      return;
+    }
+  }
+  const nav_msgs::Odometry odom =
+      makeOdometry(pipeline_->odometry(), pair.header.stamp, params_.odom_frame, child, base_from_camera);
+  if (odom_pub_.getNumSubscribers() > 0) odom_pub_.publish(odom);
+  if (params_.publish_odom_tf) {
+    geometry_msgs::TransformStamped t;
+    t.header = odom.header;
+    t.child_frame_id = odom.child_frame_id;
+    t.transform.translation.x = odom.pose.pose.position.x;
+    t.transform.translation.y = odom.pose.pose.position.y;
+    t.transform.translation.z = odom.pose.pose.position.z;
+    t.transform.rotation = odom.pose.pose.orientation;
+    tf_broadcaster_->sendTransform(t);
+  }
 }
 
 void MCFlowNodelet::publishTf(const mc_flow::Result& result, const PairContext& pair) {
@@ -743,6 +792,9 @@ std::vector<std::pair<std::string, std::string>> NodeParameters::defaults() {
           {"no_input_warning_after", text(d.no_input_warning_after)},
           {"publish_tf", flag(d.publish_tf)},
           {"segment_frame_prefix", d.segment_frame_prefix},
+          {"odom_frame", d.odom_frame},
+          {"base_frame", d.base_frame},
+          {"publish_odom_tf", flag(d.publish_odom_tf)},
           {"cloud_colour", d.cloud_colour},
           {"marker_seconds_ahead", text(d.marker_seconds_ahead)},
           {"segmentation_blend", text(d.segmentation_blend)},

@@ -616,7 +616,7 @@ int cmdRunSeq(const Arguments& args) {
     io::RunInfo info{first_rgb, first_depth, in.rgb_name, in.depth_name, source.depth_scale, 0, 0};
     io::writeResultDirectory((std::filesystem::path(out) / name).string(), r, config, loaded, info);
     csv += io::trajectoryCsvRows(step.pair_index, step.second->stamp, r, &step.world_velocities);
-    io::saveMask((std::filesystem::path(out) / name / "moving.png").string(), io::movingMask(r, step.world_velocities));
+    io::saveMask((std::filesystem::path(out) / name / "moving.png").string(), movingMask(r, step.world_velocities));
     // The camera's path: its first frame at the identity, then each solved pair's frame 2.
     if (trajectory.empty()) trajectory = io::tumTrajectoryLine(step.first->stamp, Eigen::Matrix4d::Identity());
     trajectory += io::tumTrajectoryLine(step.second->stamp, pipeline.odometry().pose);

@@ -10,6 +10,7 @@
 
 #include "temp_dir.h"
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/io/sequence_io.h"
 #include "mc_flow/io/trajectory_eval.h"
@@ -169,10 +170,10 @@ TEST(SequenceIo, TheMovingMaskHoldsThePixelsOfMovingSegments) {
   r.labels.data = {3, 8, 0};
   std::vector<WorldVelocity> world(2);
   world[1].moving = true;
-  const ImageU8 mask = io::movingMask(r, world);
+  const ImageU8 mask = movingMask(r, world);
   EXPECT_EQ(mask.data, (std::vector<std::uint8_t>{0, 255, 0}));
   world.pop_back();
-  EXPECT_THROW(io::movingMask(r, world), InputError);
+  EXPECT_THROW(movingMask(r, world), InputError);
 }
 
 }  // namespace

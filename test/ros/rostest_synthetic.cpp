@@ -2,9 +2,11 @@
 // arrives with the documented size, encoding, frame id and stamps, and the motions match the truth.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <set>
 
+#include <nav_msgs/Odometry.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <tf2_msgs/TFMessage.h>
@@ -61,6 +63,8 @@ class SyntheticSequence : public ::testing::Test {
     markers_ = new Collector<visualization_msgs::MarkerArray>(nh, "/mc_flow/motion_markers");
     info_ = new Collector<sensor_msgs::CameraInfo>(nh, "/mc_flow/camera_info");
     tf_ = new Collector<tf2_msgs::TFMessage>(nh, "/tf");
+    odom_ = new Collector<nav_msgs::Odometry>(nh, "/mc_flow/odom");
+    moving_mask_ = new Collector<sensor_msgs::Image>(nh, "/mc_flow/moving_mask");
 
     ASSERT_TRUE(waitFor([] { return camera_->inputSubscribers() >= 3; }, 60.0)) << "the nodelet never subscribed";
     ros::WallDuration(1.0).sleep();  // let the output subscriptions connect too
@@ -72,7 +76,10 @@ class SyntheticSequence : public ::testing::Test {
       }
     }
     // The other outputs of the last pair may still be on their way.
-    waitFor([] { return cloud_->count() >= kFrames - 1 && occlusion_->count() >= kFrames - 1; }, 10.0);
+    waitFor([] {
+      return cloud_->count() >= kFrames - 1 && occlusion_->count() >= kFrames - 1 && odom_->count() >= kFrames - 1 &&
+             moving_mask_->count() >= kFrames - 1;
+    }, 10.0);
   }
 
   static SyntheticCamera* camera_;
@@ -82,6 +89,8 @@ class SyntheticSequence : public ::testing::Test {
   static Collector<visualization_msgs::MarkerArray>* markers_;
   static Collector<sensor_msgs::CameraInfo>* info_;
   static Collector<tf2_msgs::TFMessage>* tf_;
+  static Collector<nav_msgs::Odometry>* odom_;
+  static Collector<sensor_msgs::Image>* moving_mask_;
 };
 
 SyntheticCamera* SyntheticSequence::camera_ = nullptr;
@@ -94,6 +103,40 @@ Collector<sensor_msgs::PointCloud2>* SyntheticSequence::cloud_ = nullptr;
 Collector<visualization_msgs::MarkerArray>* SyntheticSequence::markers_ = nullptr;
 Collector<sensor_msgs::CameraInfo>* SyntheticSequence::info_ = nullptr;
 Collector<tf2_msgs::TFMessage>* SyntheticSequence::tf_ = nullptr;
+Collector<nav_msgs::Odometry>* SyntheticSequence::odom_ = nullptr;
+Collector<sensor_msgs::Image>* SyntheticSequence::moving_mask_ = nullptr;
+
+// The static world and what moves in it: the synthetic camera does not move, so ~odom stays at the identity of the
+// odom frame (its child the camera's optical frame: no base_frame), with a covariance; the background is the world
+// and the moving parts are flagged; ~moving_mask holds their pixels.
+TEST_F(SyntheticSequence, OdometryOfTheStaticCameraAndTheMovingParts) {
+  const auto odom = odom_->messages();
+  ASSERT_EQ(odom.size(), std::size_t(kFrames - 1));
+  for (std::size_t i = 0; i < odom.size(); ++i) {
+    EXPECT_EQ(odom[i]->header.frame_id, "odom");
+    EXPECT_EQ(odom[i]->child_frame_id, SyntheticCamera::frameId());
+    EXPECT_EQ(odom[i]->header.stamp, kStart + kInterval * int(i + 1));
+    const auto& p = odom[i]->pose.pose.position;
+    EXPECT_LT(std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z), 0.02) << "pair " << i;
+    for (int k = 0; k < 6; ++k) EXPECT_GT(odom[i]->pose.covariance[std::size_t(7 * k)], 0.0) << "pair " << i;
+  }
+  const auto segs = segments_->messages();
+  const auto masks = moving_mask_->messages();
+  ASSERT_EQ(masks.size(), segs.size());
+  for (std::size_t i = 0; i < segs.size(); ++i) {
+    int world = 0, moving = 0;
+    for (const auto& s : segs[i]->segments) {
+      world += s.world ? 1 : 0;
+      moving += s.moving ? 1 : 0;
+      EXPECT_FALSE(s.world && s.moving);
+    }
+    EXPECT_GE(world, 1) << "pair " << i;
+    EXPECT_GE(moving, 1) << "pair " << i;
+    EXPECT_EQ(masks[i]->encoding, "mono8");
+    EXPECT_EQ(masks[i]->header.stamp, segs[i]->header.stamp);
+    EXPECT_GT(std::count(masks[i]->data.begin(), masks[i]->data.end(), 255), 0) << "pair " << i;
+  }
+}
 
 TEST_F(SyntheticSequence, OnePairPerNewFrameWithBothStamps) {
   const auto msgs = segments_->messages();

@@ -163,4 +163,8 @@ class SequencePipeline {
 
 std::string toString(SequenceStep::Outcome outcome);
 
+/// @brief Pixels of moving segments (WorldVelocity::moving, one per segment of `result`) in `result.labels`: 255, else
+/// 0 (input resolution). Throws InputError when the counts differ.
+ImageU8 movingMask(const Result& result, const std::vector<WorldVelocity>& world);
+
 }  // namespace mc_flow

@@ -50,8 +50,6 @@ std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose);
 /// Throws InputError naming the file and line of a malformed line or a quaternion far from unit length.
 std::vector<std::pair<double, Eigen::Matrix4d>> readTumTrajectory(const std::string& path);
 
-/// @brief Pixels of moving segments (WorldVelocity::moving) in `result.labels`: 255, else 0 (input resolution).
-ImageU8 movingMask(const Result& result, const std::vector<WorldVelocity>& world);
 
 /// @brief The segment ids over time: one column per pair, one row per id (ascending), a cell in the id's
 /// colour where the id exists in that pair, darker for smaller support. `ids_per_pair[p]` = (id, support).

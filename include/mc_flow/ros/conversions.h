@@ -18,7 +18,9 @@
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_msgs/Header.h>
+#include <Eigen/Geometry>
 #include <geometry_msgs/TransformStamped.h>
+#include <nav_msgs/Odometry.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include "mc_flow/SegmentArray.h"
@@ -70,12 +72,25 @@ struct PairContext {
   const FrameInput* previous = nullptr;  ///< the pair's first frame (points of the scene flow cloud)
   const FrameInput* current = nullptr;   ///< the pair's second frame
   double solve_time_ms = 0;
+  /// Each segment's motion relative to the static world (SequenceStep::world_velocities); null: unknown.
+  const std::vector<mc_flow::WorldVelocity>* world = nullptr;
   /// @brief Seconds between the frames (> 0).
   double interval() const { return (header.stamp - previous_stamp).toSec(); }
 };
 
 /// @brief ~segments: ids, twists [m/s, rad/s], interval transforms, support, centroid, colour.
 mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const PairContext& pair);
+
+/// @brief ~odom: the camera's odometry (mc_flow::Odometry, the camera's optical frame in its first pose) as the
+/// odometry of the frame `child_frame` mounted at `base_from_camera` (identity: the camera itself), so that the base
+/// starts at the identity of `odom_frame`: pose = M C M^-1. Pose covariance in odom_frame (x y z, rotation about x y z),
+/// twist and its covariance in child_frame (REP 105, nav_msgs/Odometry's conventions).
+nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Time& stamp, const std::string& odom_frame,
+                                const std::string& child_frame, const Eigen::Isometry3d& base_from_camera);
+
+/// @brief ~moving_mask: mono8, 255 = a pixel of a segment that moves relative to the static world.
+sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result, const std::vector<mc_flow::WorldVelocity>& world,
+                                          const PairContext& pair);
 
 /// @brief ~soft_labels: one 32FC<n> image, n = segments + 1; channel i is segment i of ~segments, the
 /// last channel the outlier label; values exactly as the solver produced them (lossless, sum to 1).

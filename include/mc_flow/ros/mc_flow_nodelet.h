@@ -33,7 +33,9 @@
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
 
 #include "mc_flow/McFlowConfig.h"
 #include "mc_flow/core/solver.h"
@@ -79,6 +81,8 @@ class MCFlowNodelet : public nodelet::Nodelet {
   void process(const SyncedInput& input);
   void publish(const mc_flow::Result& result, const PairContext& pair);
   void publishTf(const mc_flow::Result& result, const PairContext& pair);
+  // ~odom and the odom -> base TF (publish_odom_tf) from the pipeline's odometry, through the camera's mount.
+  void publishOdometry(const PairContext& pair);
   void saveAndSummarise(const mc_flow::Result& result, const PairContext& pair, const cv::Mat& segmentation);
   void timerCb(const ros::WallTimerEvent& event);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
@@ -104,9 +108,11 @@ class MCFlowNodelet : public nodelet::Nodelet {
   message_filters::PassThrough<CameraInfo> info_gate_;
   std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_ptr_;
   std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_ptr_;
-  image_transport::Publisher soft_labels_pub_, labels_pub_, segmentation_pub_, occlusion_pub_;
-  ros::Publisher segments_pub_, cloud_pub_, markers_pub_, info_pub_;
+  image_transport::Publisher soft_labels_pub_, labels_pub_, segmentation_pub_, occlusion_pub_, moving_mask_pub_;
+  ros::Publisher segments_pub_, cloud_pub_, markers_pub_, info_pub_, odom_pub_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;  // the camera's mount (base_frame set)
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<dynamic_reconfigure::Server<mc_flow::McFlowConfig>> reconfigure_server_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<diagnostic_updater::Updater> updater_;

@@ -25,6 +25,9 @@ struct NodeParameters {
   double no_input_warning_after = 5.0;          ///< [s] warn when subscribed inputs stay silent this long
   bool publish_tf = false;                      ///< one TF frame per segment
   std::string segment_frame_prefix = "mc_flow_segment_";  ///< TF child frame = prefix + segment id
+  std::string odom_frame = "odom";              ///< ~odom's frame (REP 105): the camera's first pose
+  std::string base_frame;                       ///< ~odom's child frame; "" = the colour camera's optical frame
+  bool publish_odom_tf = false;                 ///< broadcast odom_frame -> base_frame (off when another node owns it)
   std::string cloud_colour = "segment";         ///< rgb of ~scene_flow: segment or image
   double marker_seconds_ahead = 1.0;            ///< [s] length of the motion arrows in time
   double segmentation_blend = 0.6;              ///< weight of the segment colours over the image in ~segmentation
