@@ -460,14 +460,8 @@ TEST(LabelAdaptation, APartThatNoMotionSeesMergesIntoTheMotionThatSeesItOccluded
 // ---------------------------------------------------------------- one rigid thing, one segment (merge_refit_tolerance)
 
 TEST(OneMotionMerge, EachSideIsJudgedByItsOwnCostAndByTheNoiseLevel) {
-  MergeEvidence e;
-  e.own_a = 500;
-  e.pixels_a = 1000;
-  e.own_b = 40;
-  e.pixels_b = 100;
-  e.noise_per_pixel = 0.5;
-  e.increase_a = 100;
-  e.increase_b = 20;
+  // own_a, own_b, increase_a, increase_b, pixels_a, pixels_b, noise per pixel
+  MergeEvidence e{500, 40, 100, 20, 1000, 100, 0.5};
   // Own bound: 100 <= 1.0 * 500 and 20 <= 1.0 * 40; noise bound: 100 <= 2 * 0.5 * 1000 and 20 <= 2 * 0.5 * 100.
   EXPECT_TRUE(oneMotionExplains(e, 1.0, 2.0));
   EXPECT_FALSE(oneMotionExplains(e, 0.4, 2.0));  // the small side rose by 50 % of its own cost
