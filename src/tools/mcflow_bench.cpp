@@ -10,6 +10,7 @@
 // --concurrent N: N solvers (N cameras) in N threads on the same backend, each solving synth-0 `repeat` times: pairs
 // per second against one solver alone.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
@@ -61,8 +62,14 @@ int cameraOnlyBench(const Config& base, int width, int height) {
   std::printf("# mcflow_bench --camera-only: static scenes %dx%d, intensity noise 0.01, depth noise 1.5 mm at 1 m "
               "(x depth^2), regularizer %s\n",
               width, height, base.regularizer == Regularizer::Quadratic ? "quad" : "tv");
-  std::printf("%-8s %-10s %6s %8s %8s %8s %6s %10s %10s  %s\n", "scene", "motion", "segs", "EPE", "EPE_1", "ratio",
-              "segs_1", "total_ms", "total_ms_1", "motion labels over the outer iterations (K-means > after each)");
+  std::printf("# world_mm / world_deg: the static world's motion (Result::world) against the camera's true one; nees: "
+              "its error's squared Mahalanobis length under the world's covariance (6 dof: 95 %% of single values in "
+              "[1.24, 14.4]; the mean of 9 in [3.96, 8.47])\n");
+  std::printf("%-8s %-10s %6s %8s %8s %8s %6s %10s %10s %9s %9s %8s  %s\n", "scene", "motion", "segs", "EPE", "EPE_1",
+              "ratio", "segs_1", "total_ms", "total_ms_1", "world_mm", "world_deg", "nees",
+              "motion labels over the outer iterations (K-means > after each)");
+  double nees_sum = 0;
+  int nees_count = 0;
   for (int variant = 0; variant < syntheticVariantCount(); ++variant)
     for (const CameraMotion& m : motions) {
       SyntheticSceneOptions so = sceneOptions(variant, width, height, true);
@@ -78,10 +85,17 @@ int cameraOnlyBench(const Config& base, int width, int height) {
       const double epe = opticalFlowErrors(r.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion).epe;
       const double epe1 = opticalFlowErrors(r1.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion).epe;
       const std::string counts = labelCountTrace(r);
-      std::printf("synth-%-2d %-10s %6zu %8.4f %8.4f %8.3f %6zu %10.1f %10.1f  %s\n", variant, m.name, r.segments.size(),
-                  epe, epe1, epe / epe1, r1.segments.size(), r.timings.total, r1.timings.total, counts.c_str());
+      // Every part of a camera-only scene moves by the static world's apparent motion.
+      const Vector6d error = r.world.twist - pair.parts.front().twist;
+      const double nees = error.dot(r.world.covariance.ldlt().solve(error));
+      nees_sum += nees;
+      ++nees_count;
+      std::printf("synth-%-2d %-10s %6zu %8.4f %8.4f %8.3f %6zu %10.1f %10.1f %9.3f %9.4f %8.2f  %s\n", variant, m.name,
+                  r.segments.size(), epe, epe1, epe / epe1, r1.segments.size(), r.timings.total, r1.timings.total,
+                  1000.0 * error.head<3>().norm(), error.tail<3>().norm() * 180.0 / M_PI, nees, counts.c_str());
       std::fflush(stdout);
     }
+  std::printf("# mean nees over %d scenes: %.2f\n", nees_count, nees_sum / std::max(1, nees_count));
   return 0;
 }
 
