@@ -260,8 +260,19 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
           cold.start_note = why + "; the cold solve's energy is lower";
           result = std::move(cold);
         } else {
-          result.start_note = why + "; a cold solve did not do better, the warm result is kept";
-          result.timings = cold.timings;
+          // The backend now holds the cold solve's labels: the warm start is solved again (the same result) so that
+          // what reads the backend after this (the static world) reads the labels of the result that is kept. Rare:
+          // a jump whose cold solve did no better.
+          Result again = emptyResult(p, K);
+          again.timings = cold.timings;
+          t = Clock::now();
+          CarriedLabels recarried =
+              carriedLabelsAtLevel(carried_ids, backend->framePoints(p.label_level), 1 << p.label_level);
+          again.timings.initialisation += elapsedMs(t);
+          iterate(p, warmStart(p, std::move(recarried), *previous, again), again);
+          again.start = StartKind::Warm;
+          again.start_note = why + "; a cold solve did not do better, the warm result is kept";
+          result = std::move(again);
         }
       }
     }

@@ -152,3 +152,37 @@ TEST(StaticWorld, WorldVelocityIsTheMotionRelativeToTheWorldAtTheCentroid) {
   EXPECT_TRUE(w.moving);  // 5.7 deg/s > moving_min_rate
   EXPECT_THROW(worldVelocity(s, Matrix6d::Zero(), world, false, 0.0, config), InputError);
 }
+
+// A warm result kept after its energy check ran a cold solve that did no better: the backend then held the cold
+// solve's labels, and the static world must still be the kept result's (it is solved again). With
+// warm_max_energy_ratio at its minimum the check runs on every pair whose energy rose at all.
+TEST(StaticWorld, AWarmResultKeptAfterTheEnergyCheckHasItsOwnWorld) {
+  Config config = cpuConfig();
+  config.warm_max_energy_ratio = 1.0;
+  SequencePipeline pipeline(config, 0, 0.5);
+  SyntheticSceneOptions o;
+  o.width = 160;
+  o.height = 120;
+  o.variant = 2;
+  o.stream_events = true;
+  int kept = 0;
+  for (int t = 0; t < 14; ++t) {
+    StreamFrame f;
+    ImageU8 colour;
+    renderSyntheticFrame(o, t, f.frame, colour, f.K);
+    f.stamp = 10.0 + t / 30.0;
+    f.source = "camera";
+    const SequenceStep step = pipeline.push(std::move(f));
+    if (t == 0) continue;
+    ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << "pair " << t << ": " << step.problem;
+    const Result& r = *step.result;
+    kept += r.start_note.find("the warm result is kept") != std::string::npos ? 1 : 0;
+    ASSERT_TRUE(r.world.found);
+    for (const int id : r.world.ids)
+      EXPECT_NE(std::find_if(r.segments.begin(), r.segments.end(), [id](const Segment& s) { return s.id == id; }),
+                r.segments.end())
+          << "pair " << t << ": world id " << id << " is not a segment of the result";
+  }
+  std::printf("warm results kept after the energy check: %d of 13 pairs\n", kept);
+  EXPECT_GE(kept, 1) << "the path under test was not taken";
+}
