@@ -433,12 +433,20 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
       const Matrix6d damped = H + (damping[g] + kRidge) * scale * Matrix6d::Identity();
       Vector6d d = -damped.ldlt().solve(gradient[g]);
       d /= std::max({1.0, d.head<3>().norm() / 0.1, d.tail<3>().norm() / 0.1});
-      if (d.allFinite()) proposed[g] += d;
+      // A non-finite step is no step: an infinite trial cost below rejects it and damps harder.
+      proposed[g] = d.allFinite() ? Vector6d(proposed[g] + d) : Vector6d::Constant(std::numeric_limits<double>::infinity());
     }
+    // Groups whose step was not finite keep their twist in the pass and are rejected after it.
+    std::vector<bool> finite(groups.size(), true);
+    for (std::size_t g = 0; g < groups.size(); ++g)
+      if (!proposed[g].allFinite()) {
+        finite[g] = false;
+        proposed[g] = current[g];
+      }
     setTrial(proposed);
     gather(labels.costModel(trial, use_occlusion, config), next, next_gradient);
     for (std::size_t g = 0; g < groups.size(); ++g) {
-      if (next[g].cost <= fits[g].cost) {  // accepted: the union's model at the new twist
+      if (finite[g] && next[g].cost <= fits[g].cost) {  // accepted: the union's model at the new twist
         const int accepted = fits[g].iterations + 1;
         current[g] = proposed[g];
         fits[g] = next[g];

@@ -15,6 +15,9 @@
 namespace mc_flow {
 
 Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, const Config& config) {
+  // Too few pixels to say anything (fewer than a twist's six unknowns, or no curvature): a covariance that says so,
+  // 1 m and 1 rad, not a zero one that would claim certainty.
+  if (!(pixels >= 6.0) || !(curvature.diagonal().maxCoeff() > 0)) return Matrix6d::Identity();
   const double dof = std::max(1.0, 2.0 * pixels - 6.0);
   const double variance = std::max(0.0, cost) / dof;
   // A relative ridge, as the label-count update's solves: a plane leaves directions its pixels do not constrain.
@@ -50,6 +53,7 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
     const LabelCostModel under_prior =
         labels.costModel(std::vector<Vector6d>(std::size_t(n), prior_twist), use_occlusion, config);
     for (int i = 0; i < n; ++i) {
+      if (own.pixels[std::size_t(i)] < 6.0) continue;  // no evidence either way
       MergeEvidence e;
       e.own_a = e.own_b = own.cost[std::size_t(i)];
       e.increase_a = e.increase_b = under_prior.cost[std::size_t(i)] - own.cost[std::size_t(i)];

@@ -30,7 +30,9 @@ TrajectoryErrors evaluateTrajectory(const StampedPoses& ground_truth, const Stam
   std::sort(gt.begin(), gt.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<std::pair<Eigen::Matrix4d, Eigen::Matrix4d>> matched;  // (ground truth, estimate)
   std::vector<double> stamps;
-  for (const auto& [stamp, pose] : estimate) {
+  StampedPoses est = estimate;  // in time order: the RPE pairs consecutive and one-second-apart poses
+  std::stable_sort(est.begin(), est.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& [stamp, pose] : est) {
     const double t = stamp + time_offset;
     auto it = std::lower_bound(gt.begin(), gt.end(), t, [](const auto& a, double v) { return a.first < v; });
     const auto* best = it != gt.end() ? &*it : nullptr;

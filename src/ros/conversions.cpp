@@ -331,8 +331,12 @@ nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Ti
     return A;
   };
   const Eigen::Matrix<double, 6, 6> mount = adjoint(M);
-  // The pose's covariance is of a perturbation on the right (the child frame): in odom_frame it is Ad(pose) of it.
-  const Eigen::Matrix<double, 6, 6> to_odom = adjoint(pose) * mount;
+  // The pose's covariance is of a perturbation exp(d) on the right of the base's pose: its position error is R d_v and
+  // its orientation error R d_w in odom_frame (what nav_msgs/Odometry's covariance means), R the base's rotation.
+  Eigen::Matrix<double, 6, 6> rotate = Eigen::Matrix<double, 6, 6>::Zero();
+  rotate.topLeftCorner<3, 3>() = pose.topLeftCorner<3, 3>();
+  rotate.bottomRightCorner<3, 3>() = pose.topLeftCorner<3, 3>();
+  const Eigen::Matrix<double, 6, 6> to_odom = rotate * mount;
   const Eigen::Matrix<double, 6, 6> pose_cov = to_odom * odometry.pose_covariance * to_odom.transpose();
   const mc_flow::Vector6d velocity = mount * odometry.velocity;
   const Eigen::Matrix<double, 6, 6> velocity_cov = mount * odometry.velocity_covariance * mount.transpose();

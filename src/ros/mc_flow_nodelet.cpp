@@ -211,6 +211,10 @@ void MCFlowNodelet::readParameters() {
   pnh_.param("print_summary", params_.print_summary, params_.print_summary);
   pnh_.param("save_dir", params_.save_dir, params_.save_dir);
 
+  if (params_.publish_odom_tf && params_.base_frame.empty())
+    NODELET_WARN("publish_odom_tf without base_frame broadcasts %s -> the camera's optical frame, which usually has a "
+                 "parent in the camera's TF tree already: set base_frame to the robot's base frame",
+                 params_.odom_frame.c_str());
   if (params_.downsample < 0 || (params_.downsample & (params_.downsample - 1)) != 0) {
     NODELET_WARN("downsample %d is not 0 (automatic) or a power of two; using 0", params_.downsample);
     params_.downsample = 0;
@@ -276,7 +280,8 @@ bool MCFlowNodelet::anyListener() const {
   return soft_labels_pub_.getNumSubscribers() > 0 || labels_pub_.getNumSubscribers() > 0 ||
          segmentation_pub_.getNumSubscribers() > 0 || occlusion_pub_.getNumSubscribers() > 0 ||
          segments_pub_.getNumSubscribers() > 0 || cloud_pub_.getNumSubscribers() > 0 ||
-         markers_pub_.getNumSubscribers() > 0 || info_pub_.getNumSubscribers() > 0;
+         markers_pub_.getNumSubscribers() > 0 || info_pub_.getNumSubscribers() > 0 ||
+         odom_pub_.getNumSubscribers() > 0 || moving_mask_pub_.getNumSubscribers() > 0;
 }
 
 void MCFlowNodelet::connectCb() {

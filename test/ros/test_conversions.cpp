@@ -411,3 +411,27 @@ TEST(Conversions, MotionMarkersClearThenOneArrowAndTextPerSegment) {
   EXPECT_NEAR(arrow.points[1].x - arrow.points[0].x, v.x(), 1e-9);
   EXPECT_GT(v.x(), 0.15);
 }
+
+// ~odom: the base's pose M C M^-1 (it starts at the identity of the odom frame), the twist in the child frame, and the
+// pose covariance as nav_msgs/Odometry means it (position and rotation errors in the odom frame): a heading
+// uncertainty far from the origin must not turn into a position uncertainty (no lever arm about the odom origin).
+TEST(Conversions, OdometryIsTheBasesWithItsCovarianceInTheOdomFrame) {
+  mc_flow::Odometry odometry;
+  odometry.pose.topRightCorner<3, 1>() = Eigen::Vector3d(0, 0, 10);  // 10 m ahead of the first pose (optical z)
+  odometry.pose_covariance.bottomRightCorner<3, 3>() = 1e-4 * Eigen::Matrix3d::Identity();  // rotation only
+  odometry.velocity << 0, 0, 1, 0, 0, 0;  // 1 m/s forward (optical z)
+  // The camera is mounted with the usual optical rotation: base x = camera z, base y = -camera x, base z = -camera y.
+  Eigen::Isometry3d base_from_camera = Eigen::Isometry3d::Identity();
+  base_from_camera.linear() << 0, 0, 1, -1, 0, 0, 0, -1, 0;
+  const nav_msgs::Odometry msg =
+      mc_flow_ros::makeOdometry(odometry, ros::Time(5.0), "odom", "base_link", base_from_camera);
+  EXPECT_EQ(msg.header.frame_id, "odom");
+  EXPECT_EQ(msg.child_frame_id, "base_link");
+  EXPECT_NEAR(msg.pose.pose.position.x, 10.0, 1e-12);  // forward is the base's x
+  EXPECT_NEAR(msg.pose.pose.position.y, 0.0, 1e-12);
+  EXPECT_NEAR(msg.pose.pose.orientation.w, 1.0, 1e-12);
+  EXPECT_NEAR(msg.twist.twist.linear.x, 1.0, 1e-12);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(msg.pose.covariance[std::size_t(6 * r + c)], 0.0, 1e-15) << r << "," << c;
+  for (int k = 3; k < 6; ++k) EXPECT_NEAR(msg.pose.covariance[std::size_t(7 * k)], 1e-4, 1e-12);
+}
