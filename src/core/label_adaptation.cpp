@@ -25,25 +25,26 @@ constexpr double kRidge = 1e-6;
 // the TUM excerpt: docs/ALGORITHM.md), while distinct motions are priced hundreds of times above.
 constexpr double kRefitCandidateRatio = 20.0;
 
-Matrix6d regularised(const Matrix6d& H) {
-  const double scale = std::max(H.diagonal().maxCoeff(), 1e-12);
-  return H + kRidge * scale * Matrix6d::Identity();
-}
 
 // Newton decrement g^T H^-1 g: how much the cost falls when the label takes its Gauss-Newton step.
 double newtonDecrement(const Matrix6d& H, const Vector6d& g) {
-  return g.dot(regularised(H).ldlt().solve(g));
+  return g.dot(withRidge(H).ldlt().solve(g));
 }
 
 Vector6d gaussNewtonStep(const Matrix6d& H, const Vector6d& g) {
   // The motion step's step limits: 5 cm and 0.1 rad per update, so one bad linearisation cannot fling
   // a new label far away.
-  Vector6d d = -regularised(H).ldlt().solve(g);
+  Vector6d d = -withRidge(H).ldlt().solve(g);
   const double scale = std::max({1.0, d.head<3>().norm() / 0.05, d.tail<3>().norm() / 0.1});
   return d / scale;
 }
 
 }  // namespace
+
+Matrix6d withRidge(const Matrix6d& H) {
+  const double scale = std::max(H.diagonal().maxCoeff(), 1e-12);
+  return H + kRidge * scale * Matrix6d::Identity();
+}
 
 Eigen::Vector3d LabelMoments::principalAxis() const {
   const Eigen::Vector3d centre = mean();
@@ -107,7 +108,7 @@ double mergeCostIncrease(const Matrix6d& H_a, const Matrix6d& H_b, const Vector6
   const Vector6d d = xi_a - xi_b;
   // H_a (H_a + H_b)^-1 H_b is the "parallel sum" of the two curvatures: symmetric, positive semidefinite.
   const Vector6d Hb_d = H_b * d;
-  return std::max(0.0, (H_a * d).dot(regularised(H_a + H_b).ldlt().solve(Hb_d)));
+  return std::max(0.0, (H_a * d).dot(withRidge(H_a + H_b).ldlt().solve(Hb_d)));
 }
 
 double labelCost(const Config& config, int valid_pixels) { return config.label_cost * double(valid_pixels); }
@@ -205,7 +206,7 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
     const int drop = keep == best_a ? best_b : best_a;
     const double data_increase = best - switchingCost(keep, drop);  // still less the price
     const Matrix6d H = model.curvature[std::size_t(keep)] + model.curvature[std::size_t(drop)];
-    twists[std::size_t(keep)] = regularised(H).ldlt().solve(model.curvature[std::size_t(keep)] * twists[std::size_t(keep)] +
+    twists[std::size_t(keep)] = withRidge(H).ldlt().solve(model.curvature[std::size_t(keep)] * twists[std::size_t(keep)] +
                                                             model.curvature[std::size_t(drop)] * twists[std::size_t(drop)]);
     model.curvature[std::size_t(keep)] = H;
     model.gradient[std::size_t(keep)] += model.gradient[std::size_t(drop)];

@@ -24,6 +24,15 @@ Eigen::Matrix4d se3Exp(const Vector6d& xi) {
   return T;
 }
 
+Matrix6d se3Adjoint(const Eigen::Matrix4d& T) {
+  const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
+  Matrix6d A = Matrix6d::Zero();
+  A.topLeftCorner<3, 3>() = R;
+  A.topRightCorner<3, 3>() = skew(T.topRightCorner<3, 1>()) * R;
+  A.bottomRightCorner<3, 3>() = R;
+  return A;
+}
+
 Vector6d se3Log(const Eigen::Matrix4d& T) {
   const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
   const Eigen::AngleAxisd aa(R);

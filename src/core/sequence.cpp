@@ -207,12 +207,7 @@ void SequencePipeline::updateOdometry(const Result& result, double interval_s, d
   const Eigen::Matrix4d step = se3Exp(-result.world.twist);
   // A right perturbation carried through the step: d2 = Ad(step^-1) d1 + e, e the step's own uncertainty (log of the
   // inverse is minus the twist, so the world fit's covariance is the step's).
-  const Eigen::Matrix4d back = step.inverse();
-  const Eigen::Matrix3d R = back.topLeftCorner<3, 3>();
-  Matrix6d adjoint = Matrix6d::Zero();
-  adjoint.topLeftCorner<3, 3>() = R;
-  adjoint.topRightCorner<3, 3>() = skew(back.topRightCorner<3, 1>()) * R;
-  adjoint.bottomRightCorner<3, 3>() = R;
+  const Matrix6d adjoint = se3Adjoint(step.inverse());
   odometry_.pose = odometry_.pose * step;
   odometry_.pose_covariance = adjoint * odometry_.pose_covariance * adjoint.transpose() + result.world.covariance;
   odometry_.velocity = -result.world.twist / interval_s;

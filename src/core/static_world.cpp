@@ -20,10 +20,7 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
   if (!(pixels >= 6.0) || !(curvature.diagonal().maxCoeff() > 0)) return Matrix6d::Identity();
   const double dof = std::max(1.0, 2.0 * pixels - 6.0);
   const double variance = std::max(0.0, cost) / dof;
-  // A relative ridge, as the label-count update's solves: a plane leaves directions its pixels do not constrain.
-  const double scale = std::max(curvature.diagonal().maxCoeff(), 1e-12);
-  const Matrix6d H = curvature + 1e-6 * scale * Matrix6d::Identity();
-  const Matrix6d inverse = H.ldlt().solve(Matrix6d::Identity());
+  const Matrix6d inverse = withRidge(curvature).ldlt().solve(Matrix6d::Identity());
   const Matrix6d covariance = config.world_covariance_scale * variance * inverse;
   return 0.5 * (covariance + covariance.transpose());
 }

@@ -322,15 +322,7 @@ nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Ti
   const Eigen::Matrix4d M = base_from_camera.matrix();
   const Eigen::Matrix4d pose = M * odometry.pose * M.inverse();
   // Twists and right perturbations of the camera, expressed in the base frame: the adjoint of the mount.
-  auto adjoint = [](const Eigen::Matrix4d& T) {
-    Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
-    const Eigen::Matrix3d R = T.topLeftCorner<3, 3>();
-    A.topLeftCorner<3, 3>() = R;
-    A.topRightCorner<3, 3>() = mc_flow::skew(T.topRightCorner<3, 1>()) * R;
-    A.bottomRightCorner<3, 3>() = R;
-    return A;
-  };
-  const Eigen::Matrix<double, 6, 6> mount = adjoint(M);
+  const Eigen::Matrix<double, 6, 6> mount = mc_flow::se3Adjoint(M);
   // The pose's covariance is of a perturbation exp(d) on the right of the base's pose: its position error is R d_v and
   // its orientation error R d_w in odom_frame (what nav_msgs/Odometry's covariance means), R the base's rotation.
   Eigen::Matrix<double, 6, 6> rotate = Eigen::Matrix<double, 6, 6>::Zero();

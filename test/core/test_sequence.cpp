@@ -10,6 +10,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/fault_injection.h"
 #include "mc_flow/core/sequence.h"
+#include "stream_frames.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/warm_start.h"
 #include "mc_flow/testing/synthetic_scene.h"
@@ -47,28 +48,15 @@ TEST(Downsampling, UsesThePyramidRuleAcrossDepthEdges) {
   EXPECT_THROW(downsampleFrame(f, 3, 0.1), ConfigError);
 }
 
-StreamFrame syntheticFrame(int t, double stamp, int variant = 0) {
-  SyntheticSceneOptions o;
-  o.width = 160;
-  o.height = 120;
-  o.variant = variant;
-  o.stream_events = true;
-  StreamFrame f;
-  ImageU8 colour;
-  renderSyntheticFrame(o, t, f.frame, colour, f.K);
-  f.stamp = stamp;
-  f.source = "camera";
-  f.extra = t;
-  return f;
-}
+using test::syntheticStreamFrame;
 
 TEST(SequencePipeline, PairsFramesWarmStartsAndTracksSegments) {
   Config config;
   SequencePipeline pipeline(config, 0, 0.5);
-  SequenceStep s0 = pipeline.push(syntheticFrame(0, 10.0));
+  SequenceStep s0 = pipeline.push(syntheticStreamFrame(0, 10.0));
   EXPECT_EQ(s0.outcome, SequenceStep::Outcome::Started);
   EXPECT_TRUE(s0.reset_key.empty());
-  SequenceStep s1 = pipeline.push(syntheticFrame(1, 10.033));
+  SequenceStep s1 = pipeline.push(syntheticStreamFrame(1, 10.033));
   ASSERT_EQ(s1.outcome, SequenceStep::Outcome::Solved) << s1.problem;
   EXPECT_EQ(s1.result->start, StartKind::Cold);
   EXPECT_EQ(std::any_cast<int>(s1.first->extra), 0);
@@ -76,7 +64,7 @@ TEST(SequencePipeline, PairsFramesWarmStartsAndTracksSegments) {
   EXPECT_EQ(s1.pair_index, 0);
   const std::map<int, SegmentTrack> after_first = pipeline.tracks();
   const Result first_result = *s1.result;
-  SequenceStep s2 = pipeline.push(syntheticFrame(2, 10.066));
+  SequenceStep s2 = pipeline.push(syntheticStreamFrame(2, 10.066));
   ASSERT_EQ(s2.outcome, SequenceStep::Outcome::Solved) << s2.problem;
   EXPECT_EQ(s2.result->start, StartKind::Warm) << s2.result->start_note;
   EXPECT_EQ(s2.pair_index, 1);
@@ -100,20 +88,20 @@ TEST(SequencePipeline, ResetsOnStampsGoingBackGapsAndInputChanges) {
   Config config;
   config.outer_iterations = 1;
   SequencePipeline pipeline(config, 0, 0.5);
-  pipeline.push(syntheticFrame(0, 10.0));
-  EXPECT_EQ(pipeline.push(syntheticFrame(1, 10.0)).outcome, SequenceStep::Outcome::RepeatedStamp);
-  SequenceStep back = pipeline.push(syntheticFrame(1, 9.0));
+  pipeline.push(syntheticStreamFrame(0, 10.0));
+  EXPECT_EQ(pipeline.push(syntheticStreamFrame(1, 10.0)).outcome, SequenceStep::Outcome::RepeatedStamp);
+  SequenceStep back = pipeline.push(syntheticStreamFrame(1, 9.0));
   EXPECT_EQ(back.outcome, SequenceStep::Outcome::Started);
   EXPECT_EQ(back.reset_key, "back");
-  SequenceStep gap = pipeline.push(syntheticFrame(2, 9.9));
+  SequenceStep gap = pipeline.push(syntheticStreamFrame(2, 9.9));
   EXPECT_EQ(gap.outcome, SequenceStep::Outcome::Started);
   EXPECT_EQ(gap.reset_key, "gap");
-  StreamFrame other = syntheticFrame(3, 9.95);
+  StreamFrame other = syntheticStreamFrame(3, 9.95);
   other.source = "another_camera";
   SequenceStep input = pipeline.push(std::move(other));
   EXPECT_EQ(input.reset_key, "input");
   EXPECT_EQ(pipeline.resets(), 3);
-  StreamFrame next = syntheticFrame(4, 10.0);
+  StreamFrame next = syntheticStreamFrame(4, 10.0);
   next.source = "another_camera";
   EXPECT_EQ(pipeline.push(std::move(next)).outcome, SequenceStep::Outcome::Solved);
 }
@@ -122,28 +110,28 @@ TEST(SequencePipeline, AFailedPairKeepsTheStreamGoingWithoutAPrior) {
   Config config;
   config.outer_iterations = 1;
   SequencePipeline pipeline(config, 0, 0.5);
-  pipeline.push(syntheticFrame(0, 1.0));
-  ASSERT_EQ(pipeline.push(syntheticFrame(1, 1.03)).outcome, SequenceStep::Outcome::Solved);
+  pipeline.push(syntheticStreamFrame(0, 1.0));
+  ASSERT_EQ(pipeline.push(syntheticStreamFrame(1, 1.03)).outcome, SequenceStep::Outcome::Solved);
   // A frame whose depth is all beyond max_depth: the pair it closes is solved (nothing of frame 1 is found
   // in it), the pair it opens fails (no depth in its frame 1); the stream then goes on cold.
-  StreamFrame far = syntheticFrame(2, 1.06);
+  StreamFrame far = syntheticStreamFrame(2, 1.06);
   for (float& z : far.frame.depth.data) z = 9.f;
   SequenceStep closing = pipeline.push(std::move(far));
   EXPECT_EQ(closing.outcome, SequenceStep::Outcome::Solved) << closing.problem;
-  SequenceStep after = pipeline.push(syntheticFrame(3, 1.09));
+  SequenceStep after = pipeline.push(syntheticStreamFrame(3, 1.09));
   EXPECT_EQ(after.outcome, SequenceStep::Outcome::PairFailed);
   EXPECT_NE(after.problem.find("no depth within"), std::string::npos) << after.problem;
-  SequenceStep recovered = pipeline.push(syntheticFrame(4, 1.12));
+  SequenceStep recovered = pipeline.push(syntheticStreamFrame(4, 1.12));
   ASSERT_EQ(recovered.outcome, SequenceStep::Outcome::Solved) << recovered.problem;
   EXPECT_EQ(recovered.result->start, StartKind::Cold);
   // Unusable frames are refused before they enter the sequence.
-  StreamFrame bad = syntheticFrame(5, 1.15);
+  StreamFrame bad = syntheticStreamFrame(5, 1.15);
   bad.K.fx = -1;
   EXPECT_THROW(pipeline.push(std::move(bad)), InputError);
-  StreamFrame no_depth = syntheticFrame(5, 1.15);
+  StreamFrame no_depth = syntheticStreamFrame(5, 1.15);
   for (float& z : no_depth.frame.depth.data) z = 0.f;
   EXPECT_THROW(pipeline.push(std::move(no_depth)), InputError);
-  EXPECT_EQ(pipeline.push(syntheticFrame(5, 1.15)).outcome, SequenceStep::Outcome::Solved);
+  EXPECT_EQ(pipeline.push(syntheticStreamFrame(5, 1.15)).outcome, SequenceStep::Outcome::Solved);
 }
 
 // Every id a solved pair hands out: its segments and the ids it reports as merged, ended, revived or dormant.
@@ -184,9 +172,9 @@ TEST(SequencePipeline, IdsAfterAResetStartAboveEveryEarlierId) {
   config.outer_iterations = 2;
   SequencePipeline pipeline(config, 0, 0.5);
   int highest = 0;
-  pipeline.push(syntheticFrame(0, 1.0));
+  pipeline.push(syntheticStreamFrame(0, 1.0));
   for (int t = 1; t <= 3; ++t) {
-    SequenceStep step = pipeline.push(syntheticFrame(t, 1.0 + 0.033 * t));
+    SequenceStep step = pipeline.push(syntheticStreamFrame(t, 1.0 + 0.033 * t));
     ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
     for (int id : idsOf(*step.result)) highest = std::max(highest, id);
     highest = std::max(highest, step.result->next_id - 1);
@@ -195,12 +183,12 @@ TEST(SequencePipeline, IdsAfterAResetStartAboveEveryEarlierId) {
   const int before_reset = highest;
 
   // The stamps go back (a bag looping): a new sequence whose segments take none of the earlier ids.
-  EXPECT_EQ(pipeline.push(syntheticFrame(0, 0.5)).reset_key, "back");
-  SequenceStep cold = pipeline.push(syntheticFrame(1, 0.533));
+  EXPECT_EQ(pipeline.push(syntheticStreamFrame(0, 0.5)).reset_key, "back");
+  SequenceStep cold = pipeline.push(syntheticStreamFrame(1, 0.533));
   expectFreshIds(pipeline, cold, before_reset);
   EXPECT_TRUE(cold.result->merged_ids.empty() && cold.result->ended_ids.empty() && cold.result->dormant_ids.empty());
   // The sequence goes on warm from the renumbered result: its ids continue and new ones come after them.
-  SequenceStep warm = pipeline.push(syntheticFrame(2, 0.566));
+  SequenceStep warm = pipeline.push(syntheticStreamFrame(2, 0.566));
   ASSERT_EQ(warm.outcome, SequenceStep::Outcome::Solved) << warm.problem;
   EXPECT_EQ(warm.result->start, StartKind::Warm) << warm.result->start_note;
   int continued = 0;
@@ -213,8 +201,8 @@ TEST(SequencePipeline, IdsAfterAResetStartAboveEveryEarlierId) {
   highest = std::max(highest, warm.result->next_id - 1);
 
   // A gap resets again: above both earlier sequences.
-  EXPECT_EQ(pipeline.push(syntheticFrame(3, 5.0)).reset_key, "gap");
-  expectFreshIds(pipeline, pipeline.push(syntheticFrame(4, 5.033)), highest);
+  EXPECT_EQ(pipeline.push(syntheticStreamFrame(3, 5.0)).reset_key, "gap");
+  expectFreshIds(pipeline, pipeline.push(syntheticStreamFrame(4, 5.033)), highest);
 }
 
 TEST(SequencePipeline, APairAfterAFailedOneContinuesNoEarlierTrack) {
@@ -228,8 +216,8 @@ TEST(SequencePipeline, APairAfterAFailedOneContinuesNoEarlierTrack) {
     std::unique_ptr<SolveBackend> cpu = makeCpuSolveBackend();
     return backend == Backend::Cuda ? withBackendFault(std::move(cpu), fault) : std::move(cpu);
   });
-  pipeline.push(syntheticFrame(0, 1.0));
-  SequenceStep first = pipeline.push(syntheticFrame(1, 1.033));
+  pipeline.push(syntheticStreamFrame(0, 1.0));
+  SequenceStep first = pipeline.push(syntheticStreamFrame(1, 1.033));
   ASSERT_EQ(first.outcome, SequenceStep::Outcome::Solved) << first.problem;
   int highest = 0;
   for (int id : idsOf(*first.result)) highest = std::max(highest, id);
@@ -237,11 +225,11 @@ TEST(SequencePipeline, APairAfterAFailedOneContinuesNoEarlierTrack) {
   ASSERT_EQ(pipeline.tracks().size(), first.result->segments.size());
   // The failed pair is no reset: the first pair's tracks are still there, and the cold pair after it must not
   // continue them (numbered 1..m again, its segments extended the first pair's poses of ids 1..m).
-  SequenceStep failed = pipeline.push(syntheticFrame(2, 1.066));
+  SequenceStep failed = pipeline.push(syntheticStreamFrame(2, 1.066));
   ASSERT_EQ(failed.outcome, SequenceStep::Outcome::PairFailed);
   ASSERT_FALSE(failed.backend_fallback.empty());
   EXPECT_EQ(pipeline.resets(), 0);
-  expectFreshIds(pipeline, pipeline.push(syntheticFrame(3, 1.099)), highest);
+  expectFreshIds(pipeline, pipeline.push(syntheticStreamFrame(3, 1.099)), highest);
 }
 
 TEST(OffsetSegmentIds, MovesEveryIdOfAResultTogether) {

@@ -13,6 +13,7 @@
 #include "mc_flow/core/solver.h"
 #include "mc_flow/core/static_world.h"
 #include "mc_flow/testing/synthetic_scene.h"
+#include "stream_frames.h"
 
 using namespace mc_flow;
 
@@ -81,19 +82,10 @@ TEST(StaticWorld, AStreamKeepsItsWorldAndFlagsTheMovingParts) {
   // identity (the camera does not move), and the box moving at 0.3-1 m/s is flagged while the background is not.
   Config config = cpuConfig();
   SequencePipeline pipeline(config, 0, 0.5);
-  SyntheticSceneOptions o;
-  o.width = 160;
-  o.height = 120;
-  o.variant = 0;
   int world_id = -1;
   double previous_trace = -1;
   for (int t = 0; t < 4; ++t) {
-    StreamFrame f;
-    ImageU8 colour;
-    renderSyntheticFrame(o, t, f.frame, colour, f.K);
-    f.stamp = 10.0 + t / 30.0;
-    f.source = "camera";
-    const SequenceStep step = pipeline.push(std::move(f));
+    const SequenceStep step = pipeline.push(test::syntheticStreamFrame(t, 10.0 + t / 30.0));
     if (t == 0) continue;
     ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
     const Result& r = *step.result;
@@ -160,19 +152,9 @@ TEST(StaticWorld, AWarmResultKeptAfterTheEnergyCheckHasItsOwnWorld) {
   Config config = cpuConfig();
   config.warm_max_energy_ratio = 1.0;
   SequencePipeline pipeline(config, 0, 0.5);
-  SyntheticSceneOptions o;
-  o.width = 160;
-  o.height = 120;
-  o.variant = 2;
-  o.stream_events = true;
   int kept = 0;
   for (int t = 0; t < 14; ++t) {
-    StreamFrame f;
-    ImageU8 colour;
-    renderSyntheticFrame(o, t, f.frame, colour, f.K);
-    f.stamp = 10.0 + t / 30.0;
-    f.source = "camera";
-    const SequenceStep step = pipeline.push(std::move(f));
+    const SequenceStep step = pipeline.push(test::syntheticStreamFrame(t, 10.0 + t / 30.0, 2));
     if (t == 0) continue;
     ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << "pair " << t << ": " << step.problem;
     const Result& r = *step.result;

@@ -108,6 +108,10 @@ class LabelStore {
   virtual LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) = 0;
 };
 
+/// @brief H with the label-count update's relative ridge (1e-6 of its largest diagonal entry): the 6x6 solves stay
+/// defined for planar or textureless segments, whose pixels leave directions unconstrained.
+Matrix6d withRidge(const Matrix6d& H);
+
 /// @brief One pass over the level's pixels: the cost model of every motion label of `u` at `twists`.
 LabelCostModel labelCostModel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& u,
                               const ImageU8* occluded, const std::vector<Vector6d>& twists, const Config& config,

@@ -24,5 +24,7 @@ Vector6d se3Log(const Eigen::Matrix4d& T);
 Matrix6d se3LeftJacobian(const Vector6d& xi);
 /// @brief Skew-symmetric matrix of w (hat(w) x = w cross x).
 Eigen::Matrix3d skew(const Eigen::Vector3d& w);
+/// @brief Adjoint of a rigid transform T = (R, t) on twists (v, w): [[R, [t]x R], [0, R]]; T exp(d) T^-1 = exp(Ad_T d).
+Matrix6d se3Adjoint(const Eigen::Matrix4d& T);
 
 }  // namespace mc_flow
