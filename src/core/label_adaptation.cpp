@@ -126,9 +126,9 @@ double priceFor(double absolute_price, double cost_a, double cost_b, const Confi
 
 // Stream mode: merging two labels that both descend from the previous pair's segments changes the smaller one's pixels'
 // segment (and id): warm_switch_cost per unit of its support. Nothing outside a stream (no flags) or for a new label.
-double mergeSwitchingCost(const std::vector<bool>* carried, const std::vector<double>& support, int a, int b,
+double mergeSwitchingCost(const std::vector<LabelLineage>* lineage, const std::vector<double>& support, int a, int b,
                           const Config& config) {
-  if (!carried || !(*carried)[std::size_t(a)] || !(*carried)[std::size_t(b)]) return 0.0;
+  if (!lineage || !(*lineage)[std::size_t(a)].carried || !(*lineage)[std::size_t(b)].carried) return 0.0;
   return config.warm_switch_cost * std::min(support[std::size_t(a)], support[std::size_t(b)]);
 }
 
@@ -145,7 +145,7 @@ void validateRemap(const std::vector<int>& target, int old_count, int new_count)
 }
 
 AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twists, LabelCostModel& model,
-                                int valid_pixels, const Config& config, bool remove_small, std::vector<bool>* carried) {
+                                int valid_pixels, const Config& config, bool remove_small, std::vector<LabelLineage>* lineage) {
   AdaptationStats stats;
   stats.smallest_refused_merge = std::numeric_limits<double>::infinity();
   const int n0 = labels.labelCount() - 1;
@@ -156,12 +156,12 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
                      std::to_string(model.curvature.size()) + " curvatures, " + std::to_string(model.gradient.size()) +
                      " gradients and " + std::to_string(model.cost.size()) + " costs for " + std::to_string(n0) +
                      " motion labels");
-  if (carried && int(carried->size()) != n0)
-    throw InputError("adaptLabelCount: " + std::to_string(carried->size()) + " carried flags for " +
+  if (lineage && int(lineage->size()) != n0)
+    throw InputError("adaptLabelCount: " + std::to_string(lineage->size()) + " lineages for " +
                      std::to_string(n0) + " motion labels");
   const double price = labelCost(config, valid_pixels);
   std::vector<double> support = labels.supports();
-  auto switchingCost = [&](int a, int b) { return mergeSwitchingCost(carried, support, a, b, config); };
+  auto switchingCost = [&](int a, int b) { return mergeSwitchingCost(lineage, support, a, b, config); };
   // group[i]: the current label of original label i (-1: removed to the outlier label). The labels
   // themselves change once, at the end, by one remap.
   std::vector<int> group(static_cast<std::size_t>(n0));
@@ -216,9 +216,9 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
     support[std::size_t(keep)] += support[std::size_t(drop)];
     model.pixels[std::size_t(keep)] += model.pixels[std::size_t(drop)];
     model.pixels.erase(model.pixels.begin() + drop);
-    if (carried) {
-      (*carried)[std::size_t(keep)] = (*carried)[std::size_t(keep)] || (*carried)[std::size_t(drop)];
-      carried->erase(carried->begin() + drop);
+    if (lineage) {
+      (*lineage)[std::size_t(keep)] = mergedLineage((*lineage)[std::size_t(keep)], (*lineage)[std::size_t(drop)]);
+      lineage->erase(lineage->begin() + drop);
     }
     dropLabel(drop, keep);
     support.erase(support.begin() + drop);
@@ -246,7 +246,7 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
         model.gradient.erase(model.gradient.begin() + i);
         model.cost.erase(model.cost.begin() + i);
         model.pixels.erase(model.pixels.begin() + i);
-        if (carried) carried->erase(carried->begin() + i);
+        if (lineage) lineage->erase(lineage->begin() + i);
         ++stats.removed;
       }
     }
@@ -323,14 +323,14 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
 }
 
 AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vector6d>& twists, int valid_pixels,
-                                        const Config& config, std::vector<bool>* carried) {
+                                        const Config& config, std::vector<LabelLineage>* lineage) {
   AdaptationStats stats;
   const int n = int(twists.size());
   if (n != backend.labelCount() - 1)
     throw InputError("mergeOcclusionAbsorbers: " + std::to_string(n) + " twists for " +
                      std::to_string(backend.labelCount() - 1) + " motion labels");
-  if (carried && int(carried->size()) != n)
-    throw InputError("mergeOcclusionAbsorbers: " + std::to_string(carried->size()) + " carried flags for " +
+  if (lineage && int(lineage->size()) != n)
+    throw InputError("mergeOcclusionAbsorbers: " + std::to_string(lineage->size()) + " lineages for " +
                      std::to_string(n) + " motion labels");
   if (n < 2) {
     backend.updateOcclusion(twists, config);
@@ -348,10 +348,10 @@ AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vecto
   const double price = labelCost(config, valid_pixels);
   std::vector<int> target(std::size_t(n) + 1);
   std::vector<Vector6d> kept_twists;
-  std::vector<bool> kept_carried;
+  std::vector<LabelLineage> kept_lineage;
   for (int i = 0; i < n; ++i) {
     const double increase = under_host.cost[std::size_t(i)] - own.cost[std::size_t(i)];
-    if (i != host && increase + mergeSwitchingCost(carried, support, i, host, config) <
+    if (i != host && increase + mergeSwitchingCost(lineage, support, i, host, config) <
                          priceFor(price, own.cost[std::size_t(host)], own.cost[std::size_t(i)], config)) {
       target[std::size_t(i)] = -1;  // into the host, whose index is known below
       ++stats.merged;
@@ -359,21 +359,21 @@ AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vecto
     }
     target[std::size_t(i)] = int(kept_twists.size());
     kept_twists.push_back(twists[std::size_t(i)]);
-    if (carried) kept_carried.push_back((*carried)[std::size_t(i)]);
+    if (lineage) kept_lineage.push_back((*lineage)[std::size_t(i)]);
   }
   if (stats.merged == 0) return stats;
   const int into = target[std::size_t(host)];
   for (int i = 0; i < n; ++i)
     if (target[std::size_t(i)] < 0) {
       target[std::size_t(i)] = into;
-      // As a merge in adaptLabelCount: the merged label is carried if either was.
-      if (carried && (*carried)[std::size_t(i)]) kept_carried[std::size_t(into)] = true;
+      // As a merge in adaptLabelCount.
+      if (lineage) kept_lineage[std::size_t(into)] = mergedLineage(kept_lineage[std::size_t(into)], (*lineage)[std::size_t(i)]);
     }
   const int kept = int(kept_twists.size());
   target[std::size_t(n)] = kept;  // the outlier label stays last
   backend.remap(target, kept + 1);
   twists.swap(kept_twists);
-  if (carried) carried->swap(kept_carried);
+  if (lineage) lineage->swap(kept_lineage);
   backend.updateOcclusion(twists, config);  // the mask of the merged labels
   return stats;
 }
@@ -463,6 +463,21 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
   return fits;
 }
 
+LabelLineage mergedLineage(const LabelLineage& keep, const LabelLineage& drop) {
+  return keep.carried || !drop.carried ? keep : drop;
+}
+
+bool movedApartBefore(const LabelLineage& a, const LabelLineage& b, double displacement) {
+  if (!a.carried || !b.carried || displacement <= 0) return false;
+  const Eigen::Matrix4d Ta = se3Exp(a.previous_twist), Tb = se3Exp(b.previous_twist);
+  auto apart = [&](const Eigen::Vector3d& c) {
+    const Eigen::Vector3d pa = Ta.topLeftCorner<3, 3>() * c + Ta.topRightCorner<3, 1>();
+    const Eigen::Vector3d pb = Tb.topLeftCorner<3, 3>() * c + Tb.topRightCorner<3, 1>();
+    return (pa - pb).norm();
+  };
+  return std::max(apart(a.previous_centroid), apart(b.previous_centroid)) > displacement;
+}
+
 bool oneMotionExplains(const MergeEvidence& e, double own_tolerance, double noise_tolerance) {
   if (own_tolerance <= 0 || noise_tolerance <= 0) return false;
   const double noise = std::max(0.0, e.noise_per_pixel);
@@ -473,13 +488,13 @@ bool oneMotionExplains(const MergeEvidence& e, double own_tolerance, double nois
 }
 
 AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
-                                            bool use_occlusion, const Config& config, std::vector<bool>* carried) {
+                                            bool use_occlusion, const Config& config, std::vector<LabelLineage>* lineage) {
   AdaptationStats stats;
   if (int(twists.size()) != labels.labelCount() - 1)
     throw InputError("mergeWhereOneMotionExplains: " + std::to_string(twists.size()) + " twists for " +
                      std::to_string(labels.labelCount() - 1) + " motion labels");
-  if (carried && carried->size() != twists.size())
-    throw InputError("mergeWhereOneMotionExplains: " + std::to_string(carried->size()) + " carried flags for " +
+  if (lineage && lineage->size() != twists.size())
+    throw InputError("mergeWhereOneMotionExplains: " + std::to_string(lineage->size()) + " lineages for " +
                      std::to_string(twists.size()) + " motion labels");
   if (config.merge_refit_tolerance <= 0 || config.merge_refit_noise_tolerance <= 0) return stats;
   (void)valid_pixels;
@@ -499,9 +514,20 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
     const double noise = own.cost[std::size_t(widest)] / std::max(1.0, own.pixels[std::size_t(widest)]);
     // What sensor effects make a rigid thing look non-rigid grows with its extent in the image: the widest label is
     // judged with merge_refit_tolerance, two smaller ones (parts, which must stay apart when they move) with
-    // merge_refit_tolerance_parts.
+    // merge_refit_tolerance_parts. So are two labels a stream kept apart in the previous pair: they were judged apart
+    // there, and only a motion that now explains both closely undoes that.
+    auto bothCarried = [&](int a, int b) {
+      return lineage && (*lineage)[std::size_t(a)].carried && (*lineage)[std::size_t(b)].carried;
+    };
     auto ownTolerance = [&](int a, int b) {
-      return a == widest || b == widest ? config.merge_refit_tolerance : config.merge_refit_tolerance_parts;
+      return (a == widest || b == widest) && !bothCarried(a, b) ? config.merge_refit_tolerance
+                                                                : config.merge_refit_tolerance_parts;
+    };
+    // Two carried labels whose previous motions moved them apart: a part at the turn of its motion (momentarily at
+    // rest) is not merged, so it keeps its segment and id; after a pair at rest it is tested like any other.
+    auto deferred = [&](int a, int b) {
+      return lineage && movedApartBefore((*lineage)[std::size_t(a)], (*lineage)[std::size_t(b)],
+                                         config.merge_memory_displacement);
     };
     // Candidates, most alike first: the quadratic model's predicted increase against what the pair may pay. A pair
     // the model prices far beyond that (a distinct motion) is not refitted.
@@ -515,7 +541,8 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
         const double predicted = mergeCostIncrease(own.curvature[std::size_t(a)], own.curvature[std::size_t(b)],
                                                    twists[std::size_t(a)], twists[std::size_t(b)]);
         const double ratio = predicted / std::max(allowed, 1e-9);
-        if (ratio < kRefitCandidateRatio && std::find(refused.begin(), refused.end(), std::make_pair(a, b)) == refused.end())
+        if (ratio < kRefitCandidateRatio && !deferred(a, b) &&
+            std::find(refused.begin(), refused.end(), std::make_pair(a, b)) == refused.end())
           candidates.push_back({ratio, {a, b}});
       }
     if (candidates.empty()) break;
@@ -569,7 +596,7 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
       const int drop = keep == a ? b : a;
       group[std::size_t(drop)] = keep;
       merged_twists[std::size_t(keep)] = f.twist;
-      if (carried) (*carried)[std::size_t(keep)] = (*carried)[std::size_t(keep)] || (*carried)[std::size_t(drop)];
+      if (lineage) (*lineage)[std::size_t(keep)] = mergedLineage((*lineage)[std::size_t(keep)], (*lineage)[std::size_t(drop)]);
       ++merged;
     }
     if (merged == 0) continue;  // the same labels: the refused pairs stay refused, the others get their turn
@@ -577,12 +604,12 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
     own_current = false;
     std::vector<int> target(std::size_t(n) + 1);
     std::vector<Vector6d> kept_twists;
-    std::vector<bool> kept_carried;
+    std::vector<LabelLineage> kept_lineage;
     for (int i = 0; i < n; ++i) {
       if (group[std::size_t(i)] != i) continue;
       target[std::size_t(i)] = int(kept_twists.size());
       kept_twists.push_back(merged_twists[std::size_t(i)]);
-      if (carried) kept_carried.push_back((*carried)[std::size_t(i)]);
+      if (lineage) kept_lineage.push_back((*lineage)[std::size_t(i)]);
     }
     for (int i = 0; i < n; ++i)
       if (group[std::size_t(i)] != i) target[std::size_t(i)] = target[std::size_t(group[std::size_t(i)])];
@@ -590,7 +617,7 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
     target[std::size_t(n)] = kept;  // the outlier label stays last
     labels.remap(target, kept + 1);
     twists.swap(kept_twists);
-    if (carried) carried->swap(kept_carried);
+    if (lineage) lineage->swap(kept_lineage);
     stats.merged += merged;
   }
   return stats;

@@ -72,6 +72,7 @@ struct Start {
   int motion_labels = 0;
   std::vector<Vector6d> twists;
   int carried_labels = 0;  // labels 0..carried_labels-1 are the previous pair's segments (a warm start)
+  std::vector<LabelLineage> carried_lineage;  // theirs, in order
   int outer_iterations = 1;
   int label_iterations = 1, label_iterations_final = 1;  // per label step inside the loop / the final one
   int first_motion_coarsest = 0;  // the first motion step's coarsest level
@@ -347,10 +348,15 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
   for (const int h : start.hard.data)
     if (h >= 0) covered[std::size_t(h)] += 1;
   for (const int id : carried.ids) {
-    Vector6d twist = Vector6d::Zero();
+    LabelLineage lineage;
+    lineage.carried = true;
     for (const Segment& s : previous.segments)
-      if (s.id == id) twist = s.twist;
-    start.twists.push_back(twist);
+      if (s.id == id) {
+        lineage.previous_twist = s.twist;
+        lineage.previous_centroid = s.centroid;
+      }
+    start.twists.push_back(lineage.previous_twist);
+    start.carried_lineage.push_back(lineage);
   }
   const Vector6d widest = start.twists[std::size_t(std::max_element(covered.begin(), covered.end()) - covered.begin())];
   // Pixels no carried segment covers (new surfaces, parts entering the view): K-means among them alone, as
@@ -393,10 +399,11 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
   const bool occlusions = config.detect_occlusions;
   const int finest = p.finest;
   std::vector<Vector6d>& twists = start.twists;
-  // Which labels descend from the previous pair's segments (merging two of them pays warm_switch_cost).
-  std::vector<bool> carried(twists.size(), false);
-  std::fill_n(carried.begin(), std::min<std::size_t>(carried.size(), std::size_t(start.carried_labels)), true);
-  std::vector<bool>* carried_or_null = start.carried_labels > 0 ? &carried : nullptr;
+  // Which labels descend from the previous pair's segments, and those segments' motions (merging two of them pays
+  // warm_switch_cost; the merge test remembers how they moved).
+  std::vector<LabelLineage> lineage(twists.size());
+  std::copy_n(start.carried_lineage.begin(), std::min(lineage.size(), start.carried_lineage.size()), lineage.begin());
+  std::vector<LabelLineage>* lineage_or_null = start.carried_labels > 0 ? &lineage : nullptr;
   auto t = Clock::now();
 
   // ---- Algorithm 1. An outer iteration that split labels is followed by another (up to the larger of the start's
@@ -430,14 +437,14 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     // result is the same as merging one step later, but the label step then runs on a few labels, not 20.
     t = Clock::now();
     LabelCostModel early_model = labels.costModel(twists, occlusions, config);
-    const AdaptationStats early = adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false, carried_or_null);
+    const AdaptationStats early = adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false, lineage_or_null);
     stats.merged += early.merged;
     // Labels whose pixels the largest label's motion explains as well (Config::merge_occlusion_absorbers), from the
     // second outer iteration on: in the first, small labels' motions are still poor, and merging them there cost the
     // pairs with people their residuals (docs/ACCURACY.md). It leaves the occlusion mask of the labels it returns.
     const bool absorber_check = config.merge_occlusion_absorbers && occlusions && k > 0;
     if (absorber_check)
-      stats.merged += mergeOcclusionAbsorbers(labels, twists, p.valid_label_level, config, carried_or_null).merged;
+      stats.merged += mergeOcclusionAbsorbers(labels, twists, p.valid_label_level, config, lineage_or_null).merged;
     result.timings.adaptation += elapsedMs(t);
 
     // occlusion mask of the current motions (section 6)
@@ -456,18 +463,18 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     // 3. update n: merges and removals on the energy, then (while a motion step follows) splits
     t = Clock::now();
     LabelCostModel model = labels.costModel(twists, occlusions, config);
-    const AdaptationStats as = adaptLabelCount(labels, twists, model, p.valid_label_level, config, true, carried_or_null);
+    const AdaptationStats as = adaptLabelCount(labels, twists, model, p.valid_label_level, config, true, lineage_or_null);
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.smallest_refused_merge = as.smallest_refused_merge;
     // One rigid thing, one segment: pairs that one refitted motion explains within their noise merge, carried
     // segments too (no switching cost), so that a stream's splits cannot accumulate.
     const AdaptationStats explained =
-        mergeWhereOneMotionExplains(labels, twists, p.valid_label_level, occlusions, config, carried_or_null);
+        mergeWhereOneMotionExplains(labels, twists, p.valid_label_level, occlusions, config, lineage_or_null);
     stats.merged += explained.merged;
     if (k + 1 < most_outer) {
       stats.split = proposeSplits(labels, twists, occlusions, p.valid_label_level, config).split;
-      carried.resize(twists.size(), false);  // split-off halves are new segments
+      lineage.resize(twists.size());  // split-off halves are new segments
     }
     split_last = stats.split > 0;
     stats.labels_after = labels.labelCount() - 1;

@@ -32,6 +32,23 @@ struct AdaptationStats {
   double smallest_refused_merge = 0;
 };
 
+/// @brief Stream memory of one motion label: whether it descends from a segment of the previous pair, and that
+/// segment's motion over the previous interval and its centroid (the previous pair's frame 1) [m, rad]. A label that
+/// is not carried (a cold start's, K-means on uncovered pixels, a split-off half) holds no memory.
+struct LabelLineage {
+  bool carried = false;
+  Vector6d previous_twist = Vector6d::Zero();
+  Eigen::Vector3d previous_centroid = Eigen::Vector3d::Zero();
+};
+
+/// @brief The lineage of a label that keeps `keep` and absorbs `drop`: keep's, or drop's where only drop was carried.
+LabelLineage mergedLineage(const LabelLineage& keep, const LabelLineage& drop);
+
+/// @brief Whether two carried labels moved apart in the previous pair: at either one's previous centroid, their two
+/// previous motions put the point more than `displacement` [m] apart. False when either is not carried or
+/// `displacement` <= 0.
+bool movedApartBefore(const LabelLineage& a, const LabelLineage& b, double displacement);
+
 /// @brief Each motion label's data cost near its twist xi_i: E_i(xi_i + d) ~ E_i + 2 g_i^T d + d^T H_i d
 /// (Gauss-Newton on the normalised Cauchy cost, the motion step's diagonal blocks).
 struct LabelCostModel {
@@ -134,12 +151,12 @@ double labelCost(const Config& config, int valid_pixels);
 /// min_support_fraction * valid_pixels go to the outlier label. The labels change once, by one remap.
 /// Keeps the labels, twists and model consistent.
 ///
-/// `carried` (stream mode; null: a pair on its own): per motion label, whether it descends from a segment carried
-/// from the previous pair. Merging two carried labels also pays warm_switch_cost per unit of the smaller label's
-/// support (the pixels whose segment would change); the merged label is carried. Kept in step with the labels.
+/// `lineage` (stream mode; null: a pair on its own): per motion label, its LabelLineage. Merging two carried labels
+/// also pays warm_switch_cost per unit of the smaller label's support (the pixels whose segment would change); the
+/// merged label takes mergedLineage. Kept in step with the labels.
 AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twists, LabelCostModel& model,
                                 int valid_pixels, const Config& config, bool remove_small = true,
-                                std::vector<bool>* carried = nullptr);
+                                std::vector<LabelLineage>* lineage = nullptr);
 
 /// @brief Proposes to split each large label in two along its principal 3D axis, predicts the data-cost
 /// decrease of giving each half its own Gauss-Newton motion (one pass over the pixels for all
@@ -159,7 +176,7 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
 /// own (the solver runs it in place of the one before the label steps of the second and later outer iterations).
 /// Throws InputError on mismatched sizes.
 AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vector6d>& twists, int valid_pixels,
-                                        const Config& config, std::vector<bool>* carried = nullptr);
+                                        const Config& config, std::vector<LabelLineage>* lineage = nullptr);
 
 /// @brief For each group of motion labels (disjoint lists of label indices), one rigid motion for the union of their
 /// pixels: Gauss-Newton with per-group Levenberg-Marquardt backtracking from `starts` (one per group), the other labels
@@ -189,12 +206,15 @@ bool oneMotionExplains(const MergeEvidence& evidence, double own_tolerance, doub
 /// labels, most alike first (by the quadratic model), tested by
 /// refitting one motion on each pair's union (refitUnions from the better of the two motions, merge_refit_iterations
 /// steps; disjoint pairs share passes) and merged when oneMotionExplains; repeated on the merged labels until no pair
-/// merges. No switching cost: a stream's carried segments that one motion explains merge like any others. The merged
-/// label takes the refitted motion and is carried if either was. Costs 3 + merge_refit_iterations accumulator passes
+/// merges. No switching cost: a stream's carried segments that one motion explains merge like any others, with two
+/// differences that keep a stream's parts through a brief rest: two carried labels are judged with
+/// merge_refit_tolerance_parts (the stream kept them apart a pair ago), and two that movedApartBefore by
+/// merge_memory_displacement are not tested in this pair (a part merges after a pair at rest, not at the turn of its
+/// motion). The merged label takes the refitted motion and mergedLineage. Costs 3 + merge_refit_iterations accumulator passes
 /// per round (none when no pair is a candidate). Throws InputError on mismatched sizes.
 AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
                                             bool use_occlusion, const Config& config,
-                                            std::vector<bool>* carried = nullptr);
+                                            std::vector<LabelLineage>* lineage = nullptr);
 
 /// @brief A LabelStore over host soft labels at one pyramid level (the CPU backend's, and the tests').
 class HostLabelStore final : public LabelStore {
