@@ -488,7 +488,8 @@ bool oneMotionExplains(const MergeEvidence& e, double own_tolerance, double nois
 }
 
 AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
-                                            bool use_occlusion, const Config& config, std::vector<LabelLineage>* lineage) {
+                                            bool use_occlusion, const Config& config, std::vector<LabelLineage>* lineage,
+                                            const LabelCostModel* own_model) {
   AdaptationStats stats;
   if (int(twists.size()) != labels.labelCount() - 1)
     throw InputError("mergeWhereOneMotionExplains: " + std::to_string(twists.size()) + " twists for " +
@@ -503,6 +504,13 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
   std::vector<std::pair<int, int>> refused;
   LabelCostModel own;  // the labels' models under their own motions; kept while no merge changes the labels
   bool own_current = false;
+  if (own_model) {
+    if (own_model->cost.size() != twists.size() || own_model->pixels.size() != twists.size())
+      throw InputError("mergeWhereOneMotionExplains: a cost model of " + std::to_string(own_model->cost.size()) +
+                       " labels for " + std::to_string(twists.size()) + " motion labels");
+    own = *own_model;
+    own_current = true;
+  }
   for (;;) {
     const int n = int(twists.size());
     if (n < 2) break;

@@ -44,13 +44,18 @@ Rgb8 colourForId(std::uint32_t id) {
   return hsvToRgb(hue, saturation, value);
 }
 
+Rgb8 displayColour(std::uint32_t id, const std::vector<int>& world_ids) {
+  if (id != 0 && std::find(world_ids.begin(), world_ids.end(), int(id)) != world_ids.end()) return kWorldColour;
+  return colourForId(id);
+}
+
 ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
-                            double blend) {
+                            double blend, const std::vector<int>& world_ids) {
   if (labels.count < 1 || int(ids.size()) != labels.count - 1)
     throw InputError("segmentation picture: " + std::to_string(ids.size()) + " segment ids for " +
                      std::to_string(labels.count) + " label planes (expected count - 1)");
   std::vector<Rgb8> colours;
-  for (const int id : ids) colours.push_back(colourForId(std::uint32_t(std::max(id, 0))));
+  for (const int id : ids) colours.push_back(displayColour(std::uint32_t(std::max(id, 0)), world_ids));
   colours.push_back(colourForId(0));  // the outlier plane
   const bool have_image = intensity && intensity->sameSize(labels.width, labels.height);
   ImageU8 out(labels.width, labels.height, 3, 0);

@@ -110,6 +110,7 @@ PreparedFrame SequencePipeline::prepare(StreamFrame frame) const {
   out.stamp = frame.stamp;
   out.source = std::move(frame.source);
   out.extra = std::move(frame.extra);
+  out.camera_pose_prior = frame.camera_pose_prior;
   return out;
 }
 
@@ -150,14 +151,20 @@ SequenceStep SequencePipeline::push(StreamFrame input) {
   const PreparedFrame& first = *previous_frame_;
   Result result;
   try {
-    if (last_result_) {
+    // The camera's motion from the first frame to the second by the other source: the static world's prior.
+    std::optional<Eigen::Matrix4d> camera_motion;
+    if (first.camera_pose_prior && frame.camera_pose_prior)
+      camera_motion = Eigen::Matrix4d(first.camera_pose_prior->inverse() * *frame.camera_pose_prior);
+    if (camera_motion) {
+      result = solver_->solve(first.frame, frame.frame, first.K, last_result_.get(), *camera_motion);
+    } else if (last_result_) {
       result = solver_->solve(first.frame, frame.frame, first.K, *last_result_);
     } else {
-      // No prior (the first pair, after a reset or a failed pair): the solver numbers the segments 1..m; they
-      // are moved above every id handed out so far, so no earlier segment's id (track, TF frame) is reused.
       result = solver_->solve(first.frame, frame.frame, first.K);
-      offsetSegmentIds(result, next_id_);
     }
+    // No previous result (the first pair, after a reset or a failed pair): the solver numbered the segments 1..m;
+    // they are moved above every id handed out so far, so no earlier segment's id (track, TF frame) is reused.
+    if (!last_result_) offsetSegmentIds(result, next_id_);
   } catch (const BackendError& e) {
     // The GPU failed at run time: the following pairs run on the CPU.
     step.backend_fallback = std::string(e.what());

@@ -469,8 +469,10 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     stats.smallest_refused_merge = as.smallest_refused_merge;
     // One rigid thing, one segment: pairs that one refitted motion explains within their noise merge, carried
     // segments too (no switching cost), so that a stream's splits cannot accumulate.
-    const AdaptationStats explained =
-        mergeWhereOneMotionExplains(labels, twists, p.valid_label_level, occlusions, config, lineage_or_null);
+    // The update's cost model is the labels' own where it changed nothing: the merge test needs no pass for it.
+    const bool unchanged = as.merged + as.removed == 0;
+    const AdaptationStats explained = mergeWhereOneMotionExplains(labels, twists, p.valid_label_level, occlusions,
+                                                                  config, lineage_or_null, unchanged ? &model : nullptr);
     stats.merged += explained.merged;
     if (k + 1 < most_outer) {
       stats.split = proposeSplits(labels, twists, occlusions, p.valid_label_level, config).split;

@@ -269,7 +269,7 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
     out.centroid.x = s.centroid.x();
     out.centroid.y = s.centroid.y();
     out.centroid.z = s.centroid.z();
-    const Rgb8 c = colourForId(out.id);
+    const Rgb8 c = mc_flow::displayColour(out.id, result.world.ids);
     out.color.r = c.r / 255.f;
     out.color.g = c.g / 255.f;
     out.color.b = c.b / 255.f;
@@ -379,7 +379,7 @@ cv::Mat segmentationPicture(const mc_flow::Result& result, const PairContext& pa
     ids.push_back(std::size_t(c) < result.segments.size() ? result.segments[std::size_t(c)].id : 0);
   // The grey of the pixels the labels belong to: the previous frame's (the solver's intensity).
   const mc_flow::ImageF* grey = pair.previous ? &pair.previous->frame.intensity : nullptr;
-  const mc_flow::ImageU8 rgb = mc_flow::segmentationPicture(u, ids, grey, blend);
+  const mc_flow::ImageU8 rgb = mc_flow::segmentationPicture(u, ids, grey, blend, result.world.ids);
   cv::Mat picture(rgb.height, rgb.width, CV_8UC3);
   std::copy(rgb.data.begin(), rgb.data.end(), picture.data);
   return picture;
@@ -441,7 +441,7 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
     // Segment colours: a palette look-up per pixel cost more than the rest of the point (fmod, lround); the
     // pixels of a segment come in runs, so the last id's colour is kept.
     std::uint32_t cached_id = 0;
-    std::uint32_t cached_rgb = packedColour(colourForId(0));
+    std::uint32_t cached_rgb = packedColour(mc_flow::colourForId(0));
     std::uint8_t* point = data + std::size_t(y) * std::size_t(cloud->row_step);
     for (int x = 0; x < result.width; ++x, point += step) {
       const float z = have_depth ? first->frame.depth(x, y) : nan;
@@ -463,7 +463,7 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
       } else {
         if (id != cached_id) {
           cached_id = id;
-          cached_rgb = packedColour(colourForId(id));
+          cached_rgb = packedColour(mc_flow::displayColour(id, result.world.ids));
         }
         packed = cached_rgb;
       }
@@ -504,11 +504,15 @@ visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result,
   clear.action = visualization_msgs::Marker::DELETEALL;
   markers.markers.push_back(clear);
   const double dt = pair.interval();
+  // With the static world known, arrows show what moves in the world, at its world-relative velocity; the world and
+  // what rests in it get none. Without it, every segment's motion relative to the camera.
+  const bool world_known = pair.world && pair.world->size() == result.segments.size() && result.world.found;
   for (std::size_t i = 0; i < result.segments.size(); ++i) {
     const mc_flow::Segment& s = result.segments[i];
+    if (world_known && !(*pair.world)[i].moving) continue;
     const std::uint32_t id = std::uint32_t(result.segments[i].id);
     const Rgb8 c = colourForId(id);
-    const Eigen::Vector3d velocity = centroidVelocity(s, dt);
+    const Eigen::Vector3d velocity = world_known ? (*pair.world)[i].linear : centroidVelocity(s, dt);
     const Eigen::Vector3d tip = s.centroid + velocity * seconds_ahead;
 
     visualization_msgs::Marker arrow;
@@ -549,6 +553,28 @@ visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result,
     markers.markers.push_back(text);
   }
   return markers;
+}
+
+nav_msgs::Path makeCameraPath(const std::deque<Eigen::Matrix4d>& poses, const std_msgs::Header& header) {
+  nav_msgs::Path path;
+  path.header = header;
+  if (poses.empty()) return path;
+  const Eigen::Matrix4d now_from_odom = poses.back().inverse();
+  for (const Eigen::Matrix4d& pose : poses) {
+    const Eigen::Matrix4d in_now = now_from_odom * pose;
+    const Eigen::Quaterniond q(Eigen::Matrix3d(in_now.topLeftCorner<3, 3>()));
+    geometry_msgs::PoseStamped p;
+    p.header = header;
+    p.pose.position.x = in_now(0, 3);
+    p.pose.position.y = in_now(1, 3);
+    p.pose.position.z = in_now(2, 3);
+    p.pose.orientation.x = q.x();
+    p.pose.orientation.y = q.y();
+    p.pose.orientation.z = q.z();
+    p.pose.orientation.w = q.w();
+    path.poses.push_back(p);
+  }
+  return path;
 }
 
 }  // namespace mc_flow_ros

@@ -96,7 +96,7 @@ void MCFlowNodelet::onInit() {
   updater_->add("MC-Flow", this, &MCFlowNodelet::diagnose);
 
   if (params_.publish_tf || params_.publish_odom_tf) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
-  if (!params_.base_frame.empty()) {
+  if (!params_.base_frame.empty() || !params_.prior_frame.empty()) {
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_);
   }
@@ -117,6 +117,7 @@ void MCFlowNodelet::onInit() {
     markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("motion_markers", 1, connect, connect);
     info_pub_ = pnh_.advertise<sensor_msgs::CameraInfo>("camera_info", 1, connect, connect);
     odom_pub_ = pnh_.advertise<nav_msgs::Odometry>("odom", 5, connect, connect);
+    camera_path_pub_ = pnh_.advertise<nav_msgs::Path>("camera_path", 1, connect, connect);
     moving_mask_pub_ = it_out_->advertise("moving_mask", 1, image_connect, image_connect);
   }
   logStartup();
@@ -204,6 +205,7 @@ void MCFlowNodelet::readParameters() {
   pnh_.param("odom_frame", params_.odom_frame, params_.odom_frame);
   pnh_.param("base_frame", params_.base_frame, params_.base_frame);
   pnh_.param("publish_odom_tf", params_.publish_odom_tf, params_.publish_odom_tf);
+  pnh_.param("prior_frame", params_.prior_frame, params_.prior_frame);
   pnh_.param("cloud_colour", params_.cloud_colour, params_.cloud_colour);
   const std::string& cloud_colour = params_.cloud_colour;
   pnh_.param("marker_seconds_ahead", params_.marker_seconds_ahead, params_.marker_seconds_ahead);
@@ -215,6 +217,9 @@ void MCFlowNodelet::readParameters() {
     NODELET_WARN("publish_odom_tf without base_frame broadcasts %s -> the camera's optical frame, which usually has a "
                  "parent in the camera's TF tree already: set base_frame to the robot's base frame",
                  params_.odom_frame.c_str());
+  if (!params_.prior_frame.empty() && params_.prior_frame == params_.odom_frame && params_.publish_odom_tf)
+    NODELET_WARN("prior_frame '%s' is the odom_frame this node broadcasts: its own odometry would be its prior; set "
+                 "prior_frame to another source's frame", params_.prior_frame.c_str());
   if (params_.downsample < 0 || (params_.downsample & (params_.downsample - 1)) != 0) {
     NODELET_WARN("downsample %d is not 0 (automatic) or a power of two; using 0", params_.downsample);
     params_.downsample = 0;
@@ -255,7 +260,7 @@ void MCFlowNodelet::logStartup() {
     << ", " << depth_topic_ << ", " << info_topic_ << " (image_transport, parameter image_transport selects the transport)\n"
     << "  outputs: " << segments_pub_.getTopic() << ", " << soft_labels_pub_.getTopic() << ", " << labels_pub_.getTopic()
     << ", " << segmentation_pub_.getTopic() << ", " << occlusion_pub_.getTopic() << ", " << cloud_pub_.getTopic()
-    << ", " << markers_pub_.getTopic() << ", " << info_pub_.getTopic() << ", " << odom_pub_.getTopic() << ", "
+    << ", " << markers_pub_.getTopic() << ", " << info_pub_.getTopic() << ", " << odom_pub_.getTopic() << ", " << camera_path_pub_.getTopic() << ", "
     << moving_mask_pub_.getTopic() << (params_.publish_tf || params_.publish_odom_tf ? ", /tf" : "") << "\n"
     << "  node parameters: queue_size=" << params_.queue_size << " max_input_pixels=" << params_.max_input_pixels << " approximate_sync=" << params_.approximate_sync
     << " approximate_sync_max_interval=" << params_.approximate_sync_max_interval << " s downsample=" << params_.downsample
@@ -263,7 +268,7 @@ void MCFlowNodelet::logStartup() {
     << " s max_pair_interval=" << params_.max_pair_interval << " s no_input_warning_after=" << params_.no_input_warning_after
     << " s publish_tf=" << params_.publish_tf << " segment_frame_prefix=" << params_.segment_frame_prefix
     << " odom_frame=" << params_.odom_frame << " base_frame='" << params_.base_frame
-    << "' publish_odom_tf=" << params_.publish_odom_tf
+    << "' publish_odom_tf=" << params_.publish_odom_tf << " prior_frame='" << params_.prior_frame << "'"
     << " cloud_colour=" << (cloud_colour_ == CloudColour::Image ? "image" : "segment")
     << " marker_seconds_ahead=" << params_.marker_seconds_ahead << " s segmentation_blend=" << params_.segmentation_blend
     << " print_summary=" << params_.print_summary << " save_dir='"
@@ -281,7 +286,8 @@ bool MCFlowNodelet::anyListener() const {
          segmentation_pub_.getNumSubscribers() > 0 || occlusion_pub_.getNumSubscribers() > 0 ||
          segments_pub_.getNumSubscribers() > 0 || cloud_pub_.getNumSubscribers() > 0 ||
          markers_pub_.getNumSubscribers() > 0 || info_pub_.getNumSubscribers() > 0 ||
-         odom_pub_.getNumSubscribers() > 0 || moving_mask_pub_.getNumSubscribers() > 0;
+         odom_pub_.getNumSubscribers() > 0 || moving_mask_pub_.getNumSubscribers() > 0 ||
+         camera_path_pub_.getNumSubscribers() > 0;
 }
 
 void MCFlowNodelet::connectCb() {
@@ -446,6 +452,7 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   frame.K = current.K;
   frame.stamp = current.header.stamp.toSec();
   frame.source = current.header.frame_id;
+  frame.camera_pose_prior = cameraPosePrior(current.header);
   const ros::Time stamp = current.header.stamp;
   frame.extra = std::move(current);
   const ros::WallTime start = ros::WallTime::now();
@@ -565,7 +572,24 @@ void MCFlowNodelet::publish(const mc_flow::Result& result, const PairContext& pa
   }
   if (params_.publish_tf) publishTf(result, pair);
   if (odom_pub_.getNumSubscribers() > 0 || params_.publish_odom_tf) publishOdometry(pair);
+  camera_poses_.push_back(pipeline_->odometry().pose);
+  if (camera_poses_.size() > kCameraPathPoses) camera_poses_.pop_front();
+  if (camera_path_pub_.getNumSubscribers() > 0) camera_path_pub_.publish(makeCameraPath(camera_poses_, pair.header));
   if (params_.print_summary || !params_.save_dir.empty()) saveAndSummarise(result, pair, segmentation);
+}
+
+std::optional<Eigen::Matrix4d> MCFlowNodelet::cameraPosePrior(const std_msgs::Header& header) {
+  if (params_.prior_frame.empty()) return std::nullopt;
+  try {
+    // A short wait: the other source's TF usually arrives within a few milliseconds of the images.
+    return tf2::transformToEigen(
+               tf_buffer_->lookupTransform(params_.prior_frame, header.frame_id, header.stamp, ros::Duration(0.02)))
+        .matrix();
+  } catch (const tf2::TransformException& e) {
+    warnThrottled("prior", "no static-world prior for frame " + stampText(header.stamp) + ": no transform from " +
+                               "prior_frame '" + params_.prior_frame + "' to '" + header.frame_id + "': " + e.what());
+    return std::nullopt;
+  }
 }
 
 void MCFlowNodelet::publishOdometry(const PairContext& pair) {
@@ -800,6 +824,7 @@ std::vector<std::pair<std::string, std::string>> NodeParameters::defaults() {
           {"odom_frame", d.odom_frame},
           {"base_frame", d.base_frame},
           {"publish_odom_tf", flag(d.publish_odom_tf)},
+          {"prior_frame", d.prior_frame},
           {"cloud_colour", d.cloud_colour},
           {"marker_seconds_ahead", text(d.marker_seconds_ahead)},
           {"segmentation_blend", text(d.segmentation_blend)},

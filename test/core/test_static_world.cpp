@@ -114,6 +114,33 @@ TEST(StaticWorld, AStreamKeepsItsWorldAndFlagsTheMovingParts) {
   }
 }
 
+TEST(StaticWorld, ThePipelinePassesTheCameraMotionBetweenTwoFramesPosesAsThePrior) {
+  // The synthetic stream's camera stands still: poses from another source that say so make the background the world by
+  // the prior; a pair whose second frame has no pose, or poses that disagree with the images by 10 cm, fall back.
+  SequencePipeline pipeline(cpuConfig(), 0, 0.5);
+  const Eigen::Matrix4d mount = se3Exp((Vector6d() << 0.5, -0.2, 1.0, 0.1, 0.3, -0.2).finished());  // any fixed pose
+  auto frame = [&](int t, bool with_pose, double off_x = 0) {
+    StreamFrame f = test::syntheticStreamFrame(t, 10.0 + t / 30.0);
+    if (with_pose) {
+      Eigen::Matrix4d camera = Eigen::Matrix4d::Identity();
+      camera(0, 3) = off_x;
+      f.camera_pose_prior = mount * camera;
+    }
+    return f;
+  };
+  EXPECT_EQ(pipeline.push(frame(0, true)).outcome, SequenceStep::Outcome::Started);
+  SequenceStep step = pipeline.push(frame(1, true));
+  ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
+  EXPECT_EQ(step.result->world.chosen_by, "prior");
+  step = pipeline.push(frame(2, false));
+  ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
+  EXPECT_EQ(step.result->world.chosen_by, "previous");
+  pipeline.push(frame(3, true));  // the pair (2, 3): frame 2 has no pose
+  step = pipeline.push(frame(4, true, 0.10));  // the camera "moved" 10 cm by the other source
+  ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
+  EXPECT_NE(step.result->world.chosen_by, "prior");
+}
+
 TEST(StaticWorld, WorldVelocityIsTheMotionRelativeToTheWorldAtTheCentroid) {
   StaticWorld world;
   world.twist << 0.01, 0, 0, 0, 0, 0;  // the camera moved 1 cm along -x: the world's points moved +1 cm

@@ -412,6 +412,56 @@ TEST(Conversions, MotionMarkersClearThenOneArrowAndTextPerSegment) {
   EXPECT_GT(v.x(), 0.15);
 }
 
+// With the static world known (segment 7 the world, 9 moving at 0.3 m/s in it): one arrow, for the moving segment, along
+// its world-relative velocity; the world gets none, and it is drawn in the world's one colour in the pictures.
+TEST(Conversions, WithTheWorldKnownOnlyMovingSegmentsGetArrowsAndTheWorldItsOwnColour) {
+  Fixture f = makeFixture();
+  f.result.world.found = true;
+  f.result.world.ids = {7};
+  std::vector<mc_flow::WorldVelocity> world(2);
+  world[1].linear = Eigen::Vector3d(0, 0.3, 0);
+  world[1].moving = true;
+  f.pair.world = &world;
+  const auto markers = mc_flow_ros::makeMotionMarkers(f.result, f.pair, 1.0);
+  ASSERT_EQ(markers.markers.size(), 1u + 2u);
+  const auto& arrow = markers.markers[1];
+  EXPECT_EQ(arrow.id, 9);
+  ASSERT_EQ(arrow.points.size(), 2u);
+  EXPECT_NEAR(arrow.points[1].y - arrow.points[0].y, 0.3, 1e-9);
+  EXPECT_NEAR(arrow.points[1].x - arrow.points[0].x, 0.0, 1e-9);
+  world[1].moving = false;  // nothing moves: no arrow at all
+  EXPECT_EQ(mc_flow_ros::makeMotionMarkers(f.result, f.pair, 1.0).markers.size(), 1u);
+
+  const mc_flow::SegmentArray msg = mc_flow_ros::makeSegmentArray(f.result, f.pair);
+  EXPECT_NEAR(msg.segments[0].color.r, mc_flow::kWorldColour.r / 255.f, 1e-6);
+  EXPECT_NEAR(msg.segments[1].color.r, mc_flow::colourForId(9).r / 255.f, 1e-6);
+  const cv::Mat picture = mc_flow_ros::segmentationPicture(f.result, f.pair, 1.0);
+  // Pixel (1, 1): 0.75 of segment 7 (the world) and 0.25 of the outlier label's grey.
+  const cv::Vec3b p = picture.at<cv::Vec3b>(1, 1);
+  EXPECT_NEAR(p[0], 0.75 * mc_flow::kWorldColour.r + 0.25 * mc_flow::colourForId(0).r, 1.0);
+  EXPECT_NEAR(p[2], 0.75 * mc_flow::kWorldColour.b + 0.25 * mc_flow::colourForId(0).b, 1.0);
+}
+
+// ~camera_path: the poses in the latest one's frame: the latest is the identity, an earlier one where the camera was.
+TEST(Conversions, CameraPathIsThePosesInTheLatestCameraFrame) {
+  std::deque<Eigen::Matrix4d> poses;
+  Eigen::Matrix4d a = Eigen::Matrix4d::Identity(), b = Eigen::Matrix4d::Identity();
+  b.topLeftCorner<3, 3>() = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  b.topRightCorner<3, 1>() = Eigen::Vector3d(1, 0, 0);
+  poses = {a, b};
+  std_msgs::Header header;
+  header.frame_id = "camera_rgb_optical_frame";
+  const nav_msgs::Path path = mc_flow_ros::makeCameraPath(poses, header);
+  ASSERT_EQ(path.poses.size(), 2u);
+  EXPECT_EQ(path.header.frame_id, "camera_rgb_optical_frame");
+  EXPECT_NEAR(path.poses[1].pose.position.x, 0.0, 1e-12);
+  EXPECT_NEAR(path.poses[1].pose.orientation.w, 1.0, 1e-12);
+  // The first pose in b's frame: b^-1 a, at b^-1 (0, 0, 0) = -R^T (1, 0, 0) = (0, 0, -1) for a quarter turn about y.
+  EXPECT_NEAR(path.poses[0].pose.position.x, 0.0, 1e-12);
+  EXPECT_NEAR(path.poses[0].pose.position.z, -1.0, 1e-12);
+  EXPECT_TRUE(mc_flow_ros::makeCameraPath({}, header).poses.empty());
+}
+
 // ~odom: the base's pose M C M^-1 (it starts at the identity of the odom frame), the twist in the child frame, and the
 // pose covariance as nav_msgs/Odometry means it (position and rotation errors in the odom frame): a heading
 // uncertainty far from the origin must not turn into a position uncertainty (no lever arm about the odom origin).

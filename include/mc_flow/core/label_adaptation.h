@@ -210,11 +210,13 @@ bool oneMotionExplains(const MergeEvidence& evidence, double own_tolerance, doub
 /// differences that keep a stream's parts through a brief rest: two carried labels are judged with
 /// merge_refit_tolerance_parts (the stream kept them apart a pair ago), and two that movedApartBefore by
 /// merge_memory_displacement are not tested in this pair (a part merges after a pair at rest, not at the turn of its
-/// motion). The merged label takes the refitted motion and mergedLineage. Costs 3 + merge_refit_iterations accumulator passes
-/// per round (none when no pair is a candidate). Throws InputError on mismatched sizes.
+/// motion). The merged label takes the refitted motion and mergedLineage. Costs one accumulator pass for the labels'
+/// own costs (none when `own_model`, the labels' LabelStore::costModel under `twists`, is given) and 2 +
+/// merge_refit_iterations per round. Throws InputError on mismatched sizes.
 AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
                                             bool use_occlusion, const Config& config,
-                                            std::vector<LabelLineage>* lineage = nullptr);
+                                            std::vector<LabelLineage>* lineage = nullptr,
+                                            const LabelCostModel* own_model = nullptr);
 
 /// @brief A LabelStore over host soft labels at one pyramid level (the CPU backend's, and the tests').
 class HostLabelStore final : public LabelStore {

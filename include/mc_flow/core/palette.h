@@ -21,12 +21,19 @@ struct Rgb8 {
 /// (outlier / no depth) is dark grey.
 Rgb8 colourForId(std::uint32_t id);
 
+/// @brief The static world's display colour: every world segment alike (a pale steel blue, so that what moves stands
+/// out in its own hue).
+inline constexpr Rgb8 kWorldColour{150, 170, 190};
+
+/// @brief kWorldColour for an id of `world_ids`, else colourForId(id).
+Rgb8 displayColour(std::uint32_t id, const std::vector<int>& world_ids);
+
 /// @brief The segmentation picture (3 channels, RGB): per pixel the segment colours weighted by the soft labels
-/// (plane i in colourForId(ids[i]), the outlier plane in id 0's grey), mixed `blend` colour / (1 - blend) image
-/// grey (`intensity` in [0, 1]; mid grey where it is null or of another size). `ids` holds labels.count - 1 ids.
+/// (plane i in displayColour(ids[i], world_ids), the outlier plane in id 0's grey), mixed `blend` colour / (1 - blend)
+/// image grey (`intensity` in [0, 1]; mid grey where it is null or of another size). `ids` holds labels.count - 1 ids.
 /// Throws InputError naming the counts when they do not fit. The one renderer of the CLI's and the nodelet's
 /// pictures.
 ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
-                            double blend);
+                            double blend, const std::vector<int>& world_ids = {});
 
 }  // namespace mc_flow

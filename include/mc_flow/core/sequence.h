@@ -48,6 +48,10 @@ struct StreamFrame {
   double stamp = 0;     ///< [s]
   std::string source;   ///< camera / frame id: a change starts a new sequence
   std::any extra;       ///< the caller's data carried with the frame (e.g. a display image)
+  /// The camera's optical frame in another source's odometry frame at `stamp` (e.g. wheel odometry through TF). When
+  /// both frames of a pair have one, the camera's motion between them is the static world's prior
+  /// (estimateStaticWorld: the segments it explains are the world).
+  std::optional<Eigen::Matrix4d> camera_pose_prior;
 };
 
 /// @brief A frame as the solver sees it: at the processing resolution.
@@ -59,6 +63,7 @@ struct PreparedFrame {
   int downsample = 1;                  ///< input pixels per processing pixel (per axis)
   int input_width = 0, input_height = 0;
   std::any extra;
+  std::optional<Eigen::Matrix4d> camera_pose_prior;
 };
 
 /// @brief A segment's motion accumulated since it appeared (camera frame of its first pair's frame 1).

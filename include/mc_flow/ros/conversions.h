@@ -9,6 +9,7 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <map>
 #include <string>
 #include <vector>
@@ -21,6 +22,7 @@
 #include <Eigen/Geometry>
 #include <geometry_msgs/TransformStamped.h>
 #include <nav_msgs/Odometry.h>
+#include <nav_msgs/Path.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include "mc_flow/SegmentArray.h"
@@ -87,6 +89,11 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
 /// twist and its covariance in child_frame (REP 105, nav_msgs/Odometry's conventions).
 nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Time& stamp, const std::string& odom_frame,
                                 const std::string& child_frame, const Eigen::Isometry3d& base_from_camera);
+
+/// @brief ~camera_path (for display): the camera's poses `poses` (mc_flow::Odometry::pose of each pair, oldest first)
+/// expressed in its latest one, in `header`'s frame (the colour camera's optical frame now): where the camera came from,
+/// drawn in rviz without any TF. ~odom is the odometry itself.
+nav_msgs::Path makeCameraPath(const std::deque<Eigen::Matrix4d>& poses, const std_msgs::Header& header);
 
 /// @brief ~moving_mask: mono8, 255 = a pixel of a segment that moves relative to the static world.
 sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result, const std::vector<mc_flow::WorldVelocity>& world,

@@ -83,6 +83,9 @@ class MCFlowNodelet : public nodelet::Nodelet {
   void publishTf(const mc_flow::Result& result, const PairContext& pair);
   // ~odom and the odom -> base TF (publish_odom_tf) from the pipeline's odometry, through the camera's mount.
   void publishOdometry(const PairContext& pair);
+  // The camera's pose in prior_frame at the header's stamp (TF), or none (no prior_frame, or no transform: a throttled
+  // warning).
+  std::optional<Eigen::Matrix4d> cameraPosePrior(const std_msgs::Header& header);
   void saveAndSummarise(const mc_flow::Result& result, const PairContext& pair, const cv::Mat& segmentation);
   void timerCb(const ros::WallTimerEvent& event);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
@@ -109,7 +112,10 @@ class MCFlowNodelet : public nodelet::Nodelet {
   std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_ptr_;
   std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_ptr_;
   image_transport::Publisher soft_labels_pub_, labels_pub_, segmentation_pub_, occlusion_pub_, moving_mask_pub_;
-  ros::Publisher segments_pub_, cloud_pub_, markers_pub_, info_pub_, odom_pub_;
+  ros::Publisher segments_pub_, cloud_pub_, markers_pub_, info_pub_, odom_pub_, camera_path_pub_;
+  // ~camera_path: the camera's last poses (10 s at 30 Hz), oldest first.
+  static constexpr std::size_t kCameraPathPoses = 300;
+  std::deque<Eigen::Matrix4d> camera_poses_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;  // the camera's mount (base_frame set)
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;

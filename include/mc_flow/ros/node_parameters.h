@@ -28,6 +28,8 @@ struct NodeParameters {
   std::string odom_frame = "odom";              ///< ~odom's frame (REP 105): the camera's first pose
   std::string base_frame;                       ///< ~odom's child frame; "" = the colour camera's optical frame
   bool publish_odom_tf = false;                 ///< broadcast odom_frame -> base_frame (off when another node owns it)
+  std::string prior_frame;                      ///< another odometry's fixed frame: TF prior_frame -> camera gives the
+                                                ///< static world's prior per pair; "" = no prior
   std::string cloud_colour = "segment";         ///< rgb of ~scene_flow: segment or image
   double marker_seconds_ahead = 1.0;            ///< [s] length of the motion arrows in time
   double segmentation_blend = 0.6;              ///< weight of the segment colours over the image in ~segmentation
