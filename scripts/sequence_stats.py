@@ -12,7 +12,9 @@ segment: support in pixels). Needs no ground truth, so it works for any bag or f
   - new ids: ids first seen after pair 0, per pair; distinct: ids over the whole run;
   - bg changes: how often the id of the largest segment (the background in the synthetic scenes) changes;
   - segments: per pair, the share of pairs with one segment, the median and the largest count, and the mean count
-    of the last third of the pairs against the first third (drift: a stream that accumulates segments grows).
+    of the last third of the pairs against the first third (drift: a stream that accumulates segments grows);
+  - rmseI / rmseZ: the mean over pairs of how well each pair's flow explains frame 2 (run-seq's residuals: frame 2
+    warped back, intensity in [0, 1] and depth in mm, every pixel with depth that stays in view).
 With ground truth (OUT_DIR/pair_NNNN/eval.json from `mcflow eval --result OUT_DIR/pair_NNNN --gt GT/pair_NNNN`, e.g.
 GT = `mcflow synth --frames N --no-events` for the demo bag), also mcflow_bench_stream's measures:
   - EPE: mean optical-flow end-point error [px] over all pairs (non-occluded pixels);
@@ -68,6 +70,7 @@ def summarise(folder):
                     kept_parts += previous_ids[part] == i
         previous_ids = ids
     counts = [len(p["ids"]) for p in pairs]
+    residuals = [(p["rmse_intensity"], p["rmse_depth_m"]) for p in pairs if "rmse_intensity" in p]
     third = max(1, len(counts) // 3)
     return {
         "one_segment": sum(1 for c in counts if c == 1) / max(len(counts), 1),
@@ -76,6 +79,8 @@ def summarise(folder):
         "segments_first": statistics.mean(counts[:third]) if counts else float("nan"),
         "segments_last": statistics.mean(counts[-third:]) if counts else float("nan"),
         "epe": statistics.mean(epe) if epe else None,
+        "rmse_i": statistics.mean(r[0] for r in residuals) if residuals else None,
+        "rmse_z_mm": 1000 * statistics.mean(r[1] for r in residuals) if residuals else None,
         "id_keep": kept_parts / judged if epe and judged else None,
         "folder": folder,
         "pairs": len(pairs),
@@ -96,8 +101,8 @@ def main(argv):
         print(__doc__.strip())
         return 0 if len(argv) >= 2 else 2
     print("| run | pairs | warm / cold / fallbacks | ms/pair mean (median), pairs 2.. | kept | new ids/pair | distinct ids "
-          "| bg changes | segments: 1-seg share, median, max, first -> last third | EPE px | id_keep |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "| bg changes | segments: 1-seg share, median, max, first -> last third | rmseI / rmseZ mm | EPE px | id_keep |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for folder in argv[1:]:
         try:
             r = summarise(folder)
@@ -105,10 +110,11 @@ def main(argv):
             print("sequence_stats.py: %s: %s" % (folder, e), file=sys.stderr)
             return 1
         truth = lambda v, f: "-" if v is None else f % v  # noqa: E731 (no eval.json: no ground truth)
-        print("| %s | %d | %d / %d / %d | %.1f (%.1f) | %.3f | %.2f | %d | %d | %.2f, %g, %d, %.1f -> %.1f | %s | %s |" % (
+        residual = "-" if r["rmse_i"] is None else "%.4f / %.2f" % (r["rmse_i"], r["rmse_z_mm"])
+        print("| %s | %d | %d / %d / %d | %.1f (%.1f) | %.3f | %.2f | %d | %d | %.2f, %g, %d, %.1f -> %.1f | %s | %s | %s |" % (
             r["folder"], r["pairs"], r["warm"], r["cold"], r["fallbacks"], r["ms_mean"], r["ms_median"], r["kept"],
             r["new_per_pair"], r["distinct"], r["bg_changes"], r["one_segment"], r["segments_median"],
-            r["segments_max"], r["segments_first"], r["segments_last"], truth(r["epe"], "%.4f"),
+            r["segments_max"], r["segments_first"], r["segments_last"], residual, truth(r["epe"], "%.4f"),
             truth(r["id_keep"], "%.3f")))
     return 0
 

@@ -29,6 +29,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/testing/metrics.h"
 #include "mc_flow/testing/synthetic_scene.h"
 #include "mc_flow/io/benchmark.h"
 #include "mc_flow/io/camera_info.h"
@@ -631,7 +632,11 @@ int cmdRunSeq(const Arguments& args) {
       log << (k ? ", " : "") << "[" << r.merged_ids[k].first << ", " << r.merged_ids[k].second << "]";
     log << "], \"ended\": [";
     for (std::size_t k = 0; k < r.ended_ids.size(); ++k) log << (k ? ", " : "") << r.ended_ids[k];
-    log << "]}";
+    // How well the pair's flow explains frame 2 (Table 1's residuals; every pixel with depth that stays in view, so
+    // that runs with other settings are scored on the same pixels).
+    const ResidualRmse residual =
+        warpResidualRmse(step.first->frame, step.second->frame, step.first->K, &r.scene_flow, nullptr);
+    log << "], \"rmse_intensity\": " << residual.photometric << ", \"rmse_depth_m\": " << residual.geometric << "}";
     // Progress bar: pairs done of the frames' pairs, mean time per pair.
     const int width = 30, done = int((i * width) / (source.count - 1));
     std::fprintf(stderr, "\rmcflow: [%s%s] %d/%zu pairs, %.0f ms/pair (%s)   ", std::string(std::size_t(done), '#').c_str(),
