@@ -3,9 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <iterator>
+#include <string>
 #include <tuple>
 #include <unordered_map>
 #include <vector>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Geometry>
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/sampling.h"
@@ -31,6 +36,28 @@ void requireChannels(const char* what, const char* name, const Image<T>& im, int
 }
 
 inline bool isExcluded(const ImageU8* excluded, std::size_t k) { return excluded && excluded->data[k] != 0; }
+
+double rotationDeg(const Eigen::Matrix4d& T) {
+  const double c = std::clamp((T.topLeftCorner<3, 3>().trace() - 1.0) / 2.0, -1.0, 1.0);
+  return std::acos(c) * kRadToDeg;
+}
+
+Eigen::Matrix4d relative(const Eigen::Matrix4d& a, const Eigen::Matrix4d& b) { return a.inverse() * b; }
+
+// P(dof / 2, x / 2), the chi-square CDF, by the series of the regularised lower incomplete gamma function
+// P(a, z) = z^a e^-z / Gamma(a + 1) * sum_n z^n / ((a + 1) ... (a + n)), in logs so that large dof do not overflow.
+double chiSquareCdf(double dof, double x) {
+  if (!(x > 0)) return 0.0;
+  const double a = 0.5 * dof, z = 0.5 * x;
+  double term = 1.0, sum = 1.0;
+  for (int n = 1; n < 1000000; ++n) {
+    term *= z / (a + n);
+    sum += term;
+    if (!std::isfinite(sum)) return 1.0;  // z far above a: the CDF is 1 to double precision
+    if (term < sum * 1e-16) break;
+  }
+  return std::min(1.0, std::exp(a * std::log(z) - z - std::lgamma(a + 1.0) + std::log(sum)));
+}
 
 }  // namespace
 
@@ -173,6 +200,117 @@ double maskAgreement(const ImageU8& a, const ImageU8& b, const ImageU8* valid) {
     agree += (a.data[k] != 0) == (b.data[k] != 0) ? 1 : 0;
   }
   return total > 0 ? double(agree) / double(total) : 0.0;
+}
+
+double maskIou(const ImageU8& a, const ImageU8& b, const ImageU8* valid) {
+  requireSameSize("maskIou", "a", a, "b", b);
+  if (valid) requireSameSize("maskIou", "a", a, "valid mask", *valid);
+  std::size_t both = 0, either = 0;
+  const std::size_t n = a.pixelCount();
+  for (std::size_t k = 0; k < n; ++k) {
+    if (valid && valid->data[k] == 0) continue;
+    const bool in_a = a.data[k] != 0, in_b = b.data[k] != 0;
+    both += in_a && in_b;
+    either += in_a || in_b;
+  }
+  return either > 0 ? double(both) / double(either) : 1.0;
+}
+
+RegionOverlap regionOverlap(const ImageI32& labels, const std::vector<int>& ids, const ImageI32& truth, int truth_id,
+                            const ImageU8* valid) {
+  requireSameSize("regionOverlap", "labels", labels, "truth", truth);
+  if (valid) requireSameSize("regionOverlap", "labels", labels, "valid mask", *valid);
+  RegionOverlap o;
+  const std::size_t n = labels.pixelCount();
+  for (std::size_t k = 0; k < n; ++k) {
+    if (valid && valid->data[k] == 0) continue;
+    const bool in_estimate = std::find(ids.begin(), ids.end(), labels.data[k]) != ids.end();
+    const bool in_truth = truth.data[k] == truth_id;
+    o.estimate += in_estimate;
+    o.truth += in_truth;
+    o.common += in_estimate && in_truth;
+  }
+  return o;
+}
+
+double nees(const Vector6d& error, const Matrix6d& covariance) {
+  return error.dot(covariance.ldlt().solve(error));
+}
+
+double chiSquareQuantile(double dof, double probability) {
+  if (!(dof > 0) || !(probability > 0 && probability < 1))
+    throw InputError("chiSquareQuantile: needs dof > 0 and 0 < probability < 1, got dof " + std::to_string(dof) +
+                     ", probability " + std::to_string(probability));
+  // The CDF rises monotonically; the quantile lies below dof + 40 sqrt(2 dof) + 100 for every probability a double
+  // distinguishes from 1.
+  double lo = 0, hi = dof + 40.0 * std::sqrt(2.0 * dof) + 100.0;
+  while (hi - lo > 1e-10 * hi) {
+    const double mid = 0.5 * (lo + hi);
+    (chiSquareCdf(dof, mid) < probability ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+TrajectoryErrors evaluateTrajectory(const StampedPoses& ground_truth, const StampedPoses& estimate,
+                                    double max_difference, double time_offset) {
+  if (!(max_difference >= 0)) throw InputError("max difference must be >= 0 s, got " + std::to_string(max_difference));
+  StampedPoses gt = ground_truth;
+  std::sort(gt.begin(), gt.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<std::pair<Eigen::Matrix4d, Eigen::Matrix4d>> matched;  // (ground truth, estimate)
+  std::vector<double> stamps;
+  StampedPoses est = estimate;  // in time order: the RPE pairs consecutive and one-second-apart poses
+  std::stable_sort(est.begin(), est.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& [stamp, pose] : est) {
+    const double t = stamp + time_offset;
+    auto it = std::lower_bound(gt.begin(), gt.end(), t, [](const auto& a, double v) { return a.first < v; });
+    const auto* best = it != gt.end() ? &*it : nullptr;
+    if (it != gt.begin() && (!best || t - std::prev(it)->first < best->first - t)) best = &*std::prev(it);
+    if (!best || std::fabs(best->first - t) > max_difference) continue;
+    matched.emplace_back(best->second, pose);
+    stamps.push_back(stamp);
+  }
+  if (matched.size() < 3)
+    throw InputError("trajectory evaluation: " + std::to_string(matched.size()) + " of " +
+                     std::to_string(estimate.size()) + " estimated poses have a ground-truth pose within " +
+                     std::to_string(max_difference) + " s (" + std::to_string(ground_truth.size()) +
+                     " ground-truth poses); at least 3 are needed");
+  TrajectoryErrors e;
+  e.matched = int(matched.size());
+  Eigen::Matrix3Xd from(3, e.matched), to(3, e.matched);
+  for (int i = 0; i < e.matched; ++i) {
+    from.col(i) = matched[std::size_t(i)].second.topRightCorner<3, 1>();
+    to.col(i) = matched[std::size_t(i)].first.topRightCorner<3, 1>();
+  }
+  e.alignment = Eigen::umeyama(from, to, false);
+  double sum = 0;
+  for (int i = 0; i < e.matched; ++i) {
+    const Eigen::Vector3d aligned = (e.alignment * from.col(i).homogeneous()).head<3>();
+    sum += (aligned - to.col(i)).squaredNorm();
+    e.positions.emplace_back(to.col(i), aligned);
+  }
+  e.ate_rmse_m = std::sqrt(sum / e.matched);
+  // RPE over consecutive matched frames, and over about one second.
+  double t_sum = 0, r_sum = 0, t_sum_s = 0, r_sum_s = 0;
+  auto add = [&](std::size_t i, std::size_t j, double& ts, double& rs, int& count) {
+    const Eigen::Matrix4d error = relative(relative(matched[i].first, matched[j].first), relative(matched[i].second, matched[j].second));
+    ts += error.topRightCorner<3, 1>().squaredNorm();
+    const double r = rotationDeg(error);
+    rs += r * r;
+    ++count;
+  };
+  for (std::size_t i = 0; i + 1 < matched.size(); ++i) add(i, i + 1, t_sum, r_sum, e.rpe_frame_pairs);
+  for (std::size_t i = 0; i < matched.size(); ++i) {
+    const auto j = std::lower_bound(stamps.begin() + long(i), stamps.end(), stamps[i] + 1.0);
+    if (j == stamps.end()) break;
+    add(i, std::size_t(j - stamps.begin()), t_sum_s, r_sum_s, e.rpe_second_pairs);
+  }
+  e.rpe_frame_trans_m = std::sqrt(t_sum / std::max(1, e.rpe_frame_pairs));
+  e.rpe_frame_rot_deg = std::sqrt(r_sum / std::max(1, e.rpe_frame_pairs));
+  if (e.rpe_second_pairs > 0) {
+    e.rpe_second_trans_m = std::sqrt(t_sum_s / e.rpe_second_pairs);
+    e.rpe_second_rot_deg = std::sqrt(r_sum_s / e.rpe_second_pairs);
+  }
+  return e;
 }
 
 }  // namespace mc_flow

@@ -271,19 +271,14 @@ VariantSpec variantSpec(int variant, bool stream_events = false) {
   return spec;
 }
 
-/// Camera-only scenes: the room, every box and the arm (both links) take one motion, the static scene's apparent
-/// motion, at constant velocity from frame 0.
-void applyCameraOnly(const SyntheticSceneOptions& options, VariantSpec& spec) {
-  if (!options.camera_only) return;
-  const Vector3d v = options.camera_only_translation_m, rate = options.camera_only_rotation_deg, w = rate * kDeg;
-  spec.room.velocity_m = v;
-  spec.room.rotation_rate_deg = rate;
-  spec.room.period = 0;
+/// Every box and the arm (both links) take the room's motion and path: rigid with the room from frame 0.
+void followRoom(VariantSpec& spec) {
+  const Vector3d v = spec.room.velocity_m, rate = spec.room.rotation_rate_deg, w = rate * kDeg;
   // A part's twist is taken about its own pivot (twistAbout): the velocity there that gives the room's twist.
   for (BoxSpec& b : spec.boxes) {
     b.velocity_m = v - b.centre.cross(w);
     b.rotation_rate_deg = rate;
-    b.period = 0;
+    b.period = spec.room.period;
     b.start_frame = 0;
   }
   ArmSpec& arm = spec.arm;
@@ -292,7 +287,18 @@ void applyCameraOnly(const SyntheticSceneOptions& options, VariantSpec& spec) {
   arm.velocity_m = v - shoulder.cross(w);
   arm.rotation_rate_deg = rate;
   arm.elbow_rate_deg = Vector3d::Zero();
-  arm.period = 0;
+  arm.period = spec.room.period;
+}
+
+/// Camera-only scenes: the room, every box and the arm (both links) take one motion, the static scene's apparent
+/// motion, at constant velocity from frame 0. Scenes whose parts follow the room keep the room's own motion.
+void applyCameraOnly(const SyntheticSceneOptions& options, VariantSpec& spec) {
+  if (options.camera_only) {
+    spec.room.velocity_m = options.camera_only_translation_m;
+    spec.room.rotation_rate_deg = options.camera_only_rotation_deg;
+    spec.room.period = 0;
+  }
+  if (options.camera_only || options.parts_follow_room) followRoom(spec);
 }
 
 VariantSpec sceneSpec(const SyntheticSceneOptions& options) {

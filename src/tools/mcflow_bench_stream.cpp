@@ -5,18 +5,41 @@
 // pixels carry), how many pairs after it starts moving the late box has a segment of its own, and how many
 // warm starts fell back to a cold solve.
 //
+// --world (issue 28) runs each sequence through SequencePipeline instead (the same solves, stamped at 30 Hz) and
+// prints a second table, per variant, mode and scene: "parts" is the sequence above, "static" the same camera path
+// over the same room with every part moving with the room (SyntheticSceneOptions::parts_follow_room). Columns:
+//   ate_mm, rpe_mm, rpe_deg  the odometry's camera path (SequencePipeline::odometry()) against the true one (the room's
+//                            motion inverted and chained): ATE after a rigid alignment without scale, RPE per frame
+//                            (evaluateTrajectory, the TUM RGB-D definitions); ate_ratio: parts / static ("-" when
+//                            the static run's ATE is below 0.01 mm: a camera at rest, variants 0 and 1)
+//   world_ok   pairs whose world (Result::world.ids) covers the majority of the room's (part 0's) pixels with a
+//              majority of its own pixels on the room (regionOverlap); pur_min: the least such share of any pair
+//   mask_iou   the moving mask (movingMask) against the true one, the pixels of parts whose motion relative to the
+//              room exceeds moving_min_speed or moving_min_rate at 30 Hz (worldVelocity on the true twists), per pair
+//   lin_*, ang_*  each moving part's world velocity error [m/s at the part's centroid, deg/s] for the segment holding
+//              most of its pixels, median and max over parts (>= 200 pixels) and pairs; `parts` counts them
+//   nees_*     the world twist's NEES per pair (below); in95: the fraction of pairs within chi2_6's 95% interval
+//              [1.24, 14.45] (0.95 when the covariance is right); mean_lo, mean_hi: the 95% interval of the mean NEES,
+//              chi2_6N(0.025 and 0.975) / N over N pairs;
+//              pose_nees: the mean over frames of the odometry pose's NEES (its accumulated covariance)
+// The first table's columns keep their meaning under --world; only their timings include the pipeline's own work.
+//
 //   mcflow_bench_stream [--frames 30] [--variants 0,1,2] [--width 320] [--height 240] [--backend auto|cpu|cuda]
-//                       [--modes cold,warm] [--noise] [--ids] [--set name=value ...]
+//                       [--modes cold,warm] [--noise] [--ids] [--world] [--set name=value ...]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <map>
+#include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/core/static_world.h"
 #include "mc_flow/testing/bench.h"
 #include "mc_flow/testing/metrics.h"
 #include "mc_flow/testing/synthetic_scene.h"
@@ -31,12 +54,15 @@ struct Options {
   std::vector<bool> warm_modes{false, true};
   bool noise = false;
   bool print_ids = false;  // per pair, the majority id of each true part (stderr)
+  bool world = false;      // the static world's metrics (issue 28)
   Config config;
 };
 
 constexpr int kLatePart = 10;       // synthetic_scene.h: the box that starts moving at frame 10
 constexpr int kLateStartPair = 10;  // the first pair in which it moves
 constexpr int kMinPartPixels = 200; // parts smaller than this in a pair are not judged
+constexpr double kFrameRate = 30.0; // [Hz] the --world runs' stamps: the moving thresholds are per second
+constexpr double kMinStaticAte = 1e-5;  // [m] a static run's ATE below this (a camera at rest) gives no ATE ratio
 
 struct ModeStats {
   std::vector<double> ms, epe;
@@ -44,6 +70,19 @@ struct ModeStats {
   long kept = 0, judged = 0;  // id consistency
   int late_delay = -1;        // pairs after kLateStartPair until the late box has its own segment (-1: never)
   int fallbacks = 0, warm = 0;
+};
+
+// The static world's metrics of one sequence (--world).
+struct WorldStats {
+  StampedPoses truth, estimate;  // the camera's pose per frame (camera-to-odometry frame: the first frame's)
+  int pairs = 0, world_right = 0;
+  double purity_min = 1;  // the least pure world of a pair: its share of room pixels
+  std::vector<double> iou, linear_error, angular_error_deg;
+  // NEES = e^T C^-1 e (nees()): per pair e = world.twist - the room's true twist (v [m], w [rad], the motion of the
+  // world's points over the pair in the first frame's camera frame) with C = world.covariance; per frame e =
+  // log(T_true^-1 T_odometry), the right perturbation odometry().pose_covariance describes. Both chi2 with 6 dof when
+  // the estimate is unbiased and the covariance right.
+  std::vector<double> nees_pair, nees_pose;
 };
 
 // Majority predicted id of each true part (parts with enough pixels).
@@ -69,17 +108,128 @@ double mean(const std::vector<double>& v) {
   return v.empty() ? 0.0 : s / double(v.size());
 }
 
-ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& config, bool print_ids) {
+// A part's motion relative to the room as worldVelocity states it, at `centroid`: the same definition for the truth
+// (the true twists) and the estimate (a segment's fit moved to the part's centroid).
+WorldVelocity velocityAt(const Segment& segment, const Matrix6d& covariance, const StaticWorld& world,
+                         const Eigen::Vector3d& centroid, const Config& config) {
+  Segment at = segment;
+  at.centroid = centroid;
+  return worldVelocity(at, covariance, world, false, 1.0 / kFrameRate, config);
+}
+
+// Scores one solved pair of the pipeline against the pair's ground truth (WorldStats).
+void scoreWorld(const SyntheticPair& p, const SequenceStep& step, const Odometry& odometry, const Config& config,
+                bool print, WorldStats& ws) {
+  const Result& r = *step.result;
+  const int W = p.gt_parts.width, H = p.gt_parts.height;
+  ImageU8 valid(W, H, 1, 0);
+  for (std::size_t k = 0; k < valid.data.size(); ++k) valid.data[k] = isValidDepth(p.frame1.depth.data[k]) ? 1 : 0;
+  const Vector6d room = p.parts.front().twist;  // part 0: the room; its points moved by exp(room) over the pair
+  StaticWorld true_world;
+  true_world.twist = room;
+
+  // The camera path: it moved by the inverse of the room's motion.
+  const Eigen::Matrix4d previous = ws.truth.back().second;
+  ws.truth.emplace_back(odometry.stamp, previous * se3Exp(room).inverse());
+  ws.estimate.emplace_back(odometry.stamp, odometry.pose);
+  ws.nees_pose.push_back(nees(se3Log(Eigen::Matrix4d(ws.truth.back().second.inverse() * odometry.pose)),
+                              odometry.pose_covariance));
+  ++ws.pairs;
+  const RegionOverlap world = regionOverlap(r.labels, r.world.ids, p.gt_parts, 0, &valid);
+  ws.world_right += r.world.found && world.matches();
+  ws.purity_min = std::min(ws.purity_min, world.purity());
+  if (r.world.found) ws.nees_pair.push_back(nees(r.world.twist - room, r.world.covariance));
+
+  // Each part's pixels, centroid and the segment ids on them.
+  struct Part {
+    std::size_t pixels = 0;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    std::map<int, std::size_t> votes;
+  };
+  std::map<int, Part> parts;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const std::size_t k = std::size_t(y) * W + x;
+      if (!valid.data[k]) continue;
+      Part& part = parts[p.gt_parts.data[k]];
+      const double z = p.frame1.depth.data[k];
+      const Intrinsics& K = p.intrinsics;
+      part.sum += Eigen::Vector3d(z * (x - K.cx) / K.fx, z * (y - K.cy) / K.fy, z);
+      ++part.pixels;
+      if (r.labels.data[k] > 0) ++part.votes[r.labels.data[k]];
+    }
+  std::map<int, bool> moving;  // by part id
+  for (const SyntheticPart& truth : p.parts) {
+    const auto seen = parts.find(truth.id);
+    if (truth.id == 0 || seen == parts.end()) continue;
+    const Part& part = seen->second;
+    const Eigen::Vector3d centroid = part.sum / double(part.pixels);
+    Segment true_segment;
+    true_segment.twist = truth.twist;
+    true_segment.transform = se3Exp(truth.twist);
+    const WorldVelocity v = velocityAt(true_segment, Matrix6d::Zero(), true_world, centroid, config);
+    moving[truth.id] = v.moving;
+    if (!v.moving || part.pixels < std::size_t(kMinPartPixels) || part.votes.empty()) continue;
+    const int id = std::max_element(part.votes.begin(), part.votes.end(),
+                                    [](const auto& a, const auto& b) { return a.second < b.second; })->first;
+    const auto segment =
+        std::find_if(r.segments.begin(), r.segments.end(), [id](const Segment& s) { return s.id == id; });
+    if (segment == r.segments.end()) throw std::logic_error("label " + std::to_string(id) + " has no segment");
+    const WorldVelocity e = velocityAt(*segment, segment->covariance, r.world, centroid, config);
+    ws.linear_error.push_back((e.linear - v.linear).norm());
+    ws.angular_error_deg.push_back((e.angular - v.angular).norm() * 180.0 / M_PI);
+    if (print)
+      std::fprintf(stderr, "  part %2d -> %2d: true %.3f m/s %.1f deg/s, error %.3f m/s %.1f deg/s\n", truth.id, id,
+                   v.linear.norm(), v.angular.norm() * 180.0 / M_PI, ws.linear_error.back(),
+                   ws.angular_error_deg.back());
+  }
+  ImageU8 truth_mask(W, H, 1, 0);
+  for (std::size_t k = 0; k < truth_mask.data.size(); ++k) {
+    const auto m = moving.find(p.gt_parts.data[k]);
+    truth_mask.data[k] = m != moving.end() && m->second ? 255 : 0;
+  }
+  ws.iou.push_back(maskIou(movingMask(r, step.world_velocities), truth_mask, &valid));
+  if (print) {
+    std::fprintf(stderr, "  world %-8s ids", r.world.chosen_by.c_str());
+    for (int id : r.world.ids) std::fprintf(stderr, " %d", id);
+    std::fprintf(stderr, "  coverage %.3f purity %.3f  nees %.1f  iou %.3f\n", world.coverage(), world.purity(),
+                 ws.nees_pair.empty() ? 0.0 : ws.nees_pair.back(), ws.iou.back());
+  }
+}
+
+// `world`: run through SequencePipeline (frames stamped at kFrameRate) and score the static world into it; null: the
+// solver alone.
+ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& config, bool print_ids,
+                      WorldStats* world = nullptr) {
   ModeStats st;
-  Solver solver(config);
+  std::unique_ptr<Solver> solver;
   Result previous;
+  std::unique_ptr<SequencePipeline> pipeline;
+  if (!world) solver = std::make_unique<Solver>(config);
+  if (world) {
+    pipeline = std::make_unique<SequencePipeline>(config, 1, 1.0);  // downsample 1: the solver's input, as below
+    pipeline->push(StreamFrame{pairs.front().frame1, pairs.front().intrinsics, 0.0, "synthetic", {}});
+    world->truth.emplace_back(0.0, Eigen::Matrix4d::Identity());
+    world->estimate.emplace_back(0.0, Eigen::Matrix4d::Identity());
+  }
   std::map<int, int> previous_ids;
   for (std::size_t t = 0; t < pairs.size(); ++t) {
     const SyntheticPair& p = pairs[t];
+    Result solved;
+    SequenceStep step;
+    StreamFrame next;
+    if (pipeline) next = StreamFrame{p.frame2, p.intrinsics, double(t + 1) / kFrameRate, "synthetic", {}};
     const auto start = std::chrono::steady_clock::now();
-    Result r = t == 0 ? solver.solve(p.frame1, p.frame2, p.intrinsics)
-                      : solver.solve(p.frame1, p.frame2, p.intrinsics, previous);
+    if (pipeline) {
+      step = pipeline->push(std::move(next));
+    } else {
+      solved = t == 0 ? solver->solve(p.frame1, p.frame2, p.intrinsics)
+                      : solver->solve(p.frame1, p.frame2, p.intrinsics, previous);
+    }
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    if (pipeline && step.outcome != SequenceStep::Outcome::Solved)
+      throw std::runtime_error("pair " + std::to_string(t) + ": " + toString(step.outcome) + " " + step.problem);
+    const Result& r = pipeline ? *step.result : solved;
     if (t > 0) {  // the first pair is cold in both modes
       st.ms.push_back(ms);
       const StageTimings& s = r.timings;
@@ -111,10 +261,68 @@ ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& con
     if (int(t) >= kLateStartPair && st.late_delay < 0 && ids.count(kLatePart) && ids.count(0) &&
         ids.at(kLatePart) != ids.at(0))
       st.late_delay = int(t) - kLateStartPair;
+    if (world) scoreWorld(p, step, pipeline->odometry(), config, print_ids, *world);
     previous_ids = ids;
-    previous = std::move(r);
+    if (!pipeline) previous = std::move(solved);
   }
   return st;
+}
+
+std::vector<SyntheticPair> renderSequence(const Options& opt, int variant, bool parts_follow_room) {
+  std::vector<SyntheticPair> pairs;
+  for (int t = 0; t + 1 < opt.frames; ++t) {
+    SyntheticSceneOptions so;
+    so.width = opt.width;
+    so.height = opt.height;
+    so.variant = variant;
+    so.first_frame = t;
+    so.stream_events = true;
+    so.parts_follow_room = parts_follow_room;
+    if (opt.noise) so.addSensorNoise();
+    pairs.push_back(renderSyntheticPair(so));
+  }
+  return pairs;
+}
+
+struct WorldRow {
+  int variant = 0;
+  bool warm = false;
+  const char* scene = "";
+  WorldStats stats;
+  double ate_ratio = -1;  // parts / static; < 0: not printed
+};
+
+double maxOf(const std::vector<double>& v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); }
+
+void printWorldTable(const std::vector<WorldRow>& rows, const Config& config) {
+  std::printf("\nstatic world (--world): frames at %.0f Hz; moving = faster than %.3f m/s or %.1f deg/s relative to "
+              "the room; lin [m/s], ang [deg/s]\n",
+              kFrameRate, config.moving_min_speed, config.moving_min_rate);
+  std::printf("%-8s %-5s %-6s %5s %8s %9s %7s %8s %8s %7s %8s %6s %8s %8s %8s %8s %8s %9s %7s %8s %8s %9s\n", "variant",
+              "mode", "scene", "pairs", "ate_mm", "ate_ratio", "rpe_mm", "rpe_deg", "world_ok", "pur_min", "mask_iou",
+              "parts", "lin_med", "lin_max", "ang_med", "ang_max", "nees_med", "nees_mean", "in95", "mean_lo",
+              "mean_hi", "pose_nees");
+  const double lo6 = chiSquareQuantile(6, 0.025), hi6 = chiSquareQuantile(6, 0.975);
+  for (const WorldRow& row : rows) {
+    const WorldStats& w = row.stats;
+    const TrajectoryErrors e = evaluateTrajectory(w.truth, w.estimate, 1e-3, 0.0);
+    int inside = 0;
+    for (double n : w.nees_pair) inside += n >= lo6 && n <= hi6;
+    const double n = double(std::max<std::size_t>(1, w.nees_pair.size()));
+    // The mean of N NEES of 6 dof times N is chi2 with 6 N dof (independent pairs): its 95% interval.
+    const double mean_lo = w.nees_pair.empty() ? 0.0 : chiSquareQuantile(6.0 * n, 0.025) / n;
+    const double mean_hi = w.nees_pair.empty() ? 0.0 : chiSquareQuantile(6.0 * n, 0.975) / n;
+    char ratio[16] = "-";
+    if (row.ate_ratio >= 0) std::snprintf(ratio, sizeof ratio, "%.2f", row.ate_ratio);
+    std::printf("%-8d %-5s %-6s %5d %8.2f %9s %7.2f %8.3f %8.3f %7.3f %8.3f %6zu %8.4f %8.4f %8.2f %8.2f %8.1f %9.1f "
+                "%7.2f %8.2f %8.2f %9.1f\n",
+                row.variant, row.warm ? "warm" : "cold", row.scene, w.pairs, 1e3 * e.ate_rmse_m, ratio,
+                1e3 * e.rpe_frame_trans_m, e.rpe_frame_rot_deg, double(w.world_right) / std::max(1, w.pairs),
+                w.purity_min,
+                mean(w.iou), w.linear_error.size(), median(w.linear_error), maxOf(w.linear_error),
+                median(w.angular_error_deg), maxOf(w.angular_error_deg), median(w.nees_pair), mean(w.nees_pair),
+                double(inside) / n, mean_lo, mean_hi, mean(w.nees_pose));
+  }
 }
 
 }  // namespace
@@ -129,7 +337,9 @@ int main(int argc, char** argv) {
                     {"backend", true, "auto | cpu | cuda"},
                     {"modes", true, "comma-separated: cold, warm (default both)"},
                     {"noise", false, "Kinect-like intensity and depth noise"},
-                    {"ids", false, "print each pair's majority id per true part on stderr"}});
+                    {"ids", false, "print each pair's majority id per true part on stderr"},
+                    {"world", false, "the static world: odometry ATE/RPE (with and without moving parts), world "
+                                     "choice, moving mask, world velocities, NEES (a second table)"}});
   try {
     line.parse(argc, argv);
     if (line.helpRequested()) {
@@ -149,6 +359,7 @@ int main(int argc, char** argv) {
     if (line.has("backend")) opt.config.backend = parseBackend(line.text("backend", "auto"));
     opt.noise = line.has("noise");
     opt.print_ids = line.has("ids");
+    opt.world = line.has("world");
     line.applySettings(opt.config);
     opt.config.validate();
   } catch (const std::exception& e) {
@@ -158,22 +369,27 @@ int main(int argc, char** argv) {
   std::printf("%-8s %-5s %6s %9s %9s %9s %8s %9s %9s %6s   %s\n", "variant", "mode", "pairs", "mean_ms", "median_ms",
               "mean_epe", "id_keep", "late_pairs", "fallbacks", "warm",
               "mean stage ms: pyramid init motion labels count occl outputs");
+  std::vector<WorldRow> world_rows;
   for (const int variant : opt.variants) {
-    std::vector<SyntheticPair> pairs;
-    for (int t = 0; t + 1 < opt.frames; ++t) {
-      SyntheticSceneOptions so;
-      so.width = opt.width;
-      so.height = opt.height;
-      so.variant = variant;
-      so.first_frame = t;
-      so.stream_events = true;
-      if (opt.noise) so.addSensorNoise();
-      pairs.push_back(renderSyntheticPair(so));
-    }
+    const std::vector<SyntheticPair> pairs = renderSequence(opt, variant, false);
+    std::vector<SyntheticPair> static_pairs;
+    if (opt.world) static_pairs = renderSequence(opt, variant, true);
     for (const bool warm : opt.warm_modes) {
       Config config = opt.config;
       config.warm_start = warm;
-      const ModeStats st = runSequence(pairs, config, opt.print_ids);
+      WorldRow parts_row{variant, warm, "parts", {}, -1};
+      const ModeStats st = runSequence(pairs, config, opt.print_ids, opt.world ? &parts_row.stats : nullptr);
+      if (opt.world) {
+        WorldRow static_row{variant, warm, "static", {}, -1};
+        runSequence(static_pairs, config, false, &static_row.stats);
+        const WorldStats& a = parts_row.stats;
+        const WorldStats& b = static_row.stats;
+        const double parts_ate = evaluateTrajectory(a.truth, a.estimate, 1e-3, 0.0).ate_rmse_m;
+        const double static_ate = evaluateTrajectory(b.truth, b.estimate, 1e-3, 0.0).ate_rmse_m;
+        parts_row.ate_ratio = static_ate > kMinStaticAte ? parts_ate / static_ate : -1;
+        world_rows.push_back(std::move(parts_row));
+        world_rows.push_back(std::move(static_row));
+      }
       const double n = std::max<double>(1.0, double(st.ms.size()));
       const StageTimings& s = st.stages;
       std::printf("%-8d %-5s %6zu %9.1f %9.1f %9.4f %8.3f %9d %9d %6d   %.1f %.1f %.1f %.1f %.1f %.1f %.1f\n", variant,
@@ -184,5 +400,6 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
     }
   }
+  if (opt.world) printWorldTable(world_rows, opt.config);
   return 0;
 }

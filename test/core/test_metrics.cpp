@@ -3,6 +3,9 @@
 #include <cmath>
 #include <limits>
 
+#include <Eigen/Geometry>
+
+#include "mc_flow/core/error.h"
 #include "mc_flow/testing/metrics.h"
 
 namespace mc_flow {
@@ -112,6 +115,81 @@ TEST(Metrics, MaskAgreement) {
   valid(1, 0) = 0;
   EXPECT_DOUBLE_EQ(maskAgreement(a, b, nullptr), 0.75);
   EXPECT_DOUBLE_EQ(maskAgreement(a, b, &valid), 1.0);
+}
+
+TEST(Metrics, MaskIouAndTheOverlapOfSegmentsWithAPart) {
+  // Truth: part 0 on the left 6 pixels, part 1 on the right 2. Estimate: segments 3 and 4 on the left 5 pixels, the
+  // segment 7 on the rest (one part-0 pixel and both part-1 pixels), and one outlier (0).
+  ImageI32 truth(8, 1, 1, 0), labels(8, 1, 1, 0);
+  const int t[8] = {0, 0, 0, 0, 0, 0, 1, 1};
+  const int e[8] = {3, 3, 4, 4, 0, 7, 7, 7};
+  for (int x = 0; x < 8; ++x) truth(x, 0) = t[x], labels(x, 0) = e[x];
+  const RegionOverlap world = regionOverlap(labels, {3, 4}, truth, 0, nullptr);
+  EXPECT_EQ(world.estimate, 4u);
+  EXPECT_EQ(world.truth, 6u);
+  EXPECT_EQ(world.common, 4u);
+  EXPECT_DOUBLE_EQ(world.coverage(), 4.0 / 6.0);
+  EXPECT_DOUBLE_EQ(world.purity(), 1.0);
+  EXPECT_TRUE(world.matches());
+  // The segment 7 is mostly part 1 and covers a sixth of part 0: not part 0's segment.
+  EXPECT_FALSE(regionOverlap(labels, {7}, truth, 0, nullptr).matches());
+  // Together they cover 5 of 6 part-0 pixels, but 2 of their 7 pixels are part 1: still part 0 (5/7 > 1/2).
+  EXPECT_TRUE(regionOverlap(labels, {3, 4, 7}, truth, 0, nullptr).matches());
+  // Invalid pixels do not count: without the left four, segments 3 and 4 are empty.
+  ImageU8 valid(8, 1, 1, 1);
+  for (int x = 0; x < 4; ++x) valid(x, 0) = 0;
+  const RegionOverlap none = regionOverlap(labels, {3, 4}, truth, 0, &valid);
+  EXPECT_EQ(none.estimate, 0u);
+  EXPECT_FALSE(none.matches());
+
+  ImageU8 a(8, 1, 1, 0), b(8, 1, 1, 0);
+  EXPECT_DOUBLE_EQ(maskIou(a, b, nullptr), 1.0);  // both empty: they agree
+  a(5, 0) = a(6, 0) = a(7, 0) = 255;
+  b(6, 0) = b(7, 0) = 1;
+  EXPECT_DOUBLE_EQ(maskIou(a, b, nullptr), 2.0 / 3.0);
+  valid(5, 0) = 0;
+  EXPECT_DOUBLE_EQ(maskIou(a, b, &valid), 1.0);
+  EXPECT_THROW(maskIou(a, ImageU8(7, 1, 1, 0), nullptr), InputError);
+}
+
+TEST(Metrics, NeesAndChiSquareQuantiles) {
+  // Tabulated quantiles (6 degrees of freedom: the 95% interval of a twist's NEES) and a closed form (2: -2 ln(1 - p)).
+  EXPECT_NEAR(chiSquareQuantile(6, 0.025), 1.2373, 1e-4);
+  EXPECT_NEAR(chiSquareQuantile(6, 0.975), 14.4494, 1e-4);
+  EXPECT_NEAR(chiSquareQuantile(2, 0.95), -2.0 * std::log(0.05), 1e-8);
+  EXPECT_NEAR(chiSquareQuantile(180, 0.975), 219.0443, 1e-3);  // the mean of 30 six-dof NEES: 7.30 at most
+  EXPECT_THROW(chiSquareQuantile(0, 0.5), InputError);
+  EXPECT_THROW(chiSquareQuantile(6, 1.0), InputError);
+  // e^T C^-1 e with a diagonal C: the squared errors in standard deviations.
+  Matrix6d covariance = Matrix6d::Zero();
+  covariance.diagonal() << 1e-6, 1e-6, 4e-6, 1e-4, 1e-4, 1e-4;
+  Vector6d error = Vector6d::Zero();
+  error << 1e-3, 0, 4e-3, 0, 0, 2e-2;
+  EXPECT_NEAR(nees(error, covariance), 1.0 + 4.0 + 4.0, 1e-9);
+}
+
+TEST(Metrics, TheAbsoluteTrajectoryErrorOfAKnownTrajectory) {
+  // A straight path of 5 poses, 10 cm apart along x; the estimate is it in another frame (rotated and shifted), one
+  // pose 4 cm off along y. The rigid alignment cannot undo that: ATE = sqrt(sum of squared residuals / 5) of the best
+  // fit, which moves the line by 4/5 cm towards the outlier: residuals 0.8 cm (x4) and 3.2 cm.
+  StampedPoses truth, estimate;
+  Eigen::Matrix4d frame = Eigen::Matrix4d::Identity();
+  frame.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  frame.topRightCorner<3, 1>() = Eigen::Vector3d(1, -2, 0.5);
+  for (int i = 0; i < 5; ++i) {
+    Eigen::Matrix4d p = Eigen::Matrix4d::Identity();
+    p(0, 3) = 0.1 * i;
+    truth.emplace_back(i / 30.0, p);
+    if (i == 2) p(1, 3) += 0.04;
+    estimate.emplace_back(i / 30.0, frame * p);
+  }
+  const TrajectoryErrors e = evaluateTrajectory(truth, estimate, 1e-3, 0.0);
+  EXPECT_EQ(e.matched, 5);
+  EXPECT_NEAR(e.ate_rmse_m, std::sqrt((4 * 0.008 * 0.008 + 0.032 * 0.032) / 5), 1e-6);
+  EXPECT_EQ(e.rpe_frame_pairs, 4);
+  EXPECT_NEAR(e.rpe_frame_trans_m, 0.04 * std::sqrt(2.0 / 4.0), 1e-9);  // the outlier's two steps, 4 cm each
+  EXPECT_NEAR(e.rpe_frame_rot_deg, 0.0, 1e-5);
+  EXPECT_THROW(evaluateTrajectory(truth, estimate, 1e-3, 1.0), InputError);  // nothing matches
 }
 
 }  // namespace

@@ -1,12 +1,18 @@
 /**
  * @file metrics.h
- * @brief The paper's metrics (Tables 1-2) plus ground-truth comparisons for synthetic scenes.
+ * @brief The paper's metrics (Tables 1-2) plus ground-truth comparisons for synthetic scenes, and a camera trajectory
+ * scored as the TUM RGB-D benchmark does (also `mcflow eval-traj`'s maths, io/trajectory_eval.h).
  */
 #pragma once
 
 #include <cstddef>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
 
 #include "mc_flow/core/image.h"
+#include "mc_flow/core/se3.h"
 
 namespace mc_flow {
 
@@ -40,5 +46,53 @@ double segmentationAgreement(const ImageI32& estimate, const ImageI32& truth);
 
 /// @brief Fraction of valid pixels where two binary masks (non-zero = set) agree; `valid` may be null.
 double maskAgreement(const ImageU8& a, const ImageU8& b, const ImageU8* valid);
+
+/// @brief Intersection over union of two binary masks (non-zero = set) over valid pixels (`valid` may be null); 1 when
+/// both are empty (they agree).
+double maskIou(const ImageU8& a, const ImageU8& b, const ImageU8* valid);
+
+/// @brief How a set of estimated segments (pixels of `labels` carrying one of `ids`) overlaps one true part (pixels of
+/// `truth` equal to `truth_id`), over valid pixels (`valid` may be null).
+struct RegionOverlap {
+  std::size_t estimate = 0, truth = 0, common = 0;  ///< pixels
+  double coverage() const { return truth ? double(common) / double(truth) : 0.0; }       ///< of the truth
+  double purity() const { return estimate ? double(common) / double(estimate) : 0.0; }   ///< of the estimate
+  /// The estimate is that part: it covers the majority of the part's pixels, and most of its pixels are the part's.
+  bool matches() const { return coverage() > 0.5 && purity() > 0.5; }
+};
+RegionOverlap regionOverlap(const ImageI32& labels, const std::vector<int>& ids, const ImageI32& truth, int truth_id,
+                            const ImageU8* valid);
+
+/// @brief Normalised estimation error squared e^T C^-1 e of an error `error` whose claimed covariance is `covariance`:
+/// chi-square distributed with 6 degrees of freedom when the estimate is unbiased and the covariance right.
+double nees(const Vector6d& error, const Matrix6d& covariance);
+
+/// @brief The `probability` quantile of the chi-square distribution with `dof` degrees of freedom (bisection on its
+/// CDF, the regularised lower incomplete gamma function; relative accuracy 1e-10). Throws InputError outside
+/// dof > 0, 0 < probability < 1.
+double chiSquareQuantile(double dof, double probability);
+
+using StampedPoses = std::vector<std::pair<double, Eigen::Matrix4d>>;  ///< (stamp [s], camera-to-world pose)
+
+/// @brief A camera trajectory's errors as the TUM RGB-D benchmark defines them (Sturm et al., IROS 2012).
+struct TrajectoryErrors {
+  int matched = 0;                 ///< estimated poses with a ground-truth pose within max_difference
+  double ate_rmse_m = 0;           ///< after the rigid alignment (no scale)
+  double rpe_frame_trans_m = 0;    ///< RMSE of consecutive matched frames' relative motion: translation [m]
+  double rpe_frame_rot_deg = 0;    ///< ... rotation [deg]
+  int rpe_frame_pairs = 0;
+  double rpe_second_trans_m = 0;   ///< over about one second (the first frame at least 1 s later) [m]
+  double rpe_second_rot_deg = 0;   ///< [deg]
+  int rpe_second_pairs = 0;
+  Eigen::Matrix4d alignment = Eigen::Matrix4d::Identity();  ///< ground truth <- estimate
+  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> positions;  ///< (ground truth, aligned estimate) per match
+};
+
+/// @brief Matches each estimated pose (stamp + time_offset) to the nearest ground-truth stamp within max_difference
+/// [s] and scores the matches: the absolute trajectory error (RMSE of the positions after the rigid alignment that
+/// minimises it, Umeyama without scale) and the relative pose error (the error of the motion over consecutive frames
+/// and over about one second). Throws InputError when fewer than 3 poses match (naming the counts).
+TrajectoryErrors evaluateTrajectory(const StampedPoses& ground_truth, const StampedPoses& estimate,
+                                    double max_difference, double time_offset);
 
 }  // namespace mc_flow

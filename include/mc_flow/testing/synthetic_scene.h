@@ -39,6 +39,10 @@ struct SyntheticSceneOptions {
   bool camera_only = false;
   Eigen::Vector3d camera_only_translation_m = Eigen::Vector3d::Zero();
   Eigen::Vector3d camera_only_rotation_deg = Eigen::Vector3d::Zero();
+  /// Every part (boxes, the arm's links, the stream-event boxes) moves with the room, along the room's own path: the
+  /// same camera path over the same geometry and textures, without independently moving parts (variant 2: the
+  /// moving camera alone, the baseline of an odometry benchmark). camera_only overrides it.
+  bool parts_follow_room = false;
 };
 
 struct SyntheticPart {
