@@ -200,6 +200,33 @@ TEST(SyntheticScene, CameraOnlyScenesMoveAsOneRigidBody) {
   EXPECT_THROW(renderSyntheticPair(bad), InputError);
 }
 
+TEST(SyntheticScene, PartsFollowingTheRoomMoveWithItOverTheSequence) {
+  // Variant 2 with its stream events: the camera moves (the room has a twist of its own); with parts_follow_room every
+  // part takes the room's twist in every pair, and the room's twist is the one of the scene with moving parts.
+  SyntheticSceneOptions moving = optionsFor(2, 160, 120);
+  moving.stream_events = true;
+  SyntheticSceneOptions following = moving;
+  following.parts_follow_room = true;
+  for (const int t : {0, 5, 12}) {
+    const std::vector<SyntheticPart> parts = syntheticSequenceMotions(following, t);
+    const std::vector<SyntheticPart> reference = syntheticSequenceMotions(moving, t);
+    ASSERT_FALSE(parts.empty());
+    Vector6d room = Vector6d::Zero(), reference_room = Vector6d::Zero();
+    for (const SyntheticPart& p : parts)
+      if (p.id == 0) room = p.twist;
+    for (const SyntheticPart& p : reference)
+      if (p.id == 0) reference_room = p.twist;
+    EXPECT_GT(room.norm(), 1e-4) << "frame " << t;
+    EXPECT_TRUE(room.isApprox(reference_room, 1e-12)) << "frame " << t;
+    int differs = 0;
+    for (std::size_t k = 0; k < parts.size(); ++k) {
+      EXPECT_TRUE(parts[k].twist.isApprox(room, 1e-9)) << "frame " << t << " part " << parts[k].name;
+      differs += reference[k].twist.isApprox(room, 1e-6) ? 0 : 1;
+    }
+    EXPECT_GT(differs, 0) << "frame " << t << ": the reference scene's parts move on their own";
+  }
+}
+
 TEST(SyntheticScene, MotionScaleScalesTwistsAndZeroFreezesTheScene) {
   SyntheticSceneOptions o = optionsFor(2);
   const SyntheticPair one = renderSyntheticPair(o);
