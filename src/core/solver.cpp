@@ -71,8 +71,8 @@ struct Start {
   ImageI32 hard;  // a warm start's carried labels at the label level (a cold start assigns on the backend)
   int motion_labels = 0;
   std::vector<Vector6d> twists;
-  int carried_labels = 0;  // labels 0..carried_labels-1 are the previous pair's segments (a warm start)
-  std::vector<LabelLineage> carried_lineage;  // theirs, in order
+  // A warm start's carried labels: labels 0..size-1 are the previous pair's segments, these their lineages in order.
+  std::vector<LabelLineage> carried_lineage;
   int outer_iterations = 1;
   int label_iterations = 1, label_iterations_final = 1;  // per label step inside the loop / the final one
   int first_motion_coarsest = 0;  // the first motion step's coarsest level
@@ -380,9 +380,8 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
     for (std::size_t c = 0; c < kmeans.centres.size(); ++c) start.twists.push_back(widest);
   }
   start.motion_labels = int(start.twists.size());
-  start.carried_labels = int(carried.ids.size());
   backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
-  backend->holdCarriedLabels(start.carried_labels);
+  backend->holdCarriedLabels(int(start.carried_lineage.size()));
   start.outer_iterations = config.warm_outer_iterations;
   start.label_iterations = config.warm_label_iterations;
   start.label_iterations_final = config.warm_label_iterations_final;
@@ -403,7 +402,7 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
   // warm_switch_cost; the merge test remembers how they moved).
   std::vector<LabelLineage> lineage(twists.size());
   std::copy_n(start.carried_lineage.begin(), std::min(lineage.size(), start.carried_lineage.size()), lineage.begin());
-  std::vector<LabelLineage>* lineage_or_null = start.carried_labels > 0 ? &lineage : nullptr;
+  std::vector<LabelLineage>* lineage_or_null = start.carried_lineage.empty() ? nullptr : &lineage;
   auto t = Clock::now();
 
   // ---- Algorithm 1. An outer iteration that split labels is followed by another (up to the larger of the start's

@@ -14,6 +14,7 @@
 #include <opencv2/imgproc.hpp>
 #include <sensor_msgs/image_encodings.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
+#include <tf2_eigen/tf2_eigen.h>
 
 #include "mc_flow/core/se3.h"
 #include "mc_flow/core/palette.h"
@@ -257,14 +258,7 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
     out.twist.angular.x = s.twist(3) / dt;
     out.twist.angular.y = s.twist(4) / dt;
     out.twist.angular.z = s.twist(5) / dt;
-    const Eigen::Quaterniond q(Eigen::Matrix3d(s.transform.topLeftCorner<3, 3>()));
-    out.transform.translation.x = s.transform(0, 3);
-    out.transform.translation.y = s.transform(1, 3);
-    out.transform.translation.z = s.transform(2, 3);
-    out.transform.rotation.x = q.x();
-    out.transform.rotation.y = q.y();
-    out.transform.rotation.z = q.z();
-    out.transform.rotation.w = q.w();
+    out.transform = tf2::eigenToTransform(Eigen::Isometry3d(s.transform)).transform;
     out.support = s.support;
     out.centroid.x = s.centroid.x();
     out.centroid.y = s.centroid.y();
@@ -336,14 +330,7 @@ nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Ti
   msg.header.stamp = stamp;
   msg.header.frame_id = odom_frame;
   msg.child_frame_id = child_frame;
-  msg.pose.pose.position.x = pose(0, 3);
-  msg.pose.pose.position.y = pose(1, 3);
-  msg.pose.pose.position.z = pose(2, 3);
-  const Eigen::Quaterniond q(Eigen::Matrix3d(pose.topLeftCorner<3, 3>()));
-  msg.pose.pose.orientation.x = q.x();
-  msg.pose.pose.orientation.y = q.y();
-  msg.pose.pose.orientation.z = q.z();
-  msg.pose.pose.orientation.w = q.w();
+  msg.pose.pose = tf2::toMsg(Eigen::Isometry3d(pose));
   msg.twist.twist.linear.x = velocity(0);
   msg.twist.twist.linear.y = velocity(1);
   msg.twist.twist.linear.z = velocity(2);
@@ -480,18 +467,13 @@ std::vector<geometry_msgs::TransformStamped> makeSegmentTransforms(const mc_flow
   for (const mc_flow::Segment& s : result.segments) {
     const auto track = tracks.find(s.id);
     if (track == tracks.end()) continue;
-    const Eigen::Quaterniond orientation(Eigen::Matrix3d(track->second.pose.topLeftCorner<3, 3>()));
-    const Eigen::Vector3d& origin = track->second.origin;
-    geometry_msgs::TransformStamped t;
+    // The segment's accumulated rotation, placed at its centroid moved to this frame.
+    Eigen::Isometry3d frame = Eigen::Isometry3d::Identity();
+    frame.linear() = track->second.pose.topLeftCorner<3, 3>();
+    frame.translation() = track->second.origin;
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(frame);
     t.header = pair.header;
     t.child_frame_id = prefix + std::to_string(s.id);
-    t.transform.translation.x = origin.x();
-    t.transform.translation.y = origin.y();
-    t.transform.translation.z = origin.z();
-    t.transform.rotation.x = orientation.x();
-    t.transform.rotation.y = orientation.y();
-    t.transform.rotation.z = orientation.z();
-    t.transform.rotation.w = orientation.w();
     transforms.push_back(t);
   }
   return transforms;
@@ -561,17 +543,9 @@ nav_msgs::Path makeCameraPath(const std::deque<Eigen::Matrix4d>& poses, const st
   if (poses.empty()) return path;
   const Eigen::Matrix4d now_from_odom = poses.back().inverse();
   for (const Eigen::Matrix4d& pose : poses) {
-    const Eigen::Matrix4d in_now = now_from_odom * pose;
-    const Eigen::Quaterniond q(Eigen::Matrix3d(in_now.topLeftCorner<3, 3>()));
     geometry_msgs::PoseStamped p;
     p.header = header;
-    p.pose.position.x = in_now(0, 3);
-    p.pose.position.y = in_now(1, 3);
-    p.pose.position.z = in_now(2, 3);
-    p.pose.orientation.x = q.x();
-    p.pose.orientation.y = q.y();
-    p.pose.orientation.z = q.z();
-    p.pose.orientation.w = q.w();
+    p.pose = tf2::toMsg(Eigen::Isometry3d(Eigen::Matrix4d(now_from_odom * pose)));
     path.poses.push_back(p);
   }
   return path;

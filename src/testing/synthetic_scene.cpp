@@ -356,28 +356,6 @@ struct LocalRayFrame {
   }
 };
 
-/// Entering intersection of o + lambda d with the box [-h, h]; face = 2 * axis + (entering the + side).
-bool intersectBox(const Vector3d& o, const Vector3d& d, const Vector3d& h, double& lambda, int& face) {
-  double t_near = -kInf, t_far = kInf;
-  int near_axis = -1;
-  for (int i = 0; i < 3; ++i) {
-    if (d[i] == 0.0) {
-      if (o[i] < -h[i] || o[i] > h[i]) return false;
-      continue;
-    }
-    double t1 = (-h[i] - o[i]) / d[i], t2 = (h[i] - o[i]) / d[i];
-    if (t1 > t2) std::swap(t1, t2);
-    if (t1 > t_near) {
-      t_near = t1;
-      near_axis = i;
-    }
-    t_far = std::min(t_far, t2);
-  }
-  if (near_axis < 0 || t_near > t_far || t_near <= 0.0) return false;
-  lambda = t_near;
-  face = 2 * near_axis + (d[near_axis] < 0.0 ? 1 : 0);
-  return true;
-}
 
 enum class SurfaceKind { kNone, kRoom, kBox, kArm };
 
@@ -724,6 +702,28 @@ SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options) {
     }
   }
   return pair;
+}
+
+bool intersectBox(const Vector3d& o, const Vector3d& d, const Vector3d& h, double& lambda, int& face) {
+  double t_near = -kInf, t_far = kInf;
+  int near_axis = -1;
+  for (int i = 0; i < 3; ++i) {
+    if (d[i] == 0.0) {
+      if (o[i] < -h[i] || o[i] > h[i]) return false;
+      continue;
+    }
+    double t1 = (-h[i] - o[i]) / d[i], t2 = (h[i] - o[i]) / d[i];
+    if (t1 > t2) std::swap(t1, t2);
+    if (t1 > t_near) {
+      t_near = t1;
+      near_axis = i;
+    }
+    t_far = std::min(t_far, t2);
+  }
+  if (near_axis < 0 || t_near > t_far || t_near <= 0.0) return false;
+  lambda = t_near;
+  face = 2 * near_axis + (d[near_axis] < 0.0 ? 1 : 0);
+  return true;
 }
 
 }  // namespace mc_flow

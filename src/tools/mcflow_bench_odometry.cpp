@@ -37,11 +37,13 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/image.h"
+#include "mc_flow/io/camera_info.h"
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
 #include "mc_flow/io/result_io.h"
 #include "mc_flow/io/sequence_io.h"
 #include "mc_flow/testing/bench.h"
+#include "mc_flow/testing/synthetic_scene.h"
 
 using namespace mc_flow;
 namespace fs = std::filesystem;
@@ -50,22 +52,6 @@ namespace {
 
 constexpr double kTumDepthScale = 5000.0;  // units per metre in TUM depth PNGs
 
-Intrinsics parseIntrinsics(const std::string& text) {
-  std::vector<double> v;
-  std::stringstream in(text);
-  std::string item;
-  while (std::getline(in, item, ',')) {
-    try {
-      v.push_back(std::stod(item));
-    } catch (const std::exception&) {
-      throw CommandLineError("--intrinsics: '" + item + "' is not a number");
-    }
-  }
-  if (v.size() != 4) throw CommandLineError("--intrinsics: expected FX,FY,CX,CY, got '" + text + "'");
-  Intrinsics K{v[0], v[1], v[2], v[3]};
-  K.validate();
-  return K;
-}
 
 double parseNumber(const std::string& name, const std::string& text) {
   std::size_t used = 0;
@@ -141,28 +127,6 @@ double boxTexture(const Box& box, int face, double a, double b) {
   return level;
 }
 
-/// Ray (origin o, direction d, both in the box frame) against the box: the entry parameter and the face hit
-/// (axis * 2 + (positive side)), or a negative parameter on a miss or when the origin is inside.
-double intersectBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::Vector3d& half, int& face) {
-  double t_near = -std::numeric_limits<double>::infinity(), t_far = std::numeric_limits<double>::infinity();
-  int axis = -1;
-  for (int k = 0; k < 3; ++k) {
-    if (std::abs(d[k]) < 1e-12) {
-      if (std::abs(o[k]) > half[k]) return -1;
-      continue;
-    }
-    double t1 = (-half[k] - o[k]) / d[k], t2 = (half[k] - o[k]) / d[k];
-    if (t1 > t2) std::swap(t1, t2);
-    if (t1 > t_near) {
-      t_near = t1;
-      axis = k;
-    }
-    t_far = std::min(t_far, t2);
-  }
-  if (axis < 0 || t_near > t_far || t_near <= 0) return -1;
-  face = axis * 2 + ((o[axis] + t_near * d[axis]) > 0 ? 1 : 0);
-  return t_near;
-}
 
 /// Where a box is placed: in front of the camera at one frame of the sequence (its anchor).
 struct Anchor {
@@ -228,7 +192,7 @@ int cmdComposite(const CommandLine& line) {
   const std::string dir = line.text("tum", ""), out = line.text("out", "");
   if (dir.empty() || out.empty() || !line.has("intrinsics"))
     throw CommandLineError("composite needs --tum DIR, --intrinsics FX,FY,CX,CY and --out OUT");
-  const Intrinsics K = parseIntrinsics(line.text("intrinsics", ""));
+  const Intrinsics K = io::parseIntrinsics(line.text("intrinsics", ""));
   const int box_count = line.integer("boxes", 2, 0, 16);
   const int seed = line.integer("seed", 1, 0, std::numeric_limits<int>::max());
   const double offset = parseNumber("offset", line.text("offset", "-0.015"));
@@ -293,8 +257,8 @@ int cmdComposite(const CommandLine& line) {
         for (std::size_t b = 0; b < boxes.size(); ++b) {
           const Eigen::Vector3d d = R_bc[b] * ray;
           int face = 0;
-          const double z = intersectBox(o_b[b], d, boxes[b].half, face);
-          if (z > 0 && z < z_best) {
+          double z = 0;
+          if (intersectBox(o_b[b], d, boxes[b].half, z, face) && z < z_best) {
             z_best = z;
             box_best = int(b);
             face_best = face;
@@ -371,7 +335,7 @@ int cmdOpenCv(const CommandLine& line) {
   const std::string dir = line.text("tum", ""), out = line.text("out", "");
   if (dir.empty() || out.empty() || !line.has("intrinsics"))
     throw CommandLineError("opencv needs --tum DIR, --intrinsics FX,FY,CX,CY and --out TRAJ");
-  const Intrinsics K = parseIntrinsics(line.text("intrinsics", ""));
+  const Intrinsics K = io::parseIntrinsics(line.text("intrinsics", ""));
   const std::string method = line.text("method", "rgbd");
   cv::Mat camera = (cv::Mat_<float>(3, 3) << float(K.fx), 0, float(K.cx), 0, float(K.fy), float(K.cy), 0, 0, 1);
   cv::Ptr<cv::rgbd::Odometry> odometry;

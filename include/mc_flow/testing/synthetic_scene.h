@@ -65,6 +65,12 @@ struct SyntheticPair {
 
 int syntheticVariantCount();
 
+/// @brief Where the ray o + lambda d (in the box's frame) enters the box [-h, h]: lambda > 0 and the face
+/// 2 * axis + (1 when it enters on the + side); false on a miss or when o is inside. The synthetic scenes' ray cast,
+/// shared with other renderers (mcflow_bench_odometry's composited boxes).
+bool intersectBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::Vector3d& h, double& lambda,
+                  int& face);
+
 /// @brief Renders the pair (first_frame, first_frame + 1) of a variant, with its ground truth.
 SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options);
 /// @brief The default scene (variant 0, no noise) at width x height.
