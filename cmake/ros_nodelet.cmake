@@ -2,8 +2,12 @@
 
 add_library(mc_flow_nodelet SHARED
   src/ros/conversions.cpp
+  src/ros/input_gate.cpp
   src/ros/input_watch.cpp
   src/ros/message_validation.cpp
+  src/ros/node_parameters.cpp
+  src/ros/node_status.cpp
+  src/ros/output_publishers.cpp
   src/ros/reconfigure.cpp
   src/ros/mc_flow_nodelet.cpp)
 target_include_directories(mc_flow_nodelet PUBLIC
@@ -57,6 +61,8 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     test/ros/test_message_validation.cpp
     test/ros/test_reconfigure.cpp
     test/ros/test_input_watch.cpp
+    test/ros/test_input_gate.cpp
+    test/ros/test_node_status.cpp
     test/ros/test_node_parameters.cpp)
   target_link_libraries(test_ros_units PRIVATE mc_flow_nodelet GTest::gtest GTest::gtest_main)
   target_compile_definitions(test_ros_units PRIVATE MCFLOW_LAUNCH_DIR="${CMAKE_CURRENT_SOURCE_DIR}/launch")

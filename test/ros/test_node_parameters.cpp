@@ -1,5 +1,6 @@
-// Every node parameter appears once in launch/mc_flow.launch, as an argument whose default is the nodelet's
-// (include/mc_flow/ros/node_parameters.h) and as a parameter set from that argument.
+// The nodelet's parameter table (include/mc_flow/ros/node_parameters.def): every parameter appears once in
+// launch/mc_flow.launch, as an argument whose default and unit are the table's and as a parameter set from that
+// argument; out-of-bounds values are brought back with a warning naming them.
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -51,6 +52,63 @@ TEST(NodeParameters, EachAppearsOnceInTheLaunchFileWithTheNodeletsDefault) {
     EXPECT_EQ(count(text, "<arg name=\"" + name + "\""), 1);
     EXPECT_EQ(count(text, "<param name=\"" + name + "\""), 1);
   }
+}
+
+TEST(NodeParameters, EachLaunchArgumentStatesTheTablesUnit) {
+  const std::string text = launchText();
+  for (const mc_flow_ros::NodeParameterInfo& row : mc_flow_ros::NodeParameters::table()) {
+    SCOPED_TRACE(row.name);
+    const std::regex arg("<arg name=\"" + row.name + "\" default=\"[^\"]*\" doc=\"([^\"]*)\"");
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(text, m, arg)) << "no doc for " << row.name;
+    EXPECT_FALSE(row.description.empty());
+    if (!row.unit.empty()) EXPECT_EQ(m[1].str().rfind("[" + row.unit + "]", 0), 0u) << m[1].str();
+  }
+}
+
+TEST(NodeParameters, ValuesOutsideTheirBoundsAreBroughtBackWithAWarningNamingThem) {
+  mc_flow_ros::NodeParameters defaults;
+  EXPECT_TRUE(defaults.sanitise().empty());
+
+  mc_flow_ros::NodeParameters p;
+  p.queue_size = 0;
+  p.segmentation_blend = 1.5;
+  p.downsample = 3;
+  p.cloud_colour = "rainbow";
+  p.max_pair_interval = -1;
+  const std::vector<std::string> warnings = p.sanitise();
+  EXPECT_EQ(p.queue_size, 1);
+  EXPECT_EQ(p.segmentation_blend, 1.0);
+  EXPECT_EQ(p.downsample, 0);
+  EXPECT_EQ(p.cloud_colour, "segment");
+  EXPECT_GT(p.max_pair_interval, 0);
+  ASSERT_EQ(warnings.size(), 5u);
+  EXPECT_EQ(warnings[0], "queue_size 0 messages is outside [1, 10000] messages; using 1");
+  auto mentions = [&](const std::string& needle) {
+    for (const std::string& w : warnings)
+      if (w.find(needle) != std::string::npos) return true;
+    return false;
+  };
+  EXPECT_TRUE(mentions("segmentation_blend 1.5 is outside [0, 1]; using 1"));
+  EXPECT_TRUE(mentions("max_pair_interval -1 s is outside"));
+  EXPECT_TRUE(mentions("downsample 3 is not 0 (automatic) or a power of two; using 0"));
+  EXPECT_TRUE(mentions("cloud_colour 'rainbow'"));
+
+  mc_flow_ros::NodeParameters odometry;
+  odometry.publish_odom_tf = true;
+  odometry.prior_frame = odometry.odom_frame;
+  const std::vector<std::string> odometry_warnings = odometry.sanitise();
+  ASSERT_EQ(odometry_warnings.size(), 2u);
+  EXPECT_NE(odometry_warnings[0].find("set base_frame"), std::string::npos);
+  EXPECT_NE(odometry_warnings[1].find("prior_frame 'odom' is the odom_frame this node broadcasts"), std::string::npos);
+}
+
+TEST(NodeParameters, TheStartupDescriptionNamesEveryParameterWithItsUnit) {
+  const std::string d = mc_flow_ros::NodeParameters().describe();
+  for (const mc_flow_ros::NodeParameterInfo& row : mc_flow_ros::NodeParameters::table())
+    EXPECT_NE(d.find(row.name + "="), std::string::npos) << row.name;
+  EXPECT_NE(d.find("max_stamp_difference=0.02 s"), std::string::npos) << d;
+  EXPECT_NE(d.find("base_frame=''"), std::string::npos) << d;
 }
 
 TEST(NodeParameters, TheLaunchFileSetsNoUnknownNodeParameter) {

@@ -1,8 +1,9 @@
 /**
  * @file node_parameters.h
- * @brief The nodelet's own parameters (its private namespace) and their defaults, written once here. The
- * solver's parameters are mc_flow::Config's (dynamic_reconfigure). launch/mc_flow.launch passes every one of
- * these once, with the same default: test/ros/test_node_parameters.cpp checks it.
+ * @brief The nodelet's own parameters (its private namespace), generated from node_parameters.def: the struct, its
+ * defaults as text, the bounds check and the start-up description. ROS-free, so that all of it is unit-tested; the
+ * nodelet reads them with readNodeParameters (node_parameter_reading.h). The solver's parameters are mc_flow::Config's
+ * (dynamic_reconfigure).
  */
 #pragma once
 
@@ -14,30 +15,36 @@
 
 namespace mc_flow_ros {
 
-struct NodeParameters {
-  int queue_size = 5;                            ///< [messages] queue of each input subscriber and of the synchroniser
-  int max_input_pixels = int(mc_flow::kDefaultMaxInputPixels);  ///< [px] larger input images are refused
-  bool approximate_sync = true;                  ///< approximate-time synchroniser; false: exact stamps
-  double approximate_sync_max_interval = 0.0;    ///< [s] 0 = no limit
-  int downsample = 0;                            ///< input pixels per processing pixel: 0 = automatic, or a power of two
-  double max_stamp_difference = 0.02;           ///< [s] RGB vs depth stamps before a warning
-  double max_pair_interval = 1.0;               ///< [s] a longer gap between frames starts a new sequence
-  double no_input_warning_after = 5.0;          ///< [s] warn when subscribed inputs stay silent this long
-  bool publish_tf = false;                      ///< one TF frame per segment
-  std::string segment_frame_prefix = "mc_flow_segment_";  ///< TF child frame = prefix + segment id
-  std::string odom_frame = "odom";              ///< ~odom's frame (REP 105): the camera's first pose
-  std::string base_frame;                       ///< ~odom's child frame; "" = the colour camera's optical frame
-  bool publish_odom_tf = false;                 ///< broadcast odom_frame -> base_frame (off when another node owns it)
-  std::string prior_frame;                      ///< another odometry's fixed frame: TF prior_frame -> camera gives the
-                                                ///< static world's prior per pair; "" = no prior
-  std::string cloud_colour = "segment";         ///< rgb of ~scene_flow: segment or image
-  double marker_seconds_ahead = 1.0;            ///< [s] length of the motion arrows in time
-  double segmentation_blend = 0.6;              ///< weight of the segment colours over the image in ~segmentation
-  bool print_summary = false;                   ///< log one line per solved pair
-  std::string save_dir;                         ///< write PNGs per pair into this folder ("" = do not save)
+/// @brief One row of node_parameters.def, for tests and documentation.
+struct NodeParameterInfo {
+  std::string name;
+  std::string default_text;  ///< as the launch file spells it ("" for an empty text, numbers as C++ prints them)
+  std::string unit;          ///< "" for flags, texts and unitless numbers
+  std::string description;
+};
 
-  /// @brief Every parameter as (name, default as text), in declaration order.
+struct NodeParameters {
+#define MCFLOW_NODE_NUMBER(type, name, default_value, lowest, highest, unit, description) type name = default_value;
+#define MCFLOW_NODE_FLAG(name, default_value, description) bool name = default_value;
+#define MCFLOW_NODE_TEXT(name, default_value, description) std::string name = default_value;
+#include "mc_flow/ros/node_parameters.def"
+#undef MCFLOW_NODE_NUMBER
+#undef MCFLOW_NODE_FLAG
+#undef MCFLOW_NODE_TEXT
+
+  /// @brief Every parameter as (name, default as text), in the table's order.
   static std::vector<std::pair<std::string, std::string>> defaults();
+  /// @brief Every row of the table, in its order.
+  static std::vector<NodeParameterInfo> table();
+
+  /// @brief Brings every value into its bounds and rules (numbers clamped to the table's bounds, downsample a power of
+  /// two or 0, cloud_colour one of its words) and returns one warning per change, naming the parameter, the value and
+  /// what is used instead; also warns about combinations that work but are probably not meant (publish_odom_tf without
+  /// base_frame, prior_frame equal to the odom frame this node broadcasts). Does not touch the file system.
+  std::vector<std::string> sanitise();
+
+  /// @brief "name=value unit ..." for the start-up log, in the table's order.
+  std::string describe() const;
 };
 
 }  // namespace mc_flow_ros
