@@ -30,7 +30,7 @@ endif()
 
 # Writes the demo bag: a synthetic RGB-D sequence with moving parts (no camera needed).
 add_executable(make_synthetic_bag src/ros/make_synthetic_bag.cpp)
-target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet mc_flow_testing)
+target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet mc_flow_eval)
 set_target_properties(make_synthetic_bag PROPERTIES
   RUNTIME_OUTPUT_DIRECTORY ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_BIN_DESTINATION})
 
@@ -40,10 +40,15 @@ add_executable(mcflow_bench_nodelet src/ros/mcflow_bench_nodelet.cpp)
 target_link_libraries(mcflow_bench_nodelet PRIVATE mc_flow_nodelet mc_flow_io mc_flow_testing)
 target_compile_options(mcflow_bench_nodelet PRIVATE -Wall -Wextra)
 
-install(TARGETS mc_flow_nodelet make_synthetic_bag
-  LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
-  RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
-install(DIRECTORY include/mc_flow/ros DESTINATION ${CATKIN_PACKAGE_INCLUDE_DESTINATION}/ros)
+# The install space (catkin_make install, catkin_make_isolated --install; test/install/check_install.sh): the nodelet
+# and the libraries catkin_package() exports in lib/, the tools in lib/mc_flow (rosrun mc_flow mcflow), every header
+# but the benchmark and test harness's (include/mc_flow/testing) under include/mc_flow/.
+install(TARGETS mc_flow_nodelet mc_flow_io mc_flow_eval mc_flow_formats mc_flow_core
+  ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+  LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION})
+install(TARGETS mcflow make_synthetic_bag RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+install(DIRECTORY include/mc_flow/ DESTINATION ${CATKIN_PACKAGE_INCLUDE_DESTINATION}
+  PATTERN testing EXCLUDE)
 install(FILES nodelet_plugins.xml DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
 install(DIRECTORY launch rviz DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
 catkin_install_python(PROGRAMS scripts/demo_monitor.py scripts/start_rviz.py DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
@@ -127,6 +132,14 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
   add_test(NAME ros.MissingTransportFallsBackToRaw
     COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/test/ros/check_transport_fallback.sh ${CATKIN_DEVEL_PREFIX})
   set_tests_properties(ros.MissingTransportFallsBackToRaw PROPERTIES TIMEOUT 180)
+  # The install space as a ROS user meets it: the built package installed into a temporary prefix, a downstream catkin
+  # package built and run against it, `mcflow demo` and demo.launch from it. Not in a sanitized build (a downstream
+  # package cannot link instrumented archives without the sanitizer runtimes).
+  if(NOT MCFLOW_SANITIZE)
+    add_test(NAME install.BuildOnTheInstallSpace
+      COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/test/install/check_install.sh ${CMAKE_CURRENT_SOURCE_DIR} ${CMAKE_BINARY_DIR})
+    set_tests_properties(install.BuildOnTheInstallSpace PROPERTIES TIMEOUT 600)
+  endif()
   # rviz's view follows the Fixed Frame: optical (auto) along +z, a body frame (camera_link) along +x.
   add_test(NAME ros.RvizViewFollowsTheFixedFrame
     COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test/ros/check_rviz_view.py ${CMAKE_CURRENT_SOURCE_DIR})

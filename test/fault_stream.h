@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "mc_flow/core/sequence.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 namespace mc_flow {
 namespace test {

@@ -1,4 +1,4 @@
-#include "mc_flow/testing/metrics.h"
+#include "mc_flow/eval/metrics.h"
 
 #include <algorithm>
 #include <cmath>
@@ -60,6 +60,13 @@ double chiSquareCdf(double dof, double x) {
 }
 
 }  // namespace
+
+double median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  const auto middle = values.begin() + std::ptrdiff_t(values.size() / 2);
+  std::nth_element(values.begin(), middle, values.end());
+  return *middle;
+}
 
 FlowErrors opticalFlowErrors(const ImageF& estimate, const ImageF& truth, const ImageU8* excluded) {
   requireChannels("opticalFlowErrors", "estimate", estimate, 2);

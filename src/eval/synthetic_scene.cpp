@@ -1,6 +1,6 @@
 /**
  * @file synthetic_scene.cpp
- * @brief Ray-cast synthetic RGB-D scenes with exact ground truth (see mc_flow/testing/synthetic_scene.h; a test fixture, not part of the core).
+ * @brief Ray-cast synthetic RGB-D scenes with exact ground truth (see mc_flow/eval/synthetic_scene.h; library mc_flow_eval, not part of the core).
  *
  * Geometry (camera optical frame of frame 0, metres): a closed room (walls, floor, ceiling; a window in the
  * back wall through which nothing is seen, so depth is invalid there), rigid boxes and one articulated arm.
@@ -19,7 +19,7 @@
  * Textures are functions of each surface's own coordinates (metres), so they move with the surface and
  * brightness constancy holds exactly.
  */
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 #include <algorithm>
 #include <array>

@@ -9,8 +9,8 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/sampling.h"
+#include "mc_flow/eval/metrics.h"
 #include "mc_flow/io/image_io.h"
-#include "mc_flow/testing/bench.h"
 
 namespace mc_flow {
 namespace io {

@@ -10,7 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "mc_flow/core/error.h"
-#include "mc_flow/testing/metrics.h"
+#include "mc_flow/eval/metrics.h"
 #include "mc_flow/io/camera_info.h"
 #include "mc_flow/io/flow_io.h"
 #include "mc_flow/io/image_io.h"

@@ -1,4 +1,4 @@
-// The trajectory plot of `mcflow eval-traj` (its ATE and RPE: mc_flow/testing/metrics.cpp).
+// The trajectory plot of `mcflow eval-traj` (its ATE and RPE: mc_flow/eval/metrics.cpp).
 #include "mc_flow/io/trajectory_eval.h"
 
 #include <algorithm>

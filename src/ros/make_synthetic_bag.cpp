@@ -21,7 +21,7 @@
 #include <sensor_msgs/image_encodings.h>
 #include <tf2_msgs/TFMessage.h>
 
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 namespace {
 

@@ -38,7 +38,7 @@
 #include "mc_flow/ros/message_validation.h"
 #include "mc_flow/ros/node_parameters.h"
 #include "mc_flow/testing/bench.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 namespace {
 

@@ -7,13 +7,6 @@
 
 namespace mc_flow {
 
-double median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  const auto middle = values.begin() + std::ptrdiff_t(values.size() / 2);
-  std::nth_element(values.begin(), middle, values.end());
-  return *middle;
-}
-
 CommandLine::CommandLine(std::string tool, std::vector<CommandLineOption> options)
     : tool_(std::move(tool)), options_(std::move(options)) {
   options_.push_back({"set", true, "name=value: sets one Config field (config_fields.def); may be repeated"});

@@ -28,9 +28,9 @@
 #include "mc_flow/core/solver.h"
 #include "mc_flow/io/flow_io.h"
 #include "mc_flow/testing/bench.h"
-#include "mc_flow/testing/metrics.h"
+#include "mc_flow/eval/metrics.h"
 #include "mc_flow/testing/part_motion.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 using namespace mc_flow;
 

@@ -23,7 +23,7 @@
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/testing/bench.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 using namespace mc_flow;
 

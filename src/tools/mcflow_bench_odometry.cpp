@@ -43,7 +43,7 @@
 #include "mc_flow/io/result_io.h"
 #include "mc_flow/io/sequence_io.h"
 #include "mc_flow/testing/bench.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 using namespace mc_flow;
 namespace fs = std::filesystem;

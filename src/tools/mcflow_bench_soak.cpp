@@ -27,7 +27,7 @@
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/testing/bench.h"
 #include "mc_flow/testing/soak.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 using namespace mc_flow;
 

@@ -41,8 +41,8 @@
 #include "mc_flow/core/solver.h"
 #include "mc_flow/core/static_world.h"
 #include "mc_flow/testing/bench.h"
-#include "mc_flow/testing/metrics.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/metrics.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 using namespace mc_flow;
 

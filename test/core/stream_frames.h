@@ -2,7 +2,7 @@
 #pragma once
 
 #include "mc_flow/core/sequence.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 namespace mc_flow {
 namespace test {

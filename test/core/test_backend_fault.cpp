@@ -13,7 +13,7 @@
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 #include "fault_stream.h"
 
 namespace mc_flow {

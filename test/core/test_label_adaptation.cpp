@@ -3,8 +3,8 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_adaptation.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/testing/metrics.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/metrics.h"
+#include "mc_flow/eval/synthetic_scene.h"
 #include <map>
 
 #include <cmath>

@@ -6,7 +6,7 @@
 #include <Eigen/Geometry>
 
 #include "mc_flow/core/error.h"
-#include "mc_flow/testing/metrics.h"
+#include "mc_flow/eval/metrics.h"
 
 namespace mc_flow {
 namespace {

@@ -12,7 +12,7 @@
 #include "mc_flow/core/motion_step_control.h"
 #include "mc_flow/core/pyramid.h"
 #include "coupled_labels.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 #include "test_helpers.h"
 
 using namespace mc_flow;

@@ -13,7 +13,7 @@
 #include "stream_frames.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/warm_start.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 namespace mc_flow {
 namespace {

@@ -12,9 +12,9 @@
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/testing/metrics.h"
+#include "mc_flow/eval/metrics.h"
 #include "mc_flow/testing/part_motion.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 #include "same_outputs.h"
 #include "test_helpers.h"
 

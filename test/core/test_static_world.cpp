@@ -12,7 +12,7 @@
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/core/static_world.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 #include "stream_frames.h"
 
 using namespace mc_flow;

@@ -14,7 +14,7 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/se3.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 namespace mc_flow {
 namespace {

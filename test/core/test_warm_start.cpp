@@ -10,8 +10,8 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/core/warm_start.h"
-#include "mc_flow/testing/metrics.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/metrics.h"
+#include "mc_flow/eval/synthetic_scene.h"
 #include "test_helpers.h"
 
 namespace mc_flow {

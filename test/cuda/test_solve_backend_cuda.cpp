@@ -23,11 +23,11 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/kmeans.h"
 #include "mc_flow/core/label_optimization.h"
-#include "mc_flow/testing/metrics.h"
+#include "mc_flow/eval/metrics.h"
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 namespace mc_flow {
 namespace {

@@ -20,7 +20,7 @@
 #include <sensor_msgs/Image.h>
 
 #include "mc_flow/ros/bag_sequence.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 #include "temp_dir.h"
 
 #ifndef MCFLOW_CLI_PATH

@@ -2,6 +2,8 @@
  * @file metrics.h
  * @brief The paper's metrics (Tables 1-2) plus ground-truth comparisons for synthetic scenes, and a camera trajectory
  * scored as the TUM RGB-D benchmark does (also `mcflow eval-traj`'s maths, io/trajectory_eval.h).
+ *
+ * Library mc_flow_eval (installed; Eigen and the core only): the `mcflow` tool's evaluations, the benchmarks, the tests.
  */
 #pragma once
 
@@ -15,6 +17,9 @@
 #include "mc_flow/core/se3.h"
 
 namespace mc_flow {
+
+/// @brief The element at index size / 2 of the sorted values (the upper median for an even count); 0 when empty.
+double median(std::vector<double> values);
 
 struct FlowErrors {
   double epe = 0;        ///< mean end-point error [px]

@@ -5,6 +5,9 @@
  * A textured room (static background), independent rigid objects and one articulated arm whose
  * elbow blends the two links' motions smoothly; rendered by ray casting with a z-buffer so that
  * occlusions, disocclusions and out-of-view points are exact.
+ *
+ * Library mc_flow_eval (installed; Eigen and the core only): `mcflow demo` / `synth`, the demo bag
+ * (make_synthetic_bag), the benchmarks and the tests.
  */
 #pragma once
 

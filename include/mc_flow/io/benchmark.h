@@ -12,7 +12,7 @@
 
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/image.h"
-#include "mc_flow/testing/metrics.h"
+#include "mc_flow/eval/metrics.h"
 #include "mc_flow/core/solver.h"
 
 namespace mc_flow {

@@ -13,7 +13,7 @@
 
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 
 namespace mc_flow {
 namespace io {

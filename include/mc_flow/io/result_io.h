@@ -9,7 +9,7 @@
 
 #include "mc_flow/core/image.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/testing/synthetic_scene.h"
+#include "mc_flow/eval/synthetic_scene.h"
 #include "mc_flow/io/report_io.h"
 
 namespace mc_flow {

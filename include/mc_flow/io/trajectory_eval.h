@@ -8,12 +8,12 @@
 
 #include <opencv2/core.hpp>
 
-#include "mc_flow/testing/metrics.h"
+#include "mc_flow/eval/metrics.h"
 
 namespace mc_flow {
 namespace io {
 
-// The ATE/RPE maths is shared with the synthetic benchmarks, which run without OpenCV (mc_flow/testing/metrics.h).
+// The ATE/RPE maths is shared with the synthetic benchmarks, which run without OpenCV (mc_flow/eval/metrics.h).
 using mc_flow::evaluateTrajectory;
 using mc_flow::StampedPoses;
 using mc_flow::TrajectoryErrors;

@@ -1,8 +1,10 @@
 /**
  * @file bench.h
- * @brief What the benchmark tools share: their command line (one parser) and the median of timings.
+ * @brief What the benchmark tools share: their command line (one parser). The median of timings they print is
+ * mc_flow::median (mc_flow/eval/metrics.h, shared with `mcflow bench-real`).
  *
- * Core only (no OpenCV), like the tools that use it, so that it builds on the GPU machine.
+ * Core only (no OpenCV), like the tools that use it, so that it builds on the GPU machine. Benchmark harness:
+ * library mc_flow_testing, linked by the benchmarks and the tests only, not installed.
  */
 #pragma once
 
@@ -11,11 +13,9 @@
 #include <vector>
 
 #include "mc_flow/core/config.h"
+#include "mc_flow/eval/metrics.h"
 
 namespace mc_flow {
-
-/// @brief The element at index size / 2 of the sorted values (the upper median for an even count); 0 when empty.
-double median(std::vector<double> values);
 
 /// @brief A command line a tool cannot use: an unknown option, a missing or malformed value. Tools exit with 2.
 struct CommandLineError : std::runtime_error {
