@@ -18,6 +18,8 @@
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/motion_estimation.h"
 #include "mc_flow/core/se3.h"
+#include "mc_flow/core/scene_flow.h"
+#include "mc_flow/core/scene_flow_pixel.h"
 #include "mc_flow/core/se3_coefficients.h"
 #include "sampling_device.cuh"
 
@@ -43,26 +45,6 @@ __device__ __forceinline__ void mul3(const double A[9], const double B[9], doubl
     for (int c = 0; c < 3; ++c) C[r * 3 + c] = A[r * 3] * B[c] + A[r * 3 + 1] * B[3 + c] + A[r * 3 + 2] * B[6 + c];
 }
 
-/// @brief Rows 0..2 of exp(xi) (row-major 3x4), in double.
-__device__ __forceinline__ void se3ExpRowsDevice(const double xi[6], double T[12]) {
-  const double* v = xi;
-  const double* w = xi + 3;
-  double W[9], W2[9];
-  skew3(w, W);
-  mul3(W, W, W2);
-  double a, b, c;
-  se3ExpCoefficients(w[0] * w[0] + w[1] * w[1] + w[2] * w[2], a, b, c);
-  for (int r = 0; r < 3; ++r) {
-    double t = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double identity = r == k ? 1.0 : 0.0;
-      T[r * 4 + k] = identity + a * W[r * 3 + k] + b * W2[r * 3 + k];
-      t += (identity + b * W[r * 3 + k] + c * W2[r * 3 + k]) * v[k];
-    }
-    T[r * 4 + 3] = t;
-  }
-}
-
 /// @brief The warp's total in lane 0 (a shuffle-down tree: a fixed order, so the same bits on every run); every lane
 /// of the warp must take part.
 template <typename T>
@@ -77,17 +59,6 @@ struct DeviceTransform {
   float m[12];
 };
 DeviceTransform deviceTransform(const Vector6d& twist);
-
-/// @brief P2 = R P + t for a row-major 3x4 float transform, rounded as the CPU's Eigen product of the
-/// points: a0 x + (a1 y + a2 z), then + t (explicitly rounded operations, no FMA).
-__device__ __forceinline__ void transformPointDevice(const float T[12], const float P[3], float P2[3]) {
-#pragma unroll
-  for (int r = 0; r < 3; ++r) {
-    const float* row = T + 4 * r;
-    P2[r] = __fadd_rn(__fadd_rn(__fmul_rn(row[0], P[0]), __fadd_rn(__fmul_rn(row[1], P[1]), __fmul_rn(row[2], P[2]))),
-                      row[3]);
-  }
-}
 
 // ---------------------------------------------------------------- per-label sums over many blocks
 // A per-label sum over the pixels of a level used to run in one block per label (or one block in all), whose
@@ -172,49 +143,22 @@ void launchChunkSums(Pixel pixel, std::size_t pixels, int labels, DeviceBuffer<d
   check(cudaGetLastError(), what, __FILE__, __LINE__);
 }
 
-/// @brief Frame 1's point P at pixel `idx` moved by its interpolated motion (warpPoints of src/core/scene_flow.cpp),
-/// in double: the labels' mean twist by the motion-label weights of `u` (`plane` values per label), a single
-/// label's own transform where only one has mass, the largest label's where (almost) none has. `motions` holds
-/// 18 doubles per motion label (the twist, then rows 0..2 of its exp).
+/// @brief Frame 1's point P at pixel `idx` moved by its interpolated motion (scene_flow_pixel.h's warpPoint, which
+/// src/core/scene_flow.cpp's warpPoints applies too), in double; `u` holds `plane` values per label, `motions` 18
+/// doubles per motion label (packMotions of scene_flow.h).
 __device__ __forceinline__ void warpPointDevice(const float P[3], const float* __restrict__ u, std::size_t plane,
                                                 std::size_t idx, int motion_labels, const double* __restrict__ motions,
                                                 double Q[3]) {
-  constexpr double kMinMotionMass = 1e-3;  // as src/core/scene_flow.cpp
   Q[0] = P[0];
   Q[1] = P[1];
   Q[2] = P[2];
-  const int m = motion_labels;
-  if (m <= 0) return;
-  double mass = 0, xi[6] = {0, 0, 0, 0, 0, 0};
-  int nonzero = 0, last = 0;
-  for (int i = 0; i < m; ++i) {
-    const double v = u[i * plane + idx];
-    if (v == 0.0) continue;
-    mass += v;
-    for (int c = 0; c < 6; ++c) xi[c] += v * motions[18 * i + c];
-    ++nonzero;
-    last = i;
-  }
-  double T[12];
-  const double* transform = T;
-  if (mass < kMinMotionMass) {
-    int label = 0;  // the motion label with the largest value, the lowest index on ties
-    for (int i = 1; i < m; ++i)
-      if (u[i * plane + idx] > u[label * plane + idx]) label = i;
-    transform = motions + 18 * label + 6;
-  } else if (nonzero == 1) {
-    transform = motions + 18 * last + 6;
-  } else {
-    for (int c = 0; c < 6; ++c) xi[c] /= mass;
-    se3ExpRowsDevice(xi, T);
-  }
-  for (int r = 0; r < 3; ++r)
-    Q[r] = transform[4 * r] * double(P[0]) + transform[4 * r + 1] * double(P[1]) + transform[4 * r + 2] * double(P[2]) +
-           transform[4 * r + 3];
+  if (motion_labels <= 0) return;
+  scene_flow_pixel::MotionSums sums;
+  for (int i = 0; i < motion_labels; ++i)
+    scene_flow_pixel::addMotionLabel(sums, i, u[i * plane + idx], motions + scene_flow_pixel::kMotionValues * i);
+  const auto largest = [&]() { return scene_flow_pixel::largestMotionLabel(u, plane, idx, motion_labels); };
+  scene_flow_pixel::warpPoint(P, sums, motions, largest, Q);
 }
-
-/// @brief The 18 doubles per motion label that warpPointDevice reads: the twist, then rows 0..2 of its exp.
-void packMotions(const std::vector<Vector6d>& twists, double* out);
 
 // ---------------------------------------------------------------- pyramid (pyramid.cu)
 /// @brief One frame's images at one pyramid level on the device; `points` or the gradients may be null (not

@@ -28,6 +28,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/simplex_projection.h"
+#include "mc_flow/core/solve_backend.h"
 #include "device_stages.h"
 
 namespace mc_flow {
@@ -569,7 +570,7 @@ __global__ void dataCostsKernel(const DataCostParams q, float* __restrict__ data
   const float I1 = q.level.intensity1.at(x, y, 0);
   for (int i = 0; i < q.motion_labels; ++i) {
     float P2[3];
-    cuda_detail::transformPointDevice(q.transforms[i].m, P, P2);
+    transformPoint(q.transforms[i].m, P, P2);
     float cost = q.out_of_view;
     if (P2[2] > 1e-3f) {
       float u = add(__fdiv_rn(mul(q.fx, P2[0]), P2[2]), q.cx), v = add(__fdiv_rn(mul(q.fy, P2[1]), P2[2]), q.cy);

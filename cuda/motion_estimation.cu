@@ -2,9 +2,9 @@
 // (src/core/motion_estimation.cpp, the reference), one thread per pixel; each warp's 32 values of H and g are
 // added in float, everything beyond the warp in double.
 //
-// Arithmetic. Warping, projection, the in-view test, the bilinear samples and the residuals use explicitly
-// rounded float intrinsics in the CPU's order (cuda/sampling_device.cuh), so every discrete decision (in view,
-// depth jump, active labels) is the CPU's. The Jacobians and the per-pixel 6x6 products may be contracted into
+// Arithmetic. The per-pixel rules are motion_estimation_pixel.h's, shared with the CPU: warping, projection, the
+// in-view test, the bilinear samples (sampling.h) and the residuals use explicitly rounded float operations in the
+// CPU's order, so every discrete decision (in view, depth jump, active labels) is the CPU's. The Jacobians and the per-pixel 6x6 products may be contracted into
 // FMAs (a few float ulps per pixel) and the sums run in another order than the CPU's, so the results agree
 // with the CPU to a relative ~1e-7, not bit for bit (test/cuda/test_motion_estimation_cuda.cpp states the
 // tolerances).
@@ -39,7 +39,9 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/motion_estimation.h"
+#include "mc_flow/core/motion_estimation_pixel.h"
 #include "mc_flow/core/motion_step_control.h"
+#include "mc_flow/core/solve_backend.h"
 #include "device_stages.h"
 #include "sampling_device.cuh"
 
@@ -54,8 +56,6 @@ using cuda_detail::PinnedBuffer;
 constexpr int kMaxMotionLabels = 128;  // as the CUDA label step's kMaxLabels; Config allows 64 (max_labels)
 constexpr int kThreads = 256;          // one pixel per thread; warps span consecutive pixels of a row
 constexpr int kWarps = kThreads / 32;
-constexpr float kDepthEdgeJump = 0.1f;  // [m] as in src/core/motion_estimation.cpp
-constexpr float kMinMass = 0.05f;       // pixels with less motion-label mass are skipped (as on the CPU)
 
 // Per-label sums: the 21 upper-triangle values of the diagonal H block (row-major, r <= c), g (6),
 // label_cost, label_pixels.
@@ -104,7 +104,7 @@ using cuda_detail::skew3;
 // Rows 0..2 of exp(xi), cast to float (row-major 3x4).
 __device__ void se3ExpDevice(const double xi[6], float T[12]) {
   double Td[12];
-  cuda_detail::se3ExpRowsDevice(xi, Td);
+  se3ExpRows(xi, Td);
   for (int k = 0; k < 12; ++k) T[k] = float(Td[k]);
 }
 
@@ -141,24 +141,12 @@ __device__ void se3LeftJacobianDevice(const double xi[6], float J[36]) {
 }
 
 // ----------------------------------------------------------------- per-pixel linearisation
-// d(P2)/d(eps) for a left increment: row * [I | -skew(P2)] (pointJacobian of the CPU code), then through the
-// transposed left Jacobian.
-__device__ __forceinline__ void residualJacobian(const float P2[3], float r0, float r1, float r2, const float* J,
-                                                 float out[6]) {
-  const float point[6] = {r0, r1, r2, r2 * P2[1] - r1 * P2[2], r0 * P2[2] - r2 * P2[0], r1 * P2[0] - r0 * P2[1]};
-#pragma unroll
-  for (int i = 0; i < 6; ++i) {
-    float s = 0.f;
-#pragma unroll
-    for (int r = 0; r < 6; ++r) s += J[r * 6 + i] * point[r];
-    out[i] = s;
-  }
-}
+// The rules are motion_estimation_pixel.h's, shared with the CPU accumulator.
 
 // Motion-label weight of label i at a pixel: u_i / mass, kept when >= min_weight (the CPU's first pass).
 __device__ __forceinline__ float rawWeight(const KernelParams& p, std::size_t plane, std::size_t idx, int i,
                                            float mass) {
-  return divRn(__ldg(p.labels + i * plane + idx), mass);
+  return motion_pixel::labelShare(__ldg(p.labels + i * plane + idx), mass);
 }
 
 
@@ -208,7 +196,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
     const bool occluded = p.occluded && p.occluded[idx];
     if (isfinite(P[2]) && !occluded) {
       for (int i = 0; i < n; ++i) mass = addRn(mass, __ldg(p.labels + i * plane + idx));
-      if (mass >= kMinMass) {
+      if (motion_pixel::usableMass(mass)) {
         for (int i = 0; i < n; ++i) {
           const float w = rawWeight(p, plane, idx, i, mass);
           if (w >= p.min_weight) {
@@ -241,24 +229,21 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
         left_jacobian = p.motions[first].left_jacobian;
       }
       float P2[3];
-      cuda_detail::transformPointDevice(transform, P, P2);
-      const float inv_z = divRn(1.f, fmaxf(P2[2], 1e-3f));
-      float u = addRn(mulRn(mulRn(p.fx, P2[0]), inv_z), p.cx);
-      float v = addRn(mulRn(mulRn(p.fy, P2[1]), inv_z), p.cy);
+      transformPoint(transform, P, P2);
+      motion_pixel::Projection proj;
       float I2 = 0.f;
-      in_view = P2[2] >= 1e-3f && clampIntoView(p.width, p.height, u, v) &&
-                cuda_detail::sampleBilinearDevice(p.intensity2, u, v, 0, I2);
+      in_view = motion_pixel::project(P2, p.fx, p.fy, p.cx, p.cy, p.width, p.height, proj) &&
+                cuda_detail::sampleBilinearDevice(p.intensity2, proj.u, proj.v, 0, I2);
       if (in_view) {
+        const float u = proj.u, v = proj.v;
         float gIx = 0.f, gIy = 0.f;
         cuda_detail::sampleBilinearDevice(p.intensity_grad2, u, v, 0, gIx);
         cuda_detail::sampleBilinearDevice(p.intensity_grad2, u, v, 1, gIy);
-        const float du_dX = mulRn(p.fx, inv_z), du_dZ = mulRn(mulRn(mulRn(-p.fx, P2[0]), inv_z), inv_z);
-        const float dv_dY = mulRn(p.fy, inv_z), dv_dZ = mulRn(mulRn(mulRn(-p.fy, P2[1]), inv_z), inv_z);
         const float rI = subRn(p.intensity1.at(x, y, 0), I2);
-        const float cI2 = mulRn(p.c_intensity, p.c_intensity);
-        float JI[6];
-        residualJacobian(P2, -gIx * du_dX, -gIy * dv_dY, -(gIx * du_dZ + gIy * dv_dZ), left_jacobian, JI);
-        const float wI = divRn(1.f, addRn(cI2, mulRn(rI, rI)));
+        float row[3], JI[6];
+        motion_pixel::intensityRow(proj, gIx, gIy, row);
+        motion_pixel::residualJacobian(P2, row, left_jacobian, JI);
+        const float wI = motion_pixel::cauchyWeight(1.f, p.c_intensity, rI);
         const float wrI = wI * rI;
         float wJI[6];
 #pragma unroll
@@ -273,18 +258,18 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
 #pragma unroll
             for (int c = r; c < 6; ++c) Hm[k++] = wJI[r] * JI[c];
         }
-        cost = log1p(double(divRn(mulRn(rI, rI), cI2)));
+        cost = motion_pixel::cauchyCost(p.c_intensity, rI);
 
         float Z2 = 0.f;
-        if (cuda_detail::sampleDepthBilinearSmoothDevice(p.depth2, u, v, kDepthEdgeJump, Z2)) {
+        if (cuda_detail::sampleDepthBilinearSmoothDevice(p.depth2, u, v, motion_pixel::kDepthEdgeJump, Z2)) {
           float gZx = 0.f, gZy = 0.f;
           cuda_detail::sampleBilinearDevice(p.depth_grad2, u, v, 0, gZx);
           cuda_detail::sampleBilinearDevice(p.depth_grad2, u, v, 1, gZy);
           const float rZ = subRn(P2[2], Z2);
-          const float cZ2 = mulRn(p.c_depth, p.c_depth);
           float JZ[6];
-          residualJacobian(P2, -gZx * du_dX, -gZy * dv_dY, 1.f - (gZx * du_dZ + gZy * dv_dZ), left_jacobian, JZ);
-          const float wZ = divRn(p.alpha, addRn(cZ2, mulRn(rZ, rZ)));
+          motion_pixel::depthRow(proj, gZx, gZy, row);
+          motion_pixel::residualJacobian(P2, row, left_jacobian, JZ);
+          const float wZ = motion_pixel::cauchyWeight(p.alpha, p.c_depth, rZ);
           const float wrZ = wZ * rZ;
           float wJZ[6];
 #pragma unroll
@@ -297,9 +282,9 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
           for (int r = 0; r < 6; ++r)
 #pragma unroll
             for (int c = r; c < 6; ++c) Hm[k++] += wJZ[r] * JZ[c];
-          cost += double(p.alpha) * log1p(double(divRn(mulRn(rZ, rZ), cZ2)));
+          cost += mulRn(p.alpha, motion_pixel::cauchyCost(p.c_depth, rZ));
         } else {
-          cost += double(p.alpha) * log(2.0);  // no depth evidence: the CPU's constant
+          cost += motion_pixel::missingDepthCost(p.alpha);
         }
 #pragma unroll
         for (int k = 0; k < kUpper; ++k) Hm[k] = mulRn(mass, Hm[k]);
@@ -1262,8 +1247,6 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
 
 }  // namespace
 
-/// @brief The CUDA motion accumulator on host-memory levels (setLevel uploads); throws BackendError
-/// when no usable CUDA device is present.
 std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator() {
   std::string why;
   if (!cudaBackendAvailable(&why)) throw BackendError("CUDA motion step requested but unavailable: " + why);

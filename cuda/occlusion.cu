@@ -1,5 +1,6 @@
 // Occlusion mask of the device-resident solve: warpPoints (src/core/scene_flow.cpp) followed by
-// detectOcclusions (src/core/occlusion.cpp, the reference) at one pyramid level. The warp runs in double
+// detectOcclusions (src/core/occlusion.cpp, the reference) at one pyramid level, with the rules of
+// scene_flow_pixel.h and occlusion_pixel.h. The warp runs in double
 // as on the CPU; the per-target counts are integer atomics (order-independent), so the mask is the CPU's
 // up to the last bit of the blended twists' sums.
 #include <cuda_runtime.h>
@@ -8,6 +9,7 @@
 
 #include "cuda_check.h"
 #include "device_stages.h"
+#include "mc_flow/core/occlusion_pixel.h"
 
 namespace mc_flow {
 namespace cuda_detail {
@@ -43,13 +45,8 @@ __global__ void warpKernel(const OcclusionParams q, long long* __restrict__ targ
   warpPointDevice(P, q.u, plane, idx, q.count - 1, q.motions, Q);
   const float Qf[3] = {float(Q[0]), float(Q[1]), float(Q[2])};
   warped_z[idx] = Qf[2];
-  long long target = -1;
-  if (Qf[2] > 0.f) {
-    const Intrinsics& K = q.level.intrinsics;
-    const double u = K.fx * Qf[0] / Qf[2] + K.cx, v = K.fy * Qf[1] / Qf[2] + K.cy;
-    const double ur = floor(u + 0.5), vr = floor(v + 0.5);
-    if (ur >= 0 && vr >= 0 && ur < W && vr < H) target = (long long)(vr) * W + (long long)(ur);
-  }
+  const Intrinsics& K = q.level.intrinsics;
+  const long long target = occlusion_pixel::targetPixel(Qf, K.fx, K.fy, K.cx, K.cy, W, H);
   targets[idx] = target;
   if (target >= 0) atomicAdd(counts + target, 1);
 }
@@ -65,10 +62,7 @@ __global__ void occlusionTestKernel(const OcclusionParams q, const long long* __
   if (t == -1) {
     mask = 255;  // out of view (or behind the camera) in frame 2
   } else if (t >= 0) {
-    const float z2 = q.level.depth2.data[t];
-    // z-buffer form of the depth test: positive when the warped point lies behind what frame 2 sees.
-    const float depth_change = isfinite(z2) && z2 > 0.f ? __fsub_rn(warped_z[idx], z2) : 0.f;
-    if (__fadd_rn(float(counts[t]), __fmul_rn(q.kz, depth_change)) > q.ko) mask = 255;
+    if (occlusion_pixel::occluded(counts[t], warped_z[idx], q.level.depth2.data[t], q.kz, q.ko)) mask = 255;
   }
   occluded[idx] = mask;
 }

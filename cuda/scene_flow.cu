@@ -43,9 +43,10 @@ __global__ void outputsKernel(const DeviceImage points, float* __restrict__ u, i
   moved_depth[idx] = Q[2];
   const bool moved_finite = isfinite(Q[0]) && isfinite(Q[1]) && isfinite(Q[2]);
   for (int c = 0; c < 3; ++c) scene_flow[3 * idx + c] = moved_finite ? __fsub_rn(Q[c], P[c]) : nan;
-  if (moved_finite && Q[2] > 0.f) {  // a point moved behind the camera has no image position
-    optical_flow[2 * idx] = float(K.fx * Q[0] / Q[2] + K.cx - x);
-    optical_flow[2 * idx + 1] = float(K.fy * Q[1] / Q[2] + K.cy - y);
+  float flow[2];
+  if (moved_finite && scene_flow_pixel::opticalFlow(Q, K.fx, K.fy, K.cx, K.cy, x, y, flow)) {
+    optical_flow[2 * idx] = flow[0];
+    optical_flow[2 * idx + 1] = flow[1];
   } else {
     optical_flow[2 * idx] = optical_flow[2 * idx + 1] = nan;
   }
@@ -72,15 +73,6 @@ struct CentroidPixel {
 };
 
 }  // namespace
-
-void packMotions(const std::vector<Vector6d>& twists, double* out) {
-  for (std::size_t i = 0; i < twists.size(); ++i) {
-    const Eigen::Matrix4d T = se3Exp(twists[i]);
-    for (int k = 0; k < 6; ++k) out[18 * i + std::size_t(k)] = twists[i](k);
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 4; ++c) out[18 * i + 6 + std::size_t(r * 4 + c)] = T(r, c);
-  }
-}
 
 void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, const double* motions,
                             const Intrinsics& K, float* scene_flow, float* optical_flow, float* moved_depth,

@@ -584,14 +584,14 @@ class CudaSolveBackend final : public SolveBackend {
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));  // the staging buffer is reused next
   }
 
-  // The twists and their transforms (cuda_detail::packMotions) into motions_.
+  // The twists and their transforms (packMotions) into motions_.
   void uploadMotions(const std::vector<Vector6d>& twists) {
     const std::size_t n = twists.size();
     // The staging buffer is rewritten only once the previous upload from it has finished (usually long ago: no
     // synchronisation of the whole stream after an upload).
     if (motions_uploaded_.recorded) MCFLOW_CUDA_CHECK(cudaEventSynchronize(motions_uploaded_.event));
     double* staged = staged_motions_.reserve(n * 18);
-    cuda_detail::packMotions(twists, staged);
+    packMotions(twists, staged);
     motions_.reserve(std::max<std::size_t>(n * 18, 1));
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(motions_.get(), staged, n * 18 * sizeof(double), cudaMemcpyHostToDevice,
                                       stream_.stream));

@@ -9,6 +9,7 @@
 #include "mc_flow/core/motion_estimation.h"
 #include "mc_flow/core/sampling.h"
 #include "mc_flow/core/simplex_projection.h"
+#include "mc_flow/core/solve_backend.h"
 
 namespace mc_flow {
 
@@ -325,40 +326,11 @@ class CpuLabelOptimizer final : public LabelOptimizer {
 std::unique_ptr<LabelOptimizer> makeCpuLabelOptimizer() { return std::make_unique<CpuLabelOptimizer>(); }
 
 #ifndef MCFLOW_HAVE_CUDA
-bool cudaBackendAvailable(std::string* why, int) {
-  if (why) *why = "this build of mc_flow has no CUDA backend (nvcc was not found when it was configured)";
-  return false;
-}
 std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer() {
   std::string why;
   cudaBackendAvailable(&why);
   throw BackendError("CUDA backend requested but unavailable: " + why);
 }
 #endif
-
-Backend resolveBackend(Backend requested, std::string* note, int cuda_device) {
-  std::string why;
-  switch (requested) {
-    case Backend::Cpu:
-      if (note) *note = "cpu (requested)";
-      return Backend::Cpu;
-    case Backend::Cuda:
-      if (!cudaBackendAvailable(&why, cuda_device)) throw BackendError("CUDA backend requested but unavailable: " + why);
-      if (note) *note = "cuda (requested, device " + std::to_string(cuda_device) + ")";
-      return Backend::Cuda;
-    case Backend::Auto:
-    default:
-      if (cudaBackendAvailable(&why, cuda_device)) {
-        if (note) *note = "cuda (auto: GPU available, device " + std::to_string(cuda_device) + ")";
-        return Backend::Cuda;
-      }
-      if (note) *note = "cpu (auto: " + why + ")";
-      return Backend::Cpu;
-  }
-}
-
-std::unique_ptr<LabelOptimizer> makeLabelOptimizer(Backend backend, std::string* note) {
-  return resolveBackend(backend, note) == Backend::Cuda ? makeCudaLabelOptimizer() : makeCpuLabelOptimizer();
-}
 
 }  // namespace mc_flow

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/motion_estimation_pixel.h"
 #include "mc_flow/core/motion_step_control.h"
 #include "mc_flow/core/sampling.h"
 #include "mc_flow/core/scene_flow.h"
@@ -28,24 +29,12 @@ namespace mc_flow {
 namespace {
 
 using Vector6f = Eigen::Matrix<float, 6, 1>;
+using RowMajor6f = Eigen::Matrix<float, 6, 6, Eigen::RowMajor>;
+using RowMajor34f = Eigen::Matrix<float, 3, 4, Eigen::RowMajor>;
 
 // A pixel warped out of view (or behind the camera) costs as much as a residual of 10 Cauchy scales in
 // both kinds: otherwise a label could lower its cost by pushing its pixels out of the image.
 constexpr double kOutOfViewResidualScales = 10.0;
-constexpr float kDepthEdgeJump = 0.1f;  // [m] depth samples straddling a larger jump carry no geometric residual
-
-// Jacobian of the transformed point P2 = exp(xi_bar) P with respect to a left increment eps
-// (exp(eps) exp(xi_bar)): dP2 = d_eps_v + d_eps_w x P2. The increment of the twist itself maps to eps through
-// the left Jacobian of SE(3).
-inline void pointJacobian(const Eigen::Vector3f& P2, const Eigen::RowVector3f& row, Vector6f& out) {
-  // out^T = row * [I | -skew(P2)]
-  out(0) = row(0);
-  out(1) = row(1);
-  out(2) = row(2);
-  out(3) = row(2) * P2.y() - row(1) * P2.z();
-  out(4) = row(0) * P2.z() - row(2) * P2.x();
-  out(5) = row(1) * P2.x() - row(0) * P2.y();
-}
 
 class CpuMotionAccumulator final : public MotionAccumulator {
  public:
@@ -79,9 +68,9 @@ class CpuMotionAccumulator final : public MotionAccumulator {
 #endif
     accumulators_.resize(static_cast<std::size_t>(threads));
 
-    std::vector<Eigen::Matrix<float, 3, 4>> transforms(static_cast<std::size_t>(motion_labels));
+    std::vector<RowMajor34f> transforms(static_cast<std::size_t>(motion_labels));
     // Additive twist increments act on the warp through the left Jacobian: exp(xi + d) = exp(J_l d) exp(xi).
-    std::vector<Eigen::Matrix<float, 6, 6>> left_jacobians(static_cast<std::size_t>(motion_labels));
+    std::vector<RowMajor6f> left_jacobians(static_cast<std::size_t>(motion_labels));
     for (int i = 0; i < motion_labels; ++i) {
       transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
       left_jacobians[std::size_t(i)] = se3LeftJacobian(twists[std::size_t(i)]).cast<float>();
@@ -103,17 +92,17 @@ class CpuMotionAccumulator final : public MotionAccumulator {
         for (int y = 0; y < H; ++y) {
           for (int x = 0; x < W; ++x) {
             const std::size_t idx = std::size_t(y) * W + x;
-            const Eigen::Vector3f P(frame1.points(x, y, 0), frame1.points(x, y, 1), frame1.points(x, y, 2));
-            if (!std::isfinite(P.z())) continue;
+            const float P[3] = {frame1.points(x, y, 0), frame1.points(x, y, 1), frame1.points(x, y, 2)};
+            if (!std::isfinite(P[2])) continue;
             if (occluded && occluded->data[idx]) continue;
             // Interpolation weights over the motion labels; the outlier share scales the pixel down.
             float mass = 0.f;
             for (int i = 0; i < motion_labels; ++i) mass += labels.data[i * plane + idx];
-            if (mass < 0.05f) continue;
+            if (!motion_pixel::usableMass(mass)) continue;
             int n_active = 0;
             float active_mass = 0.f;
             for (int i = 0; i < motion_labels; ++i) {
-              const float w = labels.data[i * plane + idx] / mass;
+              const float w = motion_pixel::labelShare(labels.data[i * plane + idx], mass);
               if (w >= min_weight) {
                 active[std::size_t(n_active)] = i;
                 weights[std::size_t(n_active)] = w;
@@ -124,21 +113,23 @@ class CpuMotionAccumulator final : public MotionAccumulator {
             if (n_active == 0) continue;
             for (int k = 0; k < n_active; ++k) weights[std::size_t(k)] /= active_mass;
 
-            Eigen::Vector3f P2;
-            Eigen::Matrix<float, 6, 6> blended_jacobian;
-            const Eigen::Matrix<float, 6, 6>* left_jacobian = &left_jacobians[std::size_t(active[0])];
+            float P2[3];
+            RowMajor34f blended_transform;
+            RowMajor6f blended_jacobian;
+            const RowMajor34f* transform = &transforms[std::size_t(active[0])];
+            const RowMajor6f* left_jacobian = &left_jacobians[std::size_t(active[0])];
             if (n_active > 1) {
               Vector6d xi_bar = Vector6d::Zero();
               for (int k = 0; k < n_active; ++k) xi_bar += double(weights[std::size_t(k)]) * twists[std::size_t(active[std::size_t(k)])];
-              P2 = se3Exp(xi_bar).topRows<3>().cast<float>() * P.homogeneous();
+              blended_transform = se3Exp(xi_bar).topRows<3>().cast<float>();
               blended_jacobian = se3LeftJacobian(xi_bar).cast<float>();
+              transform = &blended_transform;
               left_jacobian = &blended_jacobian;
-            } else {
-              P2 = transforms[std::size_t(active[0])] * P.homogeneous();
             }
-            const float inv_z = 1.f / std::max(P2.z(), 1e-3f);
-            float u = fx * P2.x() * inv_z + cx, v = fy * P2.y() * inv_z + cy;
-            const bool in_view = P2.z() >= 1e-3f && clampIntoView(W, H, u, v);
+            transformPoint(transform->data(), P, P2);
+            motion_pixel::Projection proj;
+            const bool in_view = motion_pixel::project(P2, fx, fy, cx, cy, W, H, proj);
+            const float u = proj.u, v = proj.v;
             float I2, gIx = 0.f, gIy = 0.f;
             if (!in_view || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
               for (int a = 0; a < n_active; ++a)
@@ -148,35 +139,31 @@ class CpuMotionAccumulator final : public MotionAccumulator {
             }
             sampleBilinear(frame2.intensity_grad, u, v, 0, gIx);
             sampleBilinear(frame2.intensity_grad, u, v, 1, gIy);
-            // d(pixel)/dP2
-            const float du_dX = fx * inv_z, du_dZ = -fx * P2.x() * inv_z * inv_z;
-            const float dv_dY = fy * inv_z, dv_dZ = -fy * P2.y() * inv_z * inv_z;
-
-            const float rI = frame1.intensity(x, y) - I2;
+            const float rI = subRn(frame1.intensity(x, y), I2);
+            float row[3];
             Vector6f JI;
-            pointJacobian(P2, Eigen::RowVector3f(-gIx * du_dX, -gIy * dv_dY, -(gIx * du_dZ + gIy * dv_dZ)), JI);
-            // IRLS weight of the normalised Cauchy cost ln(1 + (r/c)^2): 1 / (c^2 + r^2).
-            const float wI = 1.f / (cI * cI + rI * rI);
-            JI = left_jacobian->transpose() * JI;
+            motion_pixel::intensityRow(proj, gIx, gIy, row);
+            motion_pixel::residualJacobian(P2, row, left_jacobian->data(), JI.data());
+            const float wI = motion_pixel::cauchyWeight(1.f, cI, rI);
             Eigen::Matrix<float, 6, 6> Hp = wI * JI * JI.transpose();
             Vector6f gp = wI * rI * JI;
-            double cost = std::log1p(rI * rI / (cI * cI));
+            double cost = motion_pixel::cauchyCost(cI, rI);
 
             float Z2;
-            if (sampleDepthBilinearSmooth(frame2.depth, u, v, kDepthEdgeJump, Z2)) {
+            if (sampleDepthBilinearSmooth(frame2.depth, u, v, motion_pixel::kDepthEdgeJump, Z2)) {
               float gZx = 0.f, gZy = 0.f;
               sampleBilinear(frame2.depth_grad, u, v, 0, gZx);
               sampleBilinear(frame2.depth_grad, u, v, 1, gZy);
-              const float rZ = P2.z() - Z2;
+              const float rZ = subRn(P2[2], Z2);
               Vector6f JZ;
-              pointJacobian(P2, Eigen::RowVector3f(-gZx * du_dX, -gZy * dv_dY, 1.f - (gZx * du_dZ + gZy * dv_dZ)), JZ);
-              JZ = left_jacobian->transpose() * JZ;
-              const float wZ = alpha / (cZ * cZ + rZ * rZ);
+              motion_pixel::depthRow(proj, gZx, gZy, row);
+              motion_pixel::residualJacobian(P2, row, left_jacobian->data(), JZ.data());
+              const float wZ = motion_pixel::cauchyWeight(alpha, cZ, rZ);
               Hp += wZ * JZ * JZ.transpose();
               gp += wZ * rZ * JZ;
-              cost += alpha * std::log1p(rZ * rZ / (cZ * cZ));
+              cost += mulRn(alpha, motion_pixel::cauchyCost(cZ, rZ));
             } else {
-              cost += alpha * std::log(2.0);  // no depth evidence: a constant, so costs stay comparable
+              cost += motion_pixel::missingDepthCost(alpha);
             }
             const Eigen::Matrix<double, 6, 6> Hd = (mass * Hp).cast<double>();
             const Vector6d gd = (mass * gp).cast<double>();
@@ -245,6 +232,12 @@ double motionOutOfViewCost(const Config& config) {
 }
 
 std::unique_ptr<MotionAccumulator> makeCpuMotionAccumulator() { return std::make_unique<CpuMotionAccumulator>(); }
+
+#ifndef MCFLOW_HAVE_CUDA
+std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator() {
+  throw BackendError("CUDA motion step requested but this build has no CUDA (built without nvcc or MCFLOW_WITH_CUDA=OFF)");
+}
+#endif
 
 MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
                                         const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,

@@ -4,19 +4,11 @@
 #include <vector>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/occlusion_pixel.h"
 
 namespace mc_flow {
 
 namespace {
-
-/// Nearest frame-2 pixel of a warped point, or -1 when it is behind the camera or outside the image.
-inline long projectToPixel(const float* P, const Intrinsics& K, int width, int height) {
-  if (!(P[2] > 0.f)) return -1;
-  const double u = K.fx * P[0] / P[2] + K.cx, v = K.fy * P[1] / P[2] + K.cy;
-  const double ur = std::floor(u + 0.5), vr = std::floor(v + 0.5);
-  if (!(ur >= 0 && vr >= 0 && ur < width && vr < height)) return -1;
-  return long(vr) * width + long(ur);
-}
 
 inline bool finitePoint(const float* P) { return std::isfinite(P[0]) && std::isfinite(P[1]) && std::isfinite(P[2]); }
 
@@ -39,7 +31,7 @@ ImageU8 detectOcclusions(const ImageF& warped_points, const ImageF& depth2, cons
     for (int x = 0; x < w; ++x) {
       const float* P = &warped_points(x, y, 0);
       if (!finitePoint(P)) continue;
-      const long t = projectToPixel(P, K, w2, h2);
+      const long t = long(occlusion_pixel::targetPixel(P, K.fx, K.fy, K.cx, K.cy, w2, h2));
       target[std::size_t(y) * w + x] = t;
       if (t >= 0) {
 #pragma omp atomic
@@ -59,10 +51,7 @@ ImageU8 detectOcclusions(const ImageF& warped_points, const ImageF& depth2, cons
         mask(x, y) = 255;
         continue;
       }
-      const float z2 = depth2.data[std::size_t(t)];
-      // z-buffer form of the depth test: positive when the warped point lies behind what frame 2 sees.
-      const float depth_change = isValidDepth(z2) ? P[2] - z2 : 0.f;
-      if (float(count[std::size_t(t)]) + kz * depth_change > ko) mask(x, y) = 255;
+      if (occlusion_pixel::occluded(count[std::size_t(t)], P[2], depth2.data[std::size_t(t)], kz, ko)) mask(x, y) = 255;
     }
   return mask;
 }

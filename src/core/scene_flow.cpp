@@ -5,13 +5,11 @@
 #include <limits>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/scene_flow_pixel.h"
 
 namespace mc_flow {
 
 namespace {
-
-// Below this total motion-label mass the renormalised weights are dominated by noise.
-constexpr float kMinMotionMass = 1e-3f;
 
 void requireTwistCount(const char* what, const SoftLabels& u, const std::vector<Vector6d>& twists) {
   if (u.count < 1 || int(twists.size()) != u.count - 1)
@@ -19,16 +17,17 @@ void requireTwistCount(const char* what, const SoftLabels& u, const std::vector<
                      std::to_string(u.count) + " label planes (expected one twist per motion label, count - 1)");
 }
 
-/// The motion label a pixel without (enough) motion-label mass takes: the one with the largest value (the lowest
-/// index on ties).
-int largestMotionLabel(const SoftLabels& u, std::size_t k) {
-  int label = 0;
-  for (int i = 1; i < u.count - 1; ++i)
-    if (u.plane(i)[k] > u.plane(label)[k]) label = i;
-  return label;
-}
-
 }  // namespace
+
+void packMotions(const std::vector<Vector6d>& twists, double* out) {
+  for (std::size_t i = 0; i < twists.size(); ++i) {
+    const Eigen::Matrix4d T = se3Exp(twists[i]);
+    double* motion = out + std::size_t(scene_flow_pixel::kMotionValues) * i;
+    for (int k = 0; k < 6; ++k) motion[k] = twists[i](k);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) motion[6 + r * 4 + c] = T(r, c);
+  }
+}
 
 ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<Vector6d>& twists) {
   requireTwistCount("warpPoints", u, twists);
@@ -40,32 +39,21 @@ ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<V
   const float nan = std::numeric_limits<float>::quiet_NaN();
 
   // Pixels owned by a single label (the common case) reuse that label's transform.
-  std::vector<Eigen::Matrix4d> label_transform(static_cast<std::size_t>(m));
-  for (int i = 0; i < m; ++i) label_transform[std::size_t(i)] = se3Exp(twists[std::size_t(i)]);
+  std::vector<double> motions(std::size_t(scene_flow_pixel::kMotionValues) * std::size_t(m));
+  packMotions(twists, motions.data());
 
   ImageF warped(w, h, 3);
 #pragma omp parallel
   {
     // Row accumulators: the label planes are read row by row (contiguous) instead of across planes per pixel.
-    std::vector<double> mass(static_cast<std::size_t>(w)), xi_sum(std::size_t(6) * w);
-    std::vector<int> nonzero(static_cast<std::size_t>(w)), last_label(static_cast<std::size_t>(w));
+    std::vector<scene_flow_pixel::MotionSums> sums(static_cast<std::size_t>(w));
 #pragma omp for schedule(static)
     for (int y = 0; y < h; ++y) {
-      std::fill(mass.begin(), mass.end(), 0.0);
-      std::fill(xi_sum.begin(), xi_sum.end(), 0.0);
-      std::fill(nonzero.begin(), nonzero.end(), 0);
+      std::fill(sums.begin(), sums.end(), scene_flow_pixel::MotionSums{});
       for (int i = 0; i < m; ++i) {
         const float* row = u.plane(i) + std::size_t(y) * w;
-        const Vector6d& tw = twists[std::size_t(i)];
-        for (int x = 0; x < w; ++x) {
-          const double v = row[x];
-          if (v == 0.0) continue;
-          mass[std::size_t(x)] += v;
-          double* acc = &xi_sum[std::size_t(6) * x];
-          for (int c = 0; c < 6; ++c) acc[c] += v * tw[c];
-          ++nonzero[std::size_t(x)];
-          last_label[std::size_t(x)] = i;
-        }
+        const double* twist = twists[std::size_t(i)].data();
+        for (int x = 0; x < w; ++x) scene_flow_pixel::addMotionLabel(sums[std::size_t(x)], i, row[x], twist);
       }
       for (int x = 0; x < w; ++x) {
         const float* P = &points(x, y, 0);
@@ -78,19 +66,11 @@ ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<V
           Q[0] = P[0], Q[1] = P[1], Q[2] = P[2];
           continue;
         }
-        const std::size_t xs = std::size_t(x);
-        Eigen::Matrix4d T;
-        if (mass[xs] < kMinMotionMass) {
-          T = label_transform[std::size_t(largestMotionLabel(u, std::size_t(y) * w + x))];
-        } else if (nonzero[xs] == 1) {
-          T = label_transform[std::size_t(last_label[xs])];
-        } else {
-          const Vector6d xi = Eigen::Map<const Vector6d>(&xi_sum[6 * xs]) / mass[xs];
-          T = se3Exp(xi);
-        }
-        const Eigen::Vector3d p(P[0], P[1], P[2]);
-        const Eigen::Vector3d q = T.topLeftCorner<3, 3>() * p + T.topRightCorner<3, 1>();
-        Q[0] = float(q.x()), Q[1] = float(q.y()), Q[2] = float(q.z());
+        const std::size_t k = std::size_t(y) * w + x;
+        auto largest = [&u, k]() { return scene_flow_pixel::largestMotionLabel(u.data.data(), u.planeSize(), k, u.count - 1); };
+        double q[3];
+        scene_flow_pixel::warpPoint(P, sums[std::size_t(x)], motions.data(), largest, q);
+        Q[0] = float(q[0]), Q[1] = float(q[1]), Q[2] = float(q[2]);
       }
     }
   }
@@ -120,12 +100,7 @@ void sceneAndOpticalFlow(const ImageF& points, const ImageF& warped_points, cons
         continue;
       }
       s[0] = Q[0] - P[0], s[1] = Q[1] - P[1], s[2] = Q[2] - P[2];
-      if (Q[2] > 0.f) {  // a point moved behind the camera has no image position
-        o[0] = float(K.fx * Q[0] / Q[2] + K.cx - x);
-        o[1] = float(K.fy * Q[1] / Q[2] + K.cy - y);
-      } else {
-        o[0] = o[1] = nan;
-      }
+      if (!scene_flow_pixel::opticalFlow(Q, K.fx, K.fy, K.cx, K.cy, x, y, o)) o[0] = o[1] = nan;
     }
 }
 

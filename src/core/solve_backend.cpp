@@ -358,6 +358,10 @@ void stageInputFrames(const RgbdFrame& frame1, const RgbdFrame& frame2, float* s
 std::unique_ptr<SolveBackend> makeCpuSolveBackend() { return std::make_unique<CpuSolveBackend>(); }
 
 #ifndef MCFLOW_HAVE_CUDA
+bool cudaBackendAvailable(std::string* why, int) {
+  if (why) *why = "this build of mc_flow has no CUDA backend (nvcc was not found when it was configured)";
+  return false;
+}
 CudaCounters cudaCounters() { return CudaCounters(); }
 bool cudaDeviceMemory(std::size_t*, std::size_t*) { return false; }
 
@@ -365,6 +369,27 @@ std::unique_ptr<SolveBackend> makeCudaSolveBackend(int) {
   throw BackendError("CUDA backend requested but this build has no CUDA (built without nvcc or MCFLOW_WITH_CUDA=OFF)");
 }
 #endif
+
+Backend resolveBackend(Backend requested, std::string* note, int cuda_device) {
+  std::string why;
+  switch (requested) {
+    case Backend::Cpu:
+      if (note) *note = "cpu (requested)";
+      return Backend::Cpu;
+    case Backend::Cuda:
+      if (!cudaBackendAvailable(&why, cuda_device)) throw BackendError("CUDA backend requested but unavailable: " + why);
+      if (note) *note = "cuda (requested, device " + std::to_string(cuda_device) + ")";
+      return Backend::Cuda;
+    case Backend::Auto:
+    default:
+      if (cudaBackendAvailable(&why, cuda_device)) {
+        if (note) *note = "cuda (auto: GPU available, device " + std::to_string(cuda_device) + ")";
+        return Backend::Cuda;
+      }
+      if (note) *note = "cpu (auto: " + why + ")";
+      return Backend::Cpu;
+  }
+}
 
 std::unique_ptr<SolveBackend> makeSolveBackend(Backend requested, std::string* note, int cuda_device) {
   return resolveBackend(requested, note, cuda_device) == Backend::Cuda ? makeCudaSolveBackend(cuda_device)

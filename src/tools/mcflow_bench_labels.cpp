@@ -22,6 +22,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/pyramid.h"
+#include "mc_flow/core/solve_backend.h"
 #include "mc_flow/testing/bench.h"
 #include "mc_flow/eval/synthetic_scene.h"
 

@@ -4,6 +4,7 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/solve_backend.h"
 
 using namespace mc_flow;
 
@@ -240,14 +241,14 @@ TEST(LabelOptimization, SwitchingCostRaisesEveryLabelButTheCarriedOne) {
 
 TEST(LabelOptimization, BackendSelection) {
   std::string note;
-  EXPECT_NO_THROW(makeLabelOptimizer(Backend::Cpu, &note));
+  EXPECT_EQ(resolveBackend(Backend::Cpu, &note), Backend::Cpu);
   EXPECT_NE(note.find("cpu"), std::string::npos);
   std::string why;
   if (!cudaBackendAvailable(&why)) {
     EXPECT_FALSE(why.empty());
-    EXPECT_THROW(makeLabelOptimizer(Backend::Cuda), BackendError);
-    auto auto_choice = makeLabelOptimizer(Backend::Auto, &note);
-    EXPECT_EQ(auto_choice->name(), "cpu");
+    EXPECT_THROW(resolveBackend(Backend::Cuda), BackendError);
+    EXPECT_THROW(makeCudaLabelOptimizer(), BackendError);
+    EXPECT_EQ(resolveBackend(Backend::Auto, &note), Backend::Cpu);
     EXPECT_NE(note.find(why), std::string::npos) << note;
   }
 }

@@ -5,7 +5,7 @@
 
 #include <string>
 
-#include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/solve_backend.h"
 
 #define SKIP_WITHOUT_GPU()                                                                               \
   do {                                                                                                   \

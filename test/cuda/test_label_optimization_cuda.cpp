@@ -17,6 +17,7 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/solve_backend.h"
 
 namespace mc_flow {
 namespace {
@@ -344,18 +345,18 @@ TEST(CudaBackendSelection, AutoPicksCudaWhenAvailable) {
   const bool available = cudaBackendAvailable(&why);
   EXPECT_FALSE(why.empty()) << "cudaBackendAvailable must explain its answer";
   std::string note;
-  auto optimizer = makeLabelOptimizer(Backend::Auto, &note);
-  ASSERT_NE(optimizer, nullptr);
+  const Backend chosen = resolveBackend(Backend::Auto, &note);
   if (available) {
-    EXPECT_EQ(optimizer->name(), "cuda") << note;
-    EXPECT_EQ(makeLabelOptimizer(Backend::Cuda)->name(), "cuda");
+    EXPECT_EQ(chosen, Backend::Cuda) << note;
+    EXPECT_EQ(resolveBackend(Backend::Cuda), Backend::Cuda);
+    EXPECT_EQ(makeCudaLabelOptimizer()->name(), "cuda");
   } else {
-    EXPECT_EQ(optimizer->name(), "cpu") << note;
+    EXPECT_EQ(chosen, Backend::Cpu) << note;
     EXPECT_NE(note.find(why), std::string::npos) << "note '" << note << "' should carry the reason '" << why << "'";
     EXPECT_THROW(makeCudaLabelOptimizer(), BackendError);
-    EXPECT_THROW(makeLabelOptimizer(Backend::Cuda), BackendError);
+    EXPECT_THROW(resolveBackend(Backend::Cuda), BackendError);
   }
-  EXPECT_EQ(makeLabelOptimizer(Backend::Cpu)->name(), "cpu");
+  EXPECT_EQ(resolveBackend(Backend::Cpu), Backend::Cpu);
 }
 
 }  // namespace

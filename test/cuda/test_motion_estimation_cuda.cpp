@@ -28,8 +28,6 @@
 
 namespace mc_flow {
 
-std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator();  // cuda/motion_estimation.cu
-
 namespace {
 
 constexpr double kRelativeTolerance = 1e-6;

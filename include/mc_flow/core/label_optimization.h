@@ -80,15 +80,8 @@ class LabelOptimizer {
 
 /// @brief The CPU implementation (OpenMP).
 std::unique_ptr<LabelOptimizer> makeCpuLabelOptimizer();
-/// @brief True when the CUDA backend is compiled in and CUDA device `device` exists and is usable; otherwise `why`
-/// says why not. The calling thread's current device is left as it was.
-bool cudaBackendAvailable(std::string* why, int device = 0);
-/// @brief The CUDA implementation; throws BackendError when unavailable.
+/// @brief The CUDA implementation (host-memory problems: tests and mcflow_bench_labels; the CUDA SolveBackend runs
+/// the same engine on its device buffers); throws BackendError when unavailable (cudaBackendAvailable, solve_backend.h).
 std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer();
-/// @brief Resolves Config::backend to Cpu or Cuda: Auto = CUDA when available else CPU; Cuda throws BackendError
-/// if unavailable. `note` says what was chosen and why.
-Backend resolveBackend(Backend requested, std::string* note = nullptr, int cuda_device = 0);
-/// @brief The label optimizer of resolveBackend(backend, note).
-std::unique_ptr<LabelOptimizer> makeLabelOptimizer(Backend backend, std::string* note = nullptr);
 
 }  // namespace mc_flow

@@ -78,6 +78,10 @@ class MotionAccumulator {
 
 /// @brief The CPU implementation (OpenMP, static schedule: deterministic for a given thread count).
 std::unique_ptr<MotionAccumulator> makeCpuMotionAccumulator();
+/// @brief The CUDA implementation on host-memory levels (setLevel uploads; tests compare it with the CPU's, the CUDA
+/// SolveBackend binds its device-resident levels instead); throws BackendError when no usable CUDA device is present
+/// or the build has no CUDA.
+std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator();
 /// @brief Cost charged to a pixel whose warp leaves the view (as if both residuals were 10 Cauchy scales).
 double motionOutOfViewCost(const Config& config);
 

@@ -17,6 +17,10 @@ namespace mc_flow {
 /// mass moves with its largest motion label.
 ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<Vector6d>& twists);
 
+/// @brief The motions as scene_flow_pixel.h's per-pixel warp reads them: per twist 18 doubles, the twist, then rows
+/// 0..2 of its exp (se3Exp). `out` holds 18 * twists.size() doubles.
+void packMotions(const std::vector<Vector6d>& twists, double* out);
+
 /// @brief Scene flow P2 - P (3 channels, m) and optical flow pi(P2) - x (2 channels, px); NaN where invalid.
 void sceneAndOpticalFlow(const ImageF& points, const ImageF& warped_points, const Intrinsics& K, ImageF& scene_flow,
                          ImageF& optical_flow);

@@ -2,13 +2,15 @@
  * @file se3_coefficients.h
  * @brief The scalar coefficients of SE(3)'s closed forms (Rodrigues' exp and Barfoot's left Jacobian), with their
  * series near zero, written once for the host (se3.cpp, which assembles Eigen matrices from them) and the CUDA
- * kernels (which assemble row-major arrays).
+ * kernels (which assemble row-major arrays); the per-pixel stages' exp of a blended twist (se3ExpRows) and the
+ * transform of a point in float (transformPoint), shared by the CPU stages and the kernels.
  */
 #pragma once
 
 #include <cmath>
 
 #include "mc_flow/core/host_device.h"
+#include "mc_flow/core/rounded.h"
 
 namespace mc_flow {
 
@@ -44,6 +46,39 @@ MCFLOW_HOST_DEVICE inline void se3LeftJacobianCoefficients(double t2, double& a,
     b = (t - s) / (t2 * t);
     c = (t2 + 2.0 * co - 2.0) / (2.0 * t2 * t2);
     d = (2.0 * t - 3.0 * s + t * co) / (2.0 * t2 * t2 * t);
+  }
+}
+
+/// @brief Rows 0..2 of exp(xi) (row-major 3x4) in double, xi = (v, w): R = I + a W + b W^2 and t = (I + b W + c W^2) v,
+/// each entry in the order of se3.cpp's Eigen expressions (W^2 and the product with v summed over k = 0, 1, 2), so
+/// that the host gets se3Exp's bits.
+MCFLOW_HOST_DEVICE inline void se3ExpRows(const double xi[6], double T[12]) {
+  const double* v = xi;
+  const double* w = xi + 3;
+  const double W[9] = {0, -w[2], w[1], w[2], 0, -w[0], -w[1], w[0], 0};
+  double W2[9];
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) W2[r * 3 + c] = W[r * 3] * W[c] + W[r * 3 + 1] * W[3 + c] + W[r * 3 + 2] * W[6 + c];
+  double a, b, c;
+  se3ExpCoefficients(w[0] * w[0] + w[1] * w[1] + w[2] * w[2], a, b, c);
+  for (int r = 0; r < 3; ++r) {
+    double V[3];
+    for (int k = 0; k < 3; ++k) {
+      const double identity = r == k ? 1.0 : 0.0;
+      T[r * 4 + k] = identity + a * W[r * 3 + k] + b * W2[r * 3 + k];
+      V[k] = identity + b * W[r * 3 + k] + c * W2[r * 3 + k];
+    }
+    T[r * 4 + 3] = V[0] * v[0] + V[1] * v[1] + V[2] * v[2];
+  }
+}
+
+/// @brief P2 = R P + t for a row-major 3x4 float transform, rounded as the CPU's Eigen product of the points:
+/// a0 x + (a1 y + a2 z), then + t (explicitly rounded operations, no FMA).
+MCFLOW_HOST_DEVICE inline void transformPoint(const float T[12], const float P[3], float P2[3]) {
+  MCFLOW_UNROLL
+  for (int r = 0; r < 3; ++r) {
+    const float* row = T + 4 * r;
+    P2[r] = addRn(addRn(mulRn(row[0], P[0]), addRn(mulRn(row[1], P[1]), mulRn(row[2], P[2]))), row[3]);
   }
 }
 

@@ -161,6 +161,13 @@ void stageInputFrames(const RgbdFrame& frame1, const RgbdFrame& frame2, float* s
 /// InputError naming the value.
 void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int height);
 
+/// @brief True when the CUDA backend is compiled in and CUDA device `device` exists and is usable; otherwise `why`
+/// says why not. The calling thread's current device is left as it was.
+bool cudaBackendAvailable(std::string* why, int device = 0);
+/// @brief Resolves Config::backend to Cpu or Cuda: Auto = CUDA when available else CPU; Cuda throws BackendError
+/// if unavailable. `note` says what was chosen and why.
+Backend resolveBackend(Backend requested, std::string* note = nullptr, int cuda_device = 0);
+
 /// @brief The CPU backend (OpenMP): the stage functions of src/core on host images.
 std::unique_ptr<SolveBackend> makeCpuSolveBackend();
 /// @brief The CUDA backend on CUDA device `cuda_device`, with its own stream; throws BackendError when that device
