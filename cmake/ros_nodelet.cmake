@@ -110,6 +110,14 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     ENVIRONMENT "ASAN_OPTIONS=detect_leaks=1:abort_on_error=1;UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1")
   add_dependencies(tests test_message_validation_sanitized)
 
+  # The nodelet in a process of its own with an injected backend fault (backend_fault.test, lazy_and_drops.test): the
+  # fault hook lives in the test library, not in the product.
+  add_executable(nodelet_with_fault test/ros/nodelet_with_fault.cpp)
+  target_link_libraries(nodelet_with_fault PRIVATE mc_flow_nodelet mc_flow_testing)
+  set_target_properties(nodelet_with_fault PROPERTIES
+    RUNTIME_OUTPUT_DIRECTORY ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_BIN_DESTINATION})
+  add_dependencies(tests nodelet_with_fault)
+
   # Node-level tests: rostest starts its own master on a free port, so ctest -j is safe.
   find_package(rostest REQUIRED)
   set(MCFLOW_ROSTEST_NODES synthetic bad_input lazy_and_drops storm backend_fault stream)

@@ -196,7 +196,6 @@ class CudaSolveBackend final : public SolveBackend {
     carried_held_ = true;
   }
 
-  int labelLevel() const override { return level_; }
 
 
   void moveLabels(int level) override {

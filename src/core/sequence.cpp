@@ -60,8 +60,7 @@ SequencePipeline::SequencePipeline(const Config& config, int downsample, double 
     : config_(config),
       downsample_request_(downsample),
       max_pair_interval_(max_pair_interval),
-      make_backend_(std::move(make_backend)),
-      injected_fault_(backendFaultFromEnvironment()) {
+      make_backend_(std::move(make_backend)) {
   chooseDownsample(downsample, 320);  // validates the request
   if (!(max_pair_interval > 0) || !std::isfinite(max_pair_interval))
     throw ConfigError("max_pair_interval = " + std::to_string(max_pair_interval) + " s is invalid: must be finite and > 0");
@@ -74,10 +73,6 @@ std::unique_ptr<Solver> SequencePipeline::makeSolver(const Config& config, const
   std::unique_ptr<SolveBackend> backend =
       make_backend_ ? make_backend_(config.backend, &note) : makeSolveBackend(config.backend, &note, config.cuda_device);
   if (!why.empty()) note = why;
-  if (injected_fault_) {
-    backend = withBackendFault(std::move(backend), *injected_fault_);
-    injected_fault_.reset();
-  }
   return std::make_unique<Solver>(config, std::move(backend), note);
 }
 

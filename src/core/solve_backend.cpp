@@ -116,7 +116,6 @@ class CpuSolveBackend final : public SolveBackend {
       if (initial.data[k] < std::min(carried_labels, u_.count - 1)) carried_.data[k] = initial.data[k];
   }
 
-  int labelLevel() const override { return level_; }
 
   void moveLabels(int level) override {
     const PyramidLevel& to = levelOf(pyramid1_, level);  // checks the level

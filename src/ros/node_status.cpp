@@ -61,6 +61,41 @@ void NodeStatus::pairSolved(const mc_flow::Result& result, double solve_ms) {
   if (result.backend_kind == mc_flow::Backend::Cuda) on_cpu_after_failure_ = false;  // new parameters restored it
 }
 
+std::vector<StepWarning> NodeStatus::recordStep(const mc_flow::SequenceStep& step, const std::string& stamp,
+                                                double solve_ms) {
+  std::vector<StepWarning> warnings;
+  if (!step.reset_key.empty()) {
+    warnings.push_back({"reset:" + step.reset_key, "frame " + stamp + ": " + step.reset_reason + ": starting a new sequence"});
+    sequenceReset();
+  }
+  using Outcome = mc_flow::SequenceStep::Outcome;
+  switch (step.outcome) {
+    case Outcome::Started:
+      break;
+    case Outcome::RepeatedStamp:
+      warnings.push_back({"stamp", "frame skipped: stamp " + stamp +
+                                       " repeats the previous frame's (is a driver or bag publishing duplicates?)"});
+      frameSkipped();
+      break;
+    case Outcome::PairFailed:
+      if (!step.backend_fallback.empty()) {
+        // The pipeline has switched to the CPU: this happens once per backend, so the warning is never held back
+        // (period 0; a GPU restored by new parameters may fail again and is reported again).
+        warnings.push_back({"backend", "pair ending at " + stamp + " skipped: " + step.problem + "; continuing on the CPU", 0.0});
+        backendFailed(step.problem);
+      } else {
+        // Bad input or parameters that do not fit this input: the sequence goes on with the newer frame.
+        warnings.push_back({"solver", "pair ending at " + stamp + " skipped: " + step.problem});
+        frameSkipped();
+      }
+      break;
+    case Outcome::Solved:
+      pairSolved(*step.result, solve_ms);
+      break;
+  }
+  return warnings;
+}
+
 long NodeStatus::framesDropped() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return frames_dropped_;

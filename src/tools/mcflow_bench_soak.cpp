@@ -6,8 +6,8 @@
 // backend fallback the warm-up starts again). Exit status: 0 flat, 1 not flat (or a solve threw), 2 a usage error.
 //
 // The stream plays `--frames` rendered frames forwards and backwards (0 1 .. F-1 F-2 .. 1 0 1 ..), stamps 1/30 s
-// apart, so it never resets and the motion only reverses at the turns. MCFLOW_INJECT_BACKEND_FAULT=SOLVE works
-// here as in the nodelet (docs/TESTING.md, "GPU faults").
+// apart, so it never resets and the motion only reverses at the turns. --fault SOLVE[:STAGE] makes the
+// first backend fail there, as the nodelet's rostests do (docs/TESTING.md, "GPU faults").
 //
 //   mcflow_bench_soak [--solves 10000] [--every N/50] [--warmup N/10] [--width 320] [--height 240] [--frames 30]
 //                     [--variant 0] [--backend auto|cpu|cuda] [--rss-tolerance-mb 8] [--device-tolerance-mb 4]
@@ -26,6 +26,7 @@
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/testing/bench.h"
+#include "mc_flow/testing/fault_injection.h"
 #include "mc_flow/testing/soak.h"
 #include "mc_flow/eval/synthetic_scene.h"
 
@@ -40,6 +41,7 @@ struct Options {
   int width = 320, height = 240, frames = 30, variant = 0;
   double rss_tolerance_mb = 8, device_tolerance_mb = 4;
   Config config;
+  SolveBackendFactory make_backend;  // --fault; empty: makeSolveBackend
 };
 
 // Device memory in use [bytes] on the current device (all processes), -1 where it cannot be read.
@@ -87,6 +89,7 @@ int main(int argc, char** argv) {
                     {"frames", true, "rendered frames the stream loops over (>= 2, default 30)"},
                     {"variant", true, "synthetic scene variant (default 0)"},
                     {"backend", true, "auto | cpu | cuda"},
+                    {"fault", true, "SOLVE[:STAGE[:hold=MS]]: the first backend fails (or waits) there once"},
                     {"rss-tolerance-mb", true, "largest RSS growth after the warm-up judged flat (default 8)"},
                     {"device-tolerance-mb", true, "largest device-memory growth judged flat (default 4)"}});
   try {
@@ -108,6 +111,7 @@ int main(int argc, char** argv) {
     opt.rss_tolerance_mb = line.integer("rss-tolerance-mb", 8, 0, 1 << 20);
     opt.device_tolerance_mb = line.integer("device-tolerance-mb", 4, 0, 1 << 20);
     if (line.has("backend")) opt.config.backend = parseBackend(line.text("backend", "auto"));
+    if (line.has("fault")) opt.make_backend = faultOnFirstBackend(parseBackendFault(line.text("fault", "")), opt.config.cuda_device);
     line.applySettings(opt.config);
     opt.config.validate();
   } catch (const std::exception& e) {
@@ -127,7 +131,7 @@ int main(int argc, char** argv) {
       renderSyntheticFrame(so, t, frames[t].frame, colour, frames[t].K);
       frames[t].source = "soak";
     }
-    SequencePipeline pipeline(opt.config, 1, 1.0);
+    SequencePipeline pipeline(opt.config, 1, 1.0, opt.make_backend);
     const bool on_cuda = pipeline.solver().backendKind() == Backend::Cuda;
     std::printf("soak: %d solves of %dx%d variant %d over %d looping frames, backend %s, sample every %d, "
                 "warm-up %d solves\n",

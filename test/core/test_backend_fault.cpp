@@ -1,5 +1,5 @@
 // GPU faults in the middle of a stream, on any machine: a backend fault injected through the pipeline's
-// SolveBackendFactory or MCFLOW_INJECT_BACKEND_FAULT (fault_injection.h) moves the stream to the CPU once, and
+// SolveBackendFactory (mc_flow/testing/fault_injection.h) moves the stream to the CPU once, and
 // the stream goes on there. test/cuda/test_backend_fault_cuda.cpp does the same with a real CUDA fault.
 #include <gtest/gtest.h>
 
@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "mc_flow/core/error.h"
-#include "mc_flow/core/fault_injection.h"
+#include "mc_flow/testing/fault_injection.h"
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/solver.h"
@@ -24,18 +24,6 @@ using test::StreamRun;
 
 constexpr int kWidth = 96, kHeight = 72;
 
-
-// Sets an environment variable for the scope of a test.
-class ScopedEnvironment {
- public:
-  ScopedEnvironment(const char* name, const char* value) : name_(name) { setenv(name, value, 1); }
-  ~ScopedEnvironment() { unsetenv(name_); }
-  ScopedEnvironment(const ScopedEnvironment&) = delete;
-  ScopedEnvironment& operator=(const ScopedEnvironment&) = delete;
-
- private:
-  const char* name_;
-};
 
 TEST(BackendFault, AFaultMidStreamMovesTheStreamToTheCpuOnceAndItGoesOn) {
   Config config;
@@ -79,11 +67,10 @@ TEST(BackendFault, AFaultMidStreamMovesTheStreamToTheCpuOnceAndItGoesOn) {
   EXPECT_EQ(run.starts[fault_frame + 2], StartKind::Warm);
 }
 
-TEST(BackendFault, TheEnvironmentHookFaultsThePipelinesFirstBackendOnly) {
-  ScopedEnvironment hook("MCFLOW_INJECT_BACKEND_FAULT", "2:motionAccumulator");
+TEST(BackendFault, FaultOnFirstBackendFaultsThePipelinesFirstBackendOnly) {
   Config config;
   config.backend = Backend::Cpu;
-  SequencePipeline pipeline(config, 1, 0.5);
+  SequencePipeline pipeline(config, 1, 0.5, faultOnFirstBackend(parseBackendFault("2:motionAccumulator")));
   const StreamRun run = runStream(pipeline, 6, kWidth, kHeight);
   const int fault_frame = run.fallbackFrame();
   ASSERT_GE(fault_frame, 1);
@@ -92,24 +79,27 @@ TEST(BackendFault, TheEnvironmentHookFaultsThePipelinesFirstBackendOnly) {
   EXPECT_EQ(pipeline.backendFallbacks(), 1);
   for (int t = fault_frame + 1; t < 6; ++t) EXPECT_EQ(run.outcomes[t], SequenceStep::Outcome::Solved) << "frame " << t;
 
-  // A second pipeline in the same process reads the variable again: the hook is per pipeline.
-  SequencePipeline second(config, 1, 0.5);
+  // A second pipeline with its own factory faults the same way: the fault belongs to the factory.
+  SequencePipeline second(config, 1, 0.5, faultOnFirstBackend(parseBackendFault("2:motionAccumulator")));
   EXPECT_EQ(runStream(second, 6, kWidth, kHeight).fallbackFrame(), fault_frame);
+  // Without one, nothing is injected (the product has no hook of its own).
+  SequencePipeline plain(config, 1, 0.5);
+  EXPECT_EQ(runStream(plain, 6, kWidth, kHeight).fallbackFrame(), -1);
 }
 
-TEST(BackendFault, MalformedHookValuesAreRefusedByName) {
-  Config config;
+TEST(BackendFault, MalformedFaultTextsAreRefusedByName) {
   for (const char* bad : {"x", "0", "-1", "3:", "3:noSuchStage", ":labelStep", "3:labelStep:", "3:labelStep:hold=",
                           "3:labelStep:hold=-5", "3:labelStep:wait=5", "3:noSuchStage:hold=5"}) {
-    ScopedEnvironment hook("MCFLOW_INJECT_BACKEND_FAULT", bad);
     try {
-      SequencePipeline pipeline(config, 1, 0.5);
+      parseBackendFault(bad);
       ADD_FAILURE() << "'" << bad << "' was accepted";
     } catch (const ConfigError& e) {
       EXPECT_NE(std::string(e.what()).find(std::string("'") + bad + "'"), std::string::npos) << e.what();
-      EXPECT_NE(std::string(e.what()).find("MCFLOW_INJECT_BACKEND_FAULT"), std::string::npos) << e.what();
     }
   }
+  BackendFault unknown;
+  unknown.stage = "noSuchStage";
+  EXPECT_THROW(faultOnFirstBackend(unknown), ConfigError);
   const BackendFault parsed = parseBackendFault("12:trialCuts");
   EXPECT_EQ(parsed.solve, 12);
   EXPECT_EQ(parsed.stage, "trialCuts");

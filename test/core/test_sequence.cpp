@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "mc_flow/core/error.h"
-#include "mc_flow/core/fault_injection.h"
+#include "mc_flow/testing/fault_injection.h"
 #include "mc_flow/core/sequence.h"
 #include "stream_frames.h"
 #include "mc_flow/core/solve_backend.h"

@@ -1,5 +1,5 @@
-// A GPU fault in the middle of a stream, at the node level: backend_fault.test starts the manager with
-// MCFLOW_INJECT_BACKEND_FAULT=3, so the pipeline's first backend throws a BackendError in its third solve (on this
+// A GPU fault in the middle of a stream, at the node level: backend_fault.test starts the nodelet in a test host
+// with --fault 3 (nodelet_with_fault.cpp), so the pipeline's first backend throws a BackendError in its third solve (on this
 // machine the wrapped backend is the CPU one; on the GPU machine it is the CUDA one). The nodelet must skip that pair
 // with one warning that names the fault and says it continues on the CPU, count it in /diagnostics (warnings of kind
 // "backend", the fallback count, the failure, the backend, a WARN summary), and solve every later pair.

@@ -77,5 +77,56 @@ TEST(NodeStatus, TheSummarySaysIdleSilentOnTheCpuOrRunning) {
   EXPECT_EQ(status.pairsSolved(), 2);
 }
 
+TEST(NodeStatus, EachPipelineStepIsCountedAndWarnedInWords) {
+  NodeStatus status;
+  using Outcome = mc_flow::SequenceStep::Outcome;
+  mc_flow::SequenceStep started;
+  started.reset_key = "gap";
+  started.reset_reason = "2.5 s since the previous frame (> max_pair_interval 1 s)";
+  std::vector<StepWarning> w = status.recordStep(started, "12.000000000", 1.0);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_EQ(w[0].key, "reset:gap");
+  EXPECT_EQ(w[0].text, "frame 12.000000000: 2.5 s since the previous frame (> max_pair_interval 1 s): starting a new sequence");
+
+  mc_flow::SequenceStep repeated;
+  repeated.outcome = Outcome::RepeatedStamp;
+  w = status.recordStep(repeated, "12.000000000", 0.1);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_EQ(w[0].key, "stamp");
+
+  mc_flow::SequenceStep failed;
+  failed.outcome = Outcome::PairFailed;
+  failed.problem = "processing_level 5 is deeper than the pyramid (3 levels at 40x30)";
+  w = status.recordStep(failed, "12.100000000", 0.5);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_EQ(w[0].key, "solver");
+  EXPECT_NE(w[0].text.find("pair ending at 12.100000000 skipped: processing_level 5"), std::string::npos) << w[0].text;
+
+  mc_flow::SequenceStep gpu;
+  gpu.outcome = Outcome::PairFailed;
+  gpu.problem = "the cuda backend failed: an illegal memory access";
+  gpu.backend_fallback = "an illegal memory access";
+  w = status.recordStep(gpu, "12.200000000", 3.0);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_EQ(w[0].key, "backend");
+  EXPECT_EQ(w[0].period, 0.0) << "a move to the CPU is never held back";
+  EXPECT_NE(w[0].text.find("; continuing on the CPU"), std::string::npos);
+
+  mc_flow::Result result;
+  result.backend = "cpu";
+  mc_flow::SequenceStep solved;
+  solved.outcome = Outcome::Solved;
+  solved.result = &result;
+  EXPECT_TRUE(status.recordStep(solved, "12.300000000", 20.0).empty());
+
+  InputGate gate({"/rgb", "/depth", "/info"});
+  diagnostic_updater::DiagnosticStatusWrapper d;
+  status.fill(d, gate, false, at(1), 5.0);
+  EXPECT_EQ(diagnostic(d, "sequence resets"), "1");
+  EXPECT_EQ(diagnostic(d, "frames skipped (bad input)"), "3");  // the repeat, the refused pair, the GPU's pair
+  EXPECT_EQ(diagnostic(d, "backend fallbacks (GPU failures)"), "1");
+  EXPECT_EQ(diagnostic(d, "pairs solved"), "1");
+}
+
 }  // namespace
 }  // namespace mc_flow_ros

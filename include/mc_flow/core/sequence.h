@@ -16,7 +16,6 @@
 #include <Eigen/Core>
 
 #include "mc_flow/core/config.h"
-#include "mc_flow/core/fault_injection.h"
 #include "mc_flow/core/image.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/core/static_world.h"
@@ -26,8 +25,8 @@ namespace mc_flow {
 class SolveBackend;
 
 /// @brief Makes a pipeline's solve backends (the first one, a new one per setConfig, the CPU one after a GPU
-/// failure) for the requested Backend; `note` becomes Result::backend_note. The default is makeSolveBackend. A
-/// test hook: a factory may return a backend with an injected fault (fault_injection.h).
+/// failure) for the requested Backend; `note` becomes Result::backend_note. The default is makeSolveBackend. Tests
+/// return backends with an injected fault this way (mc_flow/testing/fault_injection.h).
 using SolveBackendFactory = std::function<std::unique_ptr<SolveBackend>(Backend requested, std::string* note)>;
 
 /// @brief The downsampling factor for an input `width`: `requested` > 0 is used as is (a power of two,
@@ -113,9 +112,7 @@ class SequencePipeline {
   /// `downsample`: see chooseDownsample (0 = automatic). `max_pair_interval` [s]: a longer gap starts a new
   /// sequence. Throws ConfigError for a bad config, a negative interval or a downsample that is not 0 or a
   /// power of two; BackendError when CUDA is forced but unusable. `make_backend`: see SolveBackendFactory (empty:
-  /// makeSolveBackend). When the environment variable MCFLOW_INJECT_BACKEND_FAULT is set ("SOLVE" or
-  /// "SOLVE:STAGE", backendFaultFromEnvironment), the pipeline's first backend gets that fault (a test hook for
-  /// the GPU-failure path; ConfigError when the value is malformed).
+  /// makeSolveBackend).
   SequencePipeline(const Config& config, int downsample, double max_pair_interval,
                    SolveBackendFactory make_backend = {});
 
@@ -155,7 +152,6 @@ class SequencePipeline {
   int downsample_request_ = 0;
   double max_pair_interval_ = 1.0;
   SolveBackendFactory make_backend_;
-  std::optional<BackendFault> injected_fault_;  // MCFLOW_INJECT_BACKEND_FAULT, until the first backend takes it
   std::unique_ptr<Solver> solver_;
   std::unique_ptr<PreparedFrame> pair_first_;      // the last solved pair's first frame
   std::unique_ptr<PreparedFrame> previous_frame_;  // the next pair's first frame

@@ -87,8 +87,6 @@ class SolveBackend : public LabelStore {
   /// cost at the pixels that started in one of them (addSwitchingCost). The carried labels follow remap (merged into
   /// the merged label; removed: none) and moveLabels (nearest pixel); buildPyramids and initialiseLabels clear them.
   virtual void holdCarriedLabels(int carried_labels) = 0;
-  /// @brief Pyramid level the labels live at.
-  virtual int labelLevel() const = 0;
   /// @brief Carries the labels to `level` (up: bilinear and renormalised; down: 2x2 means; the same level:
   /// unchanged), clears the occlusion mask (it is recomputed there) and resets the dual variables.
   virtual void moveLabels(int level) = 0;

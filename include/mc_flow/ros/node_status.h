@@ -11,15 +11,23 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <diagnostic_updater/DiagnosticStatusWrapper.h>
 #include <ros/time.h>
 
+#include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
 
 namespace mc_flow_ros {
 
 class InputGate;
+
+/// A warning a pipeline step calls for: shown through NodeStatus::warning with this key and period.
+struct StepWarning {
+  std::string key, text;
+  double period = 5.0;
+};
 
 class NodeStatus {
  public:
@@ -36,6 +44,10 @@ class NodeStatus {
   void backendFailed(const std::string& problem);
   /// A pair was solved in `solve_ms` (the whole push, preparation included).
   void pairSolved(const mc_flow::Result& result, double solve_ms);
+  /// @brief Counts what SequencePipeline::push did with the frame stamped `stamp` (a reset, a repeated stamp, a failed
+  /// pair, a GPU failure and the move to the CPU, a solved pair taking `solve_ms`) and returns the warnings it calls
+  /// for, in words a user can act on.
+  std::vector<StepWarning> recordStep(const mc_flow::SequenceStep& step, const std::string& stamp, double solve_ms);
   long framesDropped() const;
   long pairsSolved() const;
 

@@ -1,10 +1,11 @@
 /**
  * @file fault_injection.h
- * @brief A test hook: a SolveBackend that forwards every stage to another one and fails once, in the middle of a
- * chosen solve, the way a GPU fault surfaces (BackendError out of a stage). SequencePipeline takes such a backend
- * through its SolveBackendFactory, or wraps its first backend in one when the environment variable
- * MCFLOW_INJECT_BACKEND_FAULT is set, so that the nodelet, `mcflow run-seq` and the soak benchmark can be driven
- * into their GPU-fault path on any machine. docs/TESTING.md, "GPU faults".
+ * @brief Tests and benchmarks only (the mc_flow_testing library, linked by no shipped library or tool): a SolveBackend
+ * that forwards every stage to another one and fails once, in the middle of a chosen solve, the way a GPU fault
+ * surfaces (BackendError out of a stage). SequencePipeline and the nodelet take such a backend through a
+ * SolveBackendFactory (faultOnFirstBackend), so that their GPU-fault path is driven on any machine: the core tests
+ * directly, the rostests through a test host of the nodelet (test/ros/nodelet_with_fault.cpp), the soak benchmark
+ * through --fault. docs/TESTING.md, "GPU faults".
  */
 #pragma once
 
@@ -13,6 +14,8 @@
 #include <optional>
 #include <string>
 #include <vector>
+
+#include "mc_flow/core/sequence.h"
 
 namespace mc_flow {
 
@@ -41,8 +44,9 @@ std::unique_ptr<SolveBackend> withBackendFault(std::unique_ptr<SolveBackend> bac
 /// ConfigError naming the text.
 BackendFault parseBackendFault(const std::string& text);
 
-/// @brief The fault MCFLOW_INJECT_BACKEND_FAULT asks for (parseBackendFault of its value), nothing when it is unset
-/// or empty; throws ConfigError when it is malformed.
-std::optional<BackendFault> backendFaultFromEnvironment();
+/// @brief A SolveBackendFactory whose first backend (makeSolveBackend on CUDA device `cuda_device`) gets `fault`; the
+/// later ones (new parameters, the CPU after the fault) are plain. Throws ConfigError for a fault withBackendFault
+/// refuses.
+SolveBackendFactory faultOnFirstBackend(BackendFault fault, int cuda_device = 0);
 
 }  // namespace mc_flow

@@ -1,5 +1,5 @@
 // The backend-fault test hook: a forwarding SolveBackend that fails once, in the middle of a chosen solve.
-#include "mc_flow/core/fault_injection.h"
+#include "mc_flow/testing/fault_injection.h"
 
 #include <algorithm>
 #include <chrono>
@@ -15,7 +15,7 @@ namespace mc_flow {
 namespace {
 
 // Every operation forwards to the wrapped backend; a stage operation first calls strike(name). The cheap
-// queries (kind, labelLevel, labelCount, validCounts) are not stages: they never reach the device.
+// queries (kind, labelCount, validCounts) are not stages: they never reach the device.
 class FaultInjectingBackend final : public SolveBackend {
  public:
   FaultInjectingBackend(std::unique_ptr<SolveBackend> inner, BackendFault fault)
@@ -47,7 +47,6 @@ class FaultInjectingBackend final : public SolveBackend {
     strike("holdCarriedLabels");
     inner_->holdCarriedLabels(carried_labels);
   }
-  int labelLevel() const override { return inner_->labelLevel(); }
   void moveLabels(int level) override {
     strike("moveLabels");
     inner_->moveLabels(level);
@@ -111,7 +110,7 @@ class FaultInjectingBackend final : public SolveBackend {
       return;
     }
     throw BackendError("injected fault in stage " + std::string(stage) + " of solve " + std::to_string(solves_) +
-                       " of the " + toString(inner_->kind()) + " backend (MCFLOW_INJECT_BACKEND_FAULT test hook)");
+                       " of the " + toString(inner_->kind()) + " backend (test hook)");
   }
 
   std::unique_ptr<SolveBackend> inner_;
@@ -191,14 +190,17 @@ BackendFault parseBackendFault(const std::string& text) {
   return fault;
 }
 
-std::optional<BackendFault> backendFaultFromEnvironment() {
-  const char* value = std::getenv("MCFLOW_INJECT_BACKEND_FAULT");
-  if (!value || !*value) return std::nullopt;
-  try {
-    return parseBackendFault(value);
-  } catch (const ConfigError& e) {
-    throw ConfigError(std::string("MCFLOW_INJECT_BACKEND_FAULT: ") + e.what());
-  }
+SolveBackendFactory faultOnFirstBackend(BackendFault fault, int cuda_device) {
+  const std::string problem = faultProblem(fault);
+  if (!problem.empty()) throw ConfigError("injected fault: " + problem);
+  auto pending = std::make_shared<std::optional<BackendFault>>(std::move(fault));
+  return [pending, cuda_device](Backend requested, std::string* note) {
+    std::unique_ptr<SolveBackend> backend = makeSolveBackend(requested, note, cuda_device);
+    if (!*pending) return backend;
+    BackendFault first = std::move(**pending);
+    pending->reset();
+    return withBackendFault(std::move(backend), std::move(first));
+  };
 }
 
 }  // namespace mc_flow
