@@ -64,21 +64,39 @@ SequencePipeline::SequencePipeline(const Config& config, int downsample, double 
   chooseDownsample(downsample, 320);  // validates the request
   if (!(max_pair_interval > 0) || !std::isfinite(max_pair_interval))
     throw ConfigError("max_pair_interval = " + std::to_string(max_pair_interval) + " s is invalid: must be finite and > 0");
-  solver_ = makeSolver(config_);
+  solver_ = makeSolver(config_, &backend_unavailable_);
 }
 
-std::unique_ptr<Solver> SequencePipeline::makeSolver(const Config& config, const std::string& why) {
+std::unique_ptr<Solver> SequencePipeline::makeSolver(const Config& config, std::string* unavailable,
+                                                     const std::string& why) {
   config.validate();  // before a backend is made, as Solver(config) does
-  std::string note;
-  std::unique_ptr<SolveBackend> backend =
-      make_backend_ ? make_backend_(config.backend, &note) : makeSolveBackend(config.backend, &note, config.cuda_device);
+  auto make = [this, &config](Backend requested, std::string* note) {
+    return make_backend_ ? make_backend_(requested, note) : makeSolveBackend(requested, note, config.cuda_device);
+  };
+  std::string note, failed;
+  std::unique_ptr<SolveBackend> backend;
+  Config solver_config = config;
+  try {
+    backend = make(config.backend, &note);
+  } catch (const BackendError& e) {
+    // A node that processes nothing helps no one: the CPU solves the stream, and the reason (no GPU, a cuda_device
+    // that does not exist) reaches the caller's one warning through backendUnavailable() and Result::backend_note.
+    if (config.backend == Backend::Cpu) throw;
+    failed = e.what();
+    solver_config.backend = Backend::Cpu;
+    backend = make(Backend::Cpu, &note);
+    note = "cpu (fallback: " + failed + ")";
+  }
+  if (unavailable) *unavailable = failed;
   if (!why.empty()) note = why;
-  return std::make_unique<Solver>(config, std::move(backend), note);
+  return std::make_unique<Solver>(solver_config, std::move(backend), note);
 }
 
 void SequencePipeline::setConfig(const Config& config) {
-  solver_ = makeSolver(config);
+  std::string unavailable;
+  solver_ = makeSolver(config, &unavailable);
   config_ = config;
+  backend_unavailable_ = std::move(unavailable);
 }
 
 void SequencePipeline::reset() {
@@ -168,7 +186,7 @@ SequenceStep SequencePipeline::push(StreamFrame input) {
     ++backend_fallbacks_;
     Config cpu = config_;
     cpu.backend = Backend::Cpu;
-    solver_ = makeSolver(cpu, "cpu (fallback: the " + failed + " backend failed)");
+    solver_ = makeSolver(cpu, nullptr, "cpu (fallback: the " + failed + " backend failed)");
     config_ = cpu;
   } catch (const InputError& e) {
     step.problem = e.what();

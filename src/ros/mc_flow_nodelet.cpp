@@ -369,7 +369,9 @@ void MCFlowNodelet::reportBackend(const mc_flow::Result& result) {
     NODELET_INFO("no usable NVIDIA GPU/driver found: running on the CPU");
     NODELET_DEBUG("CUDA detail: %s", result.backend_note.c_str());
   } else {
-    NODELET_WARN("backend 'cuda' was requested but no usable NVIDIA GPU/driver was found: running on the CPU (%s)",
+    // The pipeline could not make the CUDA backend and solves on the CPU (SequencePipeline's fallback): one warning
+    // with the reason, which names the device and the device count when cuda_device does not exist.
+    NODELET_WARN("backend 'cuda' was requested but cannot be used: running on the CPU (%s)",
                  result.backend_note.c_str());
   }
 }

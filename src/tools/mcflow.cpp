@@ -572,6 +572,9 @@ int cmdRunSeq(const Arguments& args) {
   const SequenceSource source = args.has("bag") ? bagSequence(args, config, downsample) : fileSequence(args, downsample);
   io::createOutputDirectory(out);
   SequencePipeline pipeline(config, source.pipeline_downsample, max_interval);
+  if (!pipeline.backendUnavailable().empty())  // the pipeline solves on the CPU rather than not at all
+    progress("warning: backend '" + toString(config.backend) + "' cannot be used: running on the CPU (" +
+             pipeline.backendUnavailable() + ")");
 
   std::string csv = io::trajectoryCsvHeader();
   std::string trajectory;  // TUM RGB-D format: the camera's optical frame in the first frame's

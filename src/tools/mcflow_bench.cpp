@@ -7,11 +7,15 @@
 //                [--regularizer both|quad|tv] [--set name=value ...] [--camera-only] [--parts [--truth-start]] [--real DIR]
 //
 // --real DIR: the real pairs as `mcflow export-real` writes them (PFM, no OpenCV needed), one row per pair and size.
-// --concurrent N: N solvers (N cameras) in N threads on the same backend, each solving synth-0 `repeat` times: pairs
-// per second against one solver alone.
+// --concurrent N [--devices 0,1]: N solvers (N cameras) in N threads, each solving synth-0 `repeat` times, solver i on
+// CUDA device devices[i % count] (Config::cuda_device; without --devices all on cuda_device): pairs per second against
+// one solver alone on the first listed device, and whether every solver's result equals that solver's alone, bit for
+// bit ("results identical: yes/no"; exit status 1 on "no", 2 for a device that does not exist).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -242,24 +246,98 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
   return 0;
 }
 
-int concurrentBench(const Config& base, int width, int height, int solvers, int repeat) {
+template <typename T>
+bool sameBytes(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+template <typename Derived>
+bool sameBytes(const Eigen::MatrixBase<Derived>& a, const Eigen::MatrixBase<Derived>& b) {
+  const typename Derived::PlainObject pa = a, pb = b;
+  return std::memcmp(pa.data(), pb.data(), sizeof(typename Derived::Scalar) * std::size_t(pa.size())) == 0;
+}
+
+// The first output in which two results of the same pair differ byte for byte (so NaN equals NaN and 0.0 is not
+// -0.0); empty when none does.
+std::string firstDifference(const Result& a, const Result& b) {
+  if (!sameBytes(a.labels.data, b.labels.data)) return "labels";
+  if (!sameBytes(a.soft_labels.data, b.soft_labels.data)) return "soft labels";
+  if (!sameBytes(a.scene_flow.data, b.scene_flow.data)) return "scene flow";
+  if (!sameBytes(a.optical_flow.data, b.optical_flow.data)) return "optical flow";
+  if (!sameBytes(a.moved_depth.data, b.moved_depth.data)) return "moved depth";
+  if (!sameBytes(a.occlusion.data, b.occlusion.data)) return "occlusion";
+  if (a.segments.size() != b.segments.size())
+    return "segment count (" + std::to_string(a.segments.size()) + " against " + std::to_string(b.segments.size()) + ")";
+  for (std::size_t k = 0; k < a.segments.size(); ++k) {
+    const Segment &sa = a.segments[k], &sb = b.segments[k];
+    const std::string which = "segment " + std::to_string(k) + "'s ";
+    if (sa.id != sb.id) return which + "id";
+    if (!sameBytes(sa.twist, sb.twist)) return which + "twist";
+    if (!sameBytes(sa.transform, sb.transform)) return which + "transform";
+    if (std::memcmp(&sa.support, &sb.support, sizeof(double)) != 0) return which + "support";
+    if (!sameBytes(sa.covariance, sb.covariance)) return which + "covariance";
+  }
+  if (!sameBytes(a.world.twist, b.world.twist)) return "the static world's twist";
+  return "";
+}
+
+// "0,1" -> {0, 1}; CommandLineError for anything but non-negative integers.
+std::vector<int> parseDevices(const CommandLine& cli, int fallback) {
+  std::vector<int> devices;
+  for (const std::string& item : cli.list("devices", std::to_string(fallback))) {
+    char* end = nullptr;
+    const long d = std::strtol(item.c_str(), &end, 10);
+    if (end == item.c_str() || *end != '\0' || d < 0 || d > 63)
+      throw CommandLineError("--devices '" + cli.text("devices", "") + "': '" + item +
+                             "' is not a CUDA device index (0..63, as in Config::cuda_device)");
+    devices.push_back(int(d));
+  }
+  if (devices.empty()) throw CommandLineError("--devices: no device given (e.g. --devices 0,1)");
+  return devices;
+}
+
+std::string joined(const std::vector<int>& values, const char* separator) {
+  std::string text;
+  for (std::size_t k = 0; k < values.size(); ++k) text += (k ? separator : "") + std::to_string(values[k]);
+  return text;
+}
+
+int concurrentBench(const Config& base, int width, int height, int solvers, int repeat,
+                    const std::vector<int>& devices) {
+  if (base.backend == Backend::Cuda)
+    for (int device : devices) {
+      std::string why;
+      if (!cudaBackendAvailable(&why, device)) {
+        std::fprintf(stderr, "mcflow_bench: CUDA backend requested but unavailable: %s\n", why.c_str());
+        return 2;
+      }
+    }
   SyntheticSceneOptions so;
   so.width = width;
   so.height = height;
   const SyntheticPair pair = renderSyntheticPair(so);
+  auto configFor = [&](int i) {
+    Config config = base;
+    config.cuda_device = devices[std::size_t(i) % devices.size()];
+    return config;
+  };
+  // Each solver's last result of the timed run: compared with the one solver's.
+  std::vector<Result> last;
   auto run = [&](int count) {
     std::vector<std::unique_ptr<Solver>> each;
     for (int i = 0; i < count; ++i) {
-      each.push_back(std::make_unique<Solver>(base));
+      each.push_back(std::make_unique<Solver>(configFor(i)));
       each.back()->solve(pair.frame1, pair.frame2, pair.intrinsics);  // warm-up: buffers of this size
     }
+    last.assign(std::size_t(count), Result());
     std::vector<std::string> errors(static_cast<std::size_t>(count));
     const auto start = std::chrono::steady_clock::now();
     std::vector<std::thread> threads;
     for (int i = 0; i < count; ++i)
       threads.emplace_back([&, i] {
         try {
-          for (int k = 0; k < repeat; ++k) each[std::size_t(i)]->solve(pair.frame1, pair.frame2, pair.intrinsics);
+          for (int k = 0; k < repeat; ++k)
+            last[std::size_t(i)] = each[std::size_t(i)]->solve(pair.frame1, pair.frame2, pair.intrinsics);
         } catch (const std::exception& e) {
           errors[std::size_t(i)] = e.what();
         }
@@ -270,13 +348,34 @@ int concurrentBench(const Config& base, int width, int height, int solvers, int 
       if (!e.empty()) throw std::runtime_error("a concurrent solve failed: " + e);
     return double(count * repeat) / seconds;
   };
-  const double alone = run(1), together = run(solvers);
-  std::printf("# mcflow_bench --concurrent %d: synth-0 %dx%d, %d solves per solver, backend %s\n", solvers, width,
-              height, repeat, toString(base.backend).c_str());
-  std::printf("one solver: %.1f pairs/s (%.1f ms per pair); %d solvers in %d threads: %.1f pairs/s in all, %.1f per "
+  const double alone = run(1);
+  const Result reference = std::move(last.front());  // the first listed device alone
+  const double together = run(solvers);
+  std::vector<int> placement;
+  for (int i = 0; i < solvers; ++i) placement.push_back(configFor(i).cuda_device);
+  const bool on_gpu = reference.backend_kind == Backend::Cuda;
+  std::printf("# mcflow_bench --concurrent %d: synth-0 %dx%d, %d solves per solver, backend %s (%s)\n", solvers, width,
+              height, repeat, reference.backend.c_str(), reference.backend_note.c_str());
+  if (on_gpu)
+    std::printf("# solver i on CUDA device devices[i %% %zu]: %s\n", devices.size(), joined(placement, " ").c_str());
+  const std::string where_one = on_gpu ? " on device " + std::to_string(devices.front()) : "";
+  const std::string where_all = on_gpu ? " on devices " + joined(devices, ",") : "";
+  std::printf("one solver%s: %.1f pairs/s (%.1f ms per pair); %d solvers in %d threads%s: %.1f pairs/s in all, %.1f per "
               "solver (%.2fx the throughput of one)\n",
-              alone, 1000.0 / alone, solvers, solvers, together, together / solvers, together / alone);
-  return 0;
+              where_one.c_str(), alone, 1000.0 / alone, solvers, solvers, where_all.c_str(), together, together / solvers,
+              together / alone);
+  bool identical = true;
+  for (int i = 0; i < solvers; ++i) {
+    const std::string difference = firstDifference(last[std::size_t(i)], reference);
+    if (difference.empty()) continue;
+    identical = false;
+    std::printf("# solver %d (device %d): its %s differ from the solve alone%s\n", i, placement[std::size_t(i)],
+                difference.c_str(), where_one.c_str());
+  }
+  std::printf("results identical: %s (each solver's last result against the same pair solved by one solver alone%s: "
+              "labels, soft labels, flows, moved depth, occlusion, segments, world twist, byte for byte)\n",
+              identical ? "yes" : "no", where_one.c_str());
+  return identical ? 0 : 1;
 }
 
 }  // namespace
@@ -297,7 +396,12 @@ int main(int argc, char** argv) {
                                    {"truth-start", false,
                                     "with --parts: every solve starts from the true parts (motions unknown, no "
                                     "splits): the motions' errors when the segments are right"},
-                                   {"concurrent", true, "N solvers in N threads on synth-0: throughput against one"},
+                                   {"concurrent", true,
+                                    "N solvers in N threads on synth-0: throughput against one, results against "
+                                    "one's bit for bit"},
+                                   {"devices", true,
+                                    "with --concurrent: CUDA devices, comma-separated (e.g. 0,1); solver i runs on the "
+                                    "(i mod count)-th; sets the backend to cuda (default: cuda_device)"},
                                    {"match", true, "with --real: only the folders whose name contains this text"},
                                    {"real", true,
                                     "DIR of real pairs written by `mcflow export-real` (PFM): time, segments and "
@@ -321,8 +425,15 @@ int main(int argc, char** argv) {
     cli.applySettings(base);
     if (cli.has("truth-start") && !cli.has("parts")) throw CommandLineError("--truth-start needs --parts");
     const std::vector<Regularizer> regs = regularizerChoice(cli.text("regularizer", "both"));
-    if (cli.has("concurrent"))
-      return concurrentBench(base, width, height, cli.integer("concurrent", 2, 1, 64), repeat);
+    if (cli.has("devices") && !cli.has("concurrent")) throw CommandLineError("--devices needs --concurrent");
+    if (cli.has("concurrent")) {
+      if (cli.has("devices")) {
+        if (base.backend == Backend::Cpu) throw CommandLineError("--devices needs the cuda backend, not --backend cpu");
+        base.backend = Backend::Cuda;  // a GPU per listed device, or the error naming the one that is missing
+      }
+      return concurrentBench(base, width, height, cli.integer("concurrent", 2, 1, 64), repeat,
+                             parseDevices(cli, base.cuda_device));
+    }
     if (cli.has("real")) {
       Config real = base;
       if (regs.size() == 1) real.regularizer = regs.front();

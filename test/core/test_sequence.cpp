@@ -232,6 +232,73 @@ TEST(SequencePipeline, APairAfterAFailedOneContinuesNoEarlierTrack) {
   expectFreshIds(pipeline, pipeline.push(syntheticStreamFrame(3, 1.099)), highest);
 }
 
+// backend=cuda where it cannot be made (no GPU here, or a cuda_device that does not exist on a GPU machine): the
+// pipeline solves on the CPU rather than not at all, and says why (the nodelet's one warning and run-seq's print it).
+TEST(SequencePipeline, ABackendThatCannotBeMadeFallsBackToTheCpuSayingWhy) {
+  Config config;
+  config.outer_iterations = 1;
+  config.backend = Backend::Cuda;
+  config.cuda_device = 63;  // Config's largest: no machine has 64 GPUs
+  std::string why;
+  ASSERT_FALSE(cudaBackendAvailable(&why, config.cuda_device));
+  SequencePipeline pipeline(config, 0, 0.5);
+  EXPECT_EQ(pipeline.solver().backendKind(), Backend::Cpu);
+  EXPECT_EQ(pipeline.backendUnavailable(), "CUDA backend requested but unavailable: " + why);
+  pipeline.push(syntheticStreamFrame(0, 1.0));
+  const SequenceStep step = pipeline.push(syntheticStreamFrame(1, 1.033));
+  ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
+  EXPECT_EQ(step.result->backend_kind, Backend::Cpu);
+  EXPECT_EQ(step.result->backend_note, "cpu (fallback: CUDA backend requested but unavailable: " + why + ")");
+  EXPECT_TRUE(step.backend_fallback.empty()) << "nothing failed at run time";
+  EXPECT_EQ(pipeline.backendFallbacks(), 0);
+  // New parameters that ask for the CPU: made as asked, nothing unavailable.
+  Config cpu = config;
+  cpu.backend = Backend::Cpu;
+  pipeline.setConfig(cpu);
+  EXPECT_TRUE(pipeline.backendUnavailable().empty()) << pipeline.backendUnavailable();
+  const SequenceStep next = pipeline.push(syntheticStreamFrame(2, 1.066));
+  ASSERT_EQ(next.outcome, SequenceStep::Outcome::Solved) << next.problem;
+  EXPECT_EQ(next.result->backend_note, "cpu (requested)");
+}
+
+// The same through a factory, on any machine: its BackendError's text reaches the note, the CPU backend comes from the
+// factory too, a setConfig falls back the same way, and a bad config is still a ConfigError (the solver is kept).
+TEST(SequencePipeline, AFactorysBackendErrorGivesACpuSolverAndABadConfigStillThrows) {
+  Config config;
+  config.outer_iterations = 1;
+  config.backend = Backend::Cuda;
+  const std::string missing = "CUDA device 7 requested (cuda_device), but 2 CUDA devices are present (0..1)";
+  std::vector<Backend> requested;
+  SolveBackendFactory factory = [&](Backend backend, std::string* note) -> std::unique_ptr<SolveBackend> {
+    requested.push_back(backend);
+    if (backend == Backend::Cuda) throw BackendError("CUDA backend requested but unavailable: " + missing);
+    *note = "cpu (requested)";
+    return makeCpuSolveBackend();
+  };
+  SequencePipeline pipeline(config, 0, 0.5, factory);
+  EXPECT_EQ(requested, (std::vector<Backend>{Backend::Cuda, Backend::Cpu}));
+  EXPECT_NE(pipeline.backendUnavailable().find(missing), std::string::npos) << pipeline.backendUnavailable();
+  pipeline.push(syntheticStreamFrame(0, 1.0));
+  const SequenceStep step = pipeline.push(syntheticStreamFrame(1, 1.033));
+  ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
+  EXPECT_EQ(step.result->backend_kind, Backend::Cpu);
+  EXPECT_EQ(step.result->backend_note, "cpu (fallback: CUDA backend requested but unavailable: " + missing + ")");
+
+  Config bad = config;
+  bad.cuda_device = 64;  // outside Config's range: a configuration error, not a backend one
+  EXPECT_THROW(pipeline.setConfig(bad), ConfigError);
+  EXPECT_THROW(SequencePipeline(bad, 0, 0.5, factory), ConfigError);
+  EXPECT_EQ(pipeline.solver().backendKind(), Backend::Cpu) << "the solver is kept";
+
+  // The CPU requested and not to be had: nothing to fall back to.
+  Config cpu = config;
+  cpu.backend = Backend::Cpu;
+  EXPECT_THROW(SequencePipeline(cpu, 0, 0.5, [](Backend, std::string*) -> std::unique_ptr<SolveBackend> {
+                 throw BackendError("no CPU backend");
+               }),
+               BackendError);
+}
+
 TEST(OffsetSegmentIds, MovesEveryIdOfAResultTogether) {
   Result r;
   r.width = 3;

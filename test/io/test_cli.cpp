@@ -489,6 +489,22 @@ TEST(Cli, SynthSequenceThenRunSeqKeepsIdsAndWritesTheSequenceFiles) {
   EXPECT_NE(missing.err.find("not a directory"), std::string::npos) << missing.err;
 }
 
+// run-seq with a CUDA backend that cannot be made (no GPU here; a cuda_device that does not exist on a GPU machine)
+// solves on the CPU rather than not at all, and says why (`mcflow run` stops instead: CudaBackendWithoutGpu).
+TEST(Cli, RunSeqOnAnUnusableCudaBackendRunsOnTheCpuAndSaysWhy) {
+  const fs::path seq = workDir() / "sequence_cuda", out = workDir() / "sequence_cuda_out";
+  const CliRun synth = runCli("synth --out " + quote(seq.string()) + " --frames 2 --width 96 --height 72");
+  ASSERT_EQ(synth.code, 0) << synth.err;
+  const CliRun run = runCli("run-seq --tum " + quote(seq.string()) + " --backend cuda --set cuda_device=63 --out " +
+                            quote(out.string()));
+  ASSERT_EQ(run.code, 0) << run.err;
+  EXPECT_NE(run.out.find("1 pair(s) solved"), std::string::npos) << run.out;
+  EXPECT_NE(run.err.find("warning: backend 'cuda' cannot be used: running on the CPU (CUDA backend requested but "
+                         "unavailable: "),
+            std::string::npos)
+      << run.err;
+}
+
 // --no-events leaves out the sequence's two extra boxes (parts 10 and 11): the demo bag's scene.
 TEST(Cli, SynthSequenceWithoutEventsHasOnlyTheSceneParts) {
   auto partsOf = [](const fs::path& dir) {

@@ -26,7 +26,8 @@ class SolveBackend;
 
 /// @brief Makes a pipeline's solve backends (the first one, a new one per setConfig, the CPU one after a GPU
 /// failure) for the requested Backend; `note` becomes Result::backend_note. The default is makeSolveBackend. Tests
-/// return backends with an injected fault this way (mc_flow/testing/fault_injection.h).
+/// return backends with an injected fault this way (mc_flow/testing/fault_injection.h). When the requested backend
+/// throws BackendError, the factory is asked for the CPU one (see the constructor).
 using SolveBackendFactory = std::function<std::unique_ptr<SolveBackend>(Backend requested, std::string* note)>;
 
 /// @brief The downsampling factor for an input `width`: `requested` > 0 is used as is (a power of two,
@@ -111,8 +112,10 @@ class SequencePipeline {
  public:
   /// `downsample`: see chooseDownsample (0 = automatic). `max_pair_interval` [s]: a longer gap starts a new
   /// sequence. Throws ConfigError for a bad config, a negative interval or a downsample that is not 0 or a
-  /// power of two; BackendError when CUDA is forced but unusable. `make_backend`: see SolveBackendFactory (empty:
-  /// makeSolveBackend).
+  /// power of two. A backend that cannot be made (BackendError: backend=cuda without a usable GPU, or a cuda_device
+  /// that does not exist) does not stop the stream: the pipeline solves on the CPU, backendUnavailable() and every
+  /// Result::backend_note say why ("cpu (fallback: ...)", naming the device count for a missing device), and the
+  /// caller warns once. `make_backend`: see SolveBackendFactory (empty: makeSolveBackend).
   SequencePipeline(const Config& config, int downsample, double max_pair_interval,
                    SolveBackendFactory make_backend = {});
 
@@ -126,7 +129,8 @@ class SequencePipeline {
   /// are numbered from nextId() on, above every id handed out before, so a new segment never continues the
   /// track (or the nodelet's TF frame) of an earlier, unrelated one.
   void reset();
-  /// @brief A new solver for the following pairs (parameters changed); the sequence continues.
+  /// @brief A new solver for the following pairs (parameters changed); the sequence continues. ConfigError for a bad
+  /// config (the solver is kept); a backend that cannot be made falls back to the CPU as in the constructor.
   void setConfig(const Config& config);
 
   const Solver& solver() const { return *solver_; }
@@ -140,13 +144,18 @@ class SequencePipeline {
   long resets() const { return resets_; }
   /// @brief How often a BackendError moved the pipeline to the CPU (SequenceStep::backend_fallback).
   long backendFallbacks() const { return backend_fallbacks_; }
+  /// @brief Why the current solver runs on the CPU although another backend was requested: the BackendError of making
+  /// that backend in the constructor or the last setConfig (e.g. "CUDA backend requested but unavailable: CUDA device 7
+  /// requested (cuda_device), but 2 CUDA devices are present (0..1)"); empty when the requested backend was made.
+  const std::string& backendUnavailable() const { return backend_unavailable_; }
 
  private:
   PreparedFrame prepare(StreamFrame frame) const;
   void updateTracks(const Result& result);
   void updateOdometry(const Result& result, double interval_s, double stamp);
-  // A solver on a backend from the factory; `why`, when given, replaces the factory's note (Result::backend_note).
-  std::unique_ptr<Solver> makeSolver(const Config& config, const std::string& why = "");
+  // A solver on a backend from the factory; `why`, when given, replaces the factory's note (Result::backend_note). A
+  // BackendError of the factory gives a CPU solver and sets `unavailable` to its text (else clears it).
+  std::unique_ptr<Solver> makeSolver(const Config& config, std::string* unavailable, const std::string& why = "");
 
   Config config_;
   int downsample_request_ = 0;
@@ -160,6 +169,7 @@ class SequencePipeline {
   Odometry odometry_;
   int next_id_ = 1;  // above every id handed out: a pair solved without a prior is numbered from here
   long pairs_solved_ = 0, resets_ = 0, backend_fallbacks_ = 0;
+  std::string backend_unavailable_;  // backendUnavailable()
 };
 
 std::string toString(SequenceStep::Outcome outcome);
