@@ -303,31 +303,8 @@ void MCFlowNodelet::process(const SyncedInput& input) {
     return;
   }
   const double solve_ms = (ros::WallTime::now() - start).toSec() * 1e3;
-  if (!step.reset_key.empty()) {
-    warn("reset:" + step.reset_key, "frame " + stampText(stamp) + ": " + step.reset_reason + ": starting a new sequence");
-    status_.sequenceReset();
-  }
-  using Outcome = mc_flow::SequenceStep::Outcome;
-  if (step.outcome == Outcome::RepeatedStamp) {
-    warn("stamp", "frame skipped: stamp " + stampText(stamp) +
-                      " repeats the previous frame's (is a driver or bag publishing duplicates?)");
-    status_.frameSkipped();
-    return;
-  }
-  if (step.outcome == Outcome::Started) return;
-  if (step.outcome == Outcome::PairFailed) {
-    if (!step.backend_fallback.empty()) {
-      // The pipeline has switched to the CPU: this happens once per backend, so the warning is never held back
-      // (period 0; a GPU restored by new parameters may fail again and is reported again).
-      warn("backend", "pair ending at " + stampText(stamp) + " skipped: " + step.problem + "; continuing on the CPU", 0.0);
-      status_.backendFailed(step.problem);
-    } else {
-      // Bad input or parameters that do not fit this input: the sequence goes on with the newer frame.
-      warn("solver", "pair ending at " + stampText(stamp) + " skipped: " + step.problem);
-      status_.frameSkipped();
-    }
-    return;
-  }
+  for (const StepWarning& w : status_.recordStep(step, stampText(stamp), solve_ms)) warn(w.key, w.text, w.period);
+  if (step.outcome != mc_flow::SequenceStep::Outcome::Solved) return;
 
   const mc_flow::Result& result = *step.result;
   reportBackend(result);
@@ -340,7 +317,6 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   pair.world = &step.world_velocities;
   outputs_->publish(result, pair, *pipeline_, step.pair_index, status_.framesDropped(),
                     [this](const std::string& key, const std::string& text) { warn(key, text); });
-  status_.pairSolved(result, solve_ms);
 }
 
 std::optional<Eigen::Matrix4d> MCFlowNodelet::cameraPosePrior(const std_msgs::Header& header) {
@@ -363,6 +339,10 @@ void MCFlowNodelet::reportBackend(const mc_flow::Result& result) {
   const mc_flow::Backend requested = solver_config_.backend;
   if (result.backend_kind == mc_flow::Backend::Cuda || requested == mc_flow::Backend::Cpu) {
     NODELET_INFO("solver backend: %s (%s)", result.backend.c_str(), result.backend_note.c_str());
+  } else if (requested == mc_flow::Backend::Auto && solver_config_.cuda_device != 0) {
+    // A GPU other than the first was asked for: its absence is a configuration problem, said with its reason.
+    NODELET_WARN("cuda_device %d cannot be used: running on the CPU (%s)", solver_config_.cuda_device,
+                 result.backend_note.c_str());
   } else if (requested == mc_flow::Backend::Auto) {
     // The usual case on a machine without an NVIDIA GPU: the CUDA runtime's own words ("driver version is
     // insufficient") read as a request to upgrade a driver, so they go to debug level.
