@@ -1,12 +1,10 @@
 // Label step on the GPU: the same diagonally preconditioned primal-dual iteration as
 // src/core/label_optimization.cpp (the reference), one kernel per half-step.
 //
-// Arithmetic: every float operation of the iteration uses the explicitly rounded intrinsics
-// (__fadd_rn, __fmul_rn, ...), which nvcc never fuses into FMAs, in the order the CPU code evaluates
-// them (including its precomputed factors sigma * r, 1 / (1 + sigma / (2 lambda)) and 1 / lambda, and its
-// simplex projection in double); sqrt and division are IEEE-rounded as on the CPU. The iteration is
-// therefore the CPU's operation for operation; the tests still allow a stated tolerance, for the day the
-// two orders drift apart.
+// Arithmetic: the per-pixel rules (weights, data costs, step sizes, dual and primal updates) are the CPU's own,
+// from include/mc_flow/core/label_step_pixel.h, every float operation rounded on its own (no FMAs), and the simplex
+// projection is simplex_projection.h's. The iteration is therefore the CPU's operation for operation; the tests
+// still allow a stated tolerance, for the day the two orders drift apart.
 //
 // Convergence: the CPU tests max |u_new - u_old| after every iteration; here the test needs a device
 // reduction, so it runs every kConvergenceCheckInterval iterations and at the last one. With a tolerance the GPU
@@ -27,6 +25,7 @@
 #include "cuda_check.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
+#include "mc_flow/core/label_step_pixel.h"
 #include "mc_flow/core/simplex_projection.h"
 #include "mc_flow/core/solve_backend.h"
 #include "device_stages.h"
@@ -43,14 +42,10 @@ constexpr int kRoundsBetweenReads = 5;          // checked rounds queued between
 constexpr int kBlockX = 32, kBlockY = 8;        // a warp spans 32 consecutive pixels of a row
 
 // Rounded float operations that the compiler may not contract into FMAs (keeps the CPU's rounding).
-__device__ __forceinline__ float add(float a, float b) { return __fadd_rn(a, b); }
 __device__ __forceinline__ float sub(float a, float b) { return __fsub_rn(a, b); }
 __device__ __forceinline__ float mul(float a, float b) { return __fmul_rn(a, b); }
-__device__ __forceinline__ float divide(float a, float b) { return __fdiv_rn(a, b); }
 
-// Diagonal preconditioners (Pock & Chambolle 2011, alpha = 1) as the CPU computes them, stored in the form
-// the iteration uses: sigma * r per direction (the CPU multiplies sigma by r first), the quadratic prox
-// factor 1 / (1 + sigma / (2 lambda)), and tau.
+// Diagonal preconditioners (label_pixel::stepSizes), stored in the form the iteration uses.
 __global__ void computeStepSizes(const float* __restrict__ rx, const float* __restrict__ ry, int width, int height,
                                  bool tv, float lambda, float* __restrict__ sigma_rx, float* __restrict__ sigma_ry,
                                  float* __restrict__ shrink_x, float* __restrict__ shrink_y, float* __restrict__ tau) {
@@ -58,25 +53,17 @@ __global__ void computeStepSizes(const float* __restrict__ rx, const float* __re
   const int y = blockIdx.y * blockDim.y + threadIdx.y;
   if (x >= width || y >= height) return;
   const std::size_t i = std::size_t(y) * width + x;
-  float sx = rx[i] > 0.f ? divide(1.f, mul(2.f, rx[i])) : 0.f;
-  float sy = ry[i] > 0.f ? divide(1.f, mul(2.f, ry[i])) : 0.f;
-  if (tv) {
-    const float m = fmaxf(rx[i], ry[i]);
-    sx = sy = m > 0.f ? divide(1.f, mul(2.f, m)) : 0.f;
-  }
-  sigma_rx[i] = mul(sx, rx[i]);
-  sigma_ry[i] = mul(sy, ry[i]);
-  const float two_lambda = mul(2.f, lambda);
-  shrink_x[i] = divide(1.f, add(1.f, divide(sx, two_lambda)));
-  shrink_y[i] = divide(1.f, add(1.f, divide(sy, two_lambda)));
-  float column = add(rx[i], ry[i]);
-  column = add(column, x > 0 ? rx[i - 1] : 0.f);
-  column = add(column, y > 0 ? ry[i - width] : 0.f);
-  tau[i] = column > 0.f ? divide(1.f, column) : 1e3f;
+  const label_pixel::StepSizes steps =
+      label_pixel::stepSizes(rx[i], ry[i], x > 0 ? rx[i - 1] : 0.f, y > 0 ? ry[i - width] : 0.f, tv, lambda);
+  sigma_rx[i] = steps.sigma_rx;
+  sigma_ry[i] = steps.sigma_ry;
+  shrink_x[i] = steps.shrink_x;
+  shrink_y[i] = steps.shrink_y;
+  tau[i] = steps.tau;
 }
 
 // Dual ascent + prox of sigma Q*; one thread per (pixel, label), label = blockIdx.z.
-// At the last column/row r = 0, so the CPU adds an exact zero there; here the difference is not read.
+// At the last column/row sigma r = 0: the difference is not read there (0 stands for it).
 __global__ void dualStep(const float* __restrict__ u_bar, float* __restrict__ p, const float* __restrict__ sigma_rx,
                          const float* __restrict__ sigma_ry, const float* __restrict__ shrink_x,
                          const float* __restrict__ shrink_y, int width, int height, bool tv, float inv_lambda,
@@ -91,17 +78,15 @@ __global__ void dualStep(const float* __restrict__ u_bar, float* __restrict__ p,
   const float* ub = u_bar + label * plane;
   float* px = p + (2 * std::size_t(label)) * plane;
   float* py = px + plane;
-  const float step_x = x + 1 < width ? mul(sigma_rx[i], sub(ub[i + 1], ub[i])) : 0.f;
-  const float step_y = y + 1 < height ? mul(sigma_ry[i], sub(ub[i + width], ub[i])) : 0.f;
-  const float qx = add(px[i], step_x);
-  const float qy = add(py[i], step_y);
+  const float qx = label_pixel::dualAscent(px[i], sigma_rx[i], x + 1 < width ? sub(ub[i + 1], ub[i]) : 0.f);
+  const float qy = label_pixel::dualAscent(py[i], sigma_ry[i], y + 1 < height ? sub(ub[i + width], ub[i]) : 0.f);
   if (tv) {
-    const float scale = divide(1.f, fmaxf(1.f, mul(__fsqrt_rn(add(mul(qx, qx), mul(qy, qy))), inv_lambda)));
+    const float scale = label_pixel::dualTvScale(qx, qy, inv_lambda);
     px[i] = mul(qx, scale);
     py[i] = mul(qy, scale);
   } else {
-    px[i] = mul(qx, shrink_x[i]);
-    py[i] = mul(qy, shrink_y[i]);
+    px[i] = label_pixel::dualQuadratic(qx, shrink_x[i]);
+    py[i] = label_pixel::dualQuadratic(qy, shrink_y[i]);
   }
 }
 
@@ -134,11 +119,11 @@ __global__ void primalStep(float* __restrict__ u, float* __restrict__ u_bar, con
     for (int label = threadIdx.y; label < count; label += blockDim.y) {
       const float* px = p + (2 * std::size_t(label)) * plane;
       const float* py = px + plane;
-      // K^T p = -(weighted backward divergence of p); the CPU subtracts exact zeros at the first column/row.
-      float divergence = add(mul(rx_here, px[i]), mul(ry_here, py[i]));
-      if (x > 0) divergence = sub(divergence, mul(rx_left, px[i - 1]));
-      if (y > 0) divergence = sub(divergence, mul(ry_up, py[i - width]));
-      v[label * kBlockX] = sub(u[label * plane + i], mul(tau_here, add(-divergence, data_cost[label * plane + i])));
+      // K^T p = -(weighted backward divergence of p); zeros stand for the missing neighbours at the first column/row.
+      const float divergence = label_pixel::divergence(rx_here, px[i], ry_here, py[i], rx_left, x > 0 ? px[i - 1] : 0.f,
+                                                       ry_up, y > 0 ? py[i - width] : 0.f);
+      v[label * kBlockX] =
+          label_pixel::primalCandidate(u[label * plane + i], tau_here, divergence, data_cost[label * plane + i]);
     }
   }
   __syncthreads();
@@ -155,9 +140,9 @@ __global__ void primalStep(float* __restrict__ u, float* __restrict__ u_bar, con
     for (int label = threadIdx.y; label < count; label += blockDim.y) {
       const float old = u[label * plane + i];
       const float value = v[label * kBlockX];
-      max_change = fmaxf(max_change, fabsf(sub(value, old)));
+      max_change = fmaxf(max_change, label_pixel::change(value, old));
       u[label * plane + i] = value;
-      u_bar[label * plane + i] = sub(mul(2.f, value), old);
+      u_bar[label * plane + i] = label_pixel::extrapolate(value, old);
     }
   }
   if (!record_change) return;  // uniform: no barrier is skipped by part of the block
@@ -527,13 +512,8 @@ __global__ void geometricWeightsKernel(const cuda_detail::DeviceImage points, fl
   const int W = points.width, H = points.height;
   if (x >= W || y >= H) return;
   auto weight = [&](int x1, int y1) {
-    const float z0 = points.at(x, y, 2), z1 = points.at(x1, y1, 2);
-    if (!isfinite(z0) || !isfinite(z1)) return wmin;
-    const float dx = sub(points.at(x, y, 0), points.at(x1, y1, 0)), dy = sub(points.at(x, y, 1), points.at(x1, y1, 1));
-    const float dz = sub(z0, z1);
-    const float distance = __fsqrt_rn(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz)));
-    const float footprint = __fdiv_rn(mul(0.5f, add(z0, z1)), fmean);
-    return fmaxf(wmin, __fdiv_rn(footprint, fmaxf(footprint, distance)));
+    return label_pixel::geometricWeight(points.at(x, y, 0), points.at(x, y, 1), points.at(x, y, 2), points.at(x1, y1, 0),
+                                        points.at(x1, y1, 1), points.at(x1, y1, 2), fmean, wmin);
   };
   const std::size_t i = std::size_t(y) * W + x;
   weight_x[i] = x + 1 < W ? weight(x + 1, y) : 0.f;
@@ -545,7 +525,8 @@ struct DataCostParams {
   const cuda_detail::DeviceTransform* transforms;
   int motion_labels;
   const std::uint8_t* occluded;
-  float fx, fy, cx, cy, c_intensity, c_depth, alpha, outlier_cost, out_of_view, missing_depth_cost;
+  label_pixel::DataCostTerms terms;
+  float outlier_cost;
 };
 
 __global__ void dataCostsKernel(const DataCostParams q, float* __restrict__ data_cost,
@@ -571,22 +552,9 @@ __global__ void dataCostsKernel(const DataCostParams q, float* __restrict__ data
   for (int i = 0; i < q.motion_labels; ++i) {
     float P2[3];
     transformPoint(q.transforms[i].m, P, P2);
-    float cost = q.out_of_view;
-    if (P2[2] > 1e-3f) {
-      float u = add(__fdiv_rn(mul(q.fx, P2[0]), P2[2]), q.cx), v = add(__fdiv_rn(mul(q.fy, P2[1]), P2[2]), q.cy);
-      float I2, Z2;
-      if (clampIntoView(W, H, u, v) && cuda_detail::sampleBilinearDevice(q.level.intensity2, u, v, 0, I2)) {
-        const float rI = __fdiv_rn(sub(I1, I2), q.c_intensity);
-        cost = log1pf(mul(rI, rI));
-        if (cuda_detail::sampleDepthBilinearSmoothDevice(q.level.depth2, u, v, INFINITY, Z2)) {
-          const float rZ = __fdiv_rn(sub(P2[2], Z2), q.c_depth);
-          cost = add(cost, mul(q.alpha, log1pf(mul(rZ, rZ))));
-        } else {
-          cost = add(cost, q.missing_depth_cost);
-        }
-      }
-    }
-    data_cost[std::size_t(i) * plane + idx] = cost;
+    data_cost[std::size_t(i) * plane + idx] =
+        label_pixel::motionLabelCost(P2, I1, cuda_detail::DeviceChannel{q.level.intensity2, 0},
+                                     cuda_detail::DeviceChannel{q.level.depth2, 0}, W, H, q.terms);
   }
 }
 
@@ -657,7 +625,7 @@ std::unique_ptr<DevicePrimalDual> makeDevicePrimalDual(cudaStream_t stream) {
 void launchGeometricWeights(const DeviceLevel& level, double min_weight, float* weight_x, float* weight_y,
                             cudaStream_t stream) {
   const dim3 block(kBlockX, kBlockY), grid((level.width + kBlockX - 1) / kBlockX, (level.height + kBlockY - 1) / kBlockY);
-  const float fmean = float(0.5 * (level.intrinsics.fx + level.intrinsics.fy));
+  const float fmean = label_pixel::geometricWeightFocal(level.intrinsics);
   geometricWeightsKernel<<<grid, block, 0, stream>>>(level.points1, fmean, float(min_weight), weight_x, weight_y);
   MCFLOW_CUDA_CHECK_LAUNCH("geometricWeightsKernel");
 }
@@ -670,16 +638,8 @@ void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms
   q.transforms = transforms;
   q.motion_labels = motion_labels;
   q.occluded = occluded;
-  q.fx = float(level.intrinsics.fx);
-  q.fy = float(level.intrinsics.fy);
-  q.cx = float(level.intrinsics.cx);
-  q.cy = float(level.intrinsics.cy);
-  q.c_intensity = float(config.cauchy_c_intensity);
-  q.c_depth = float(config.cauchy_c_depth);
-  q.alpha = float(config.alpha);
+  q.terms = label_pixel::dataCostTerms(level.intrinsics, config);
   q.outlier_cost = float(config.outlier_cost);
-  q.out_of_view = float(config.out_of_view_cost);
-  q.missing_depth_cost = float(config.alpha) * std::log(2.f);
   const dim3 block(kBlockX, kBlockY), grid((level.width + kBlockX - 1) / kBlockX, (level.height + kBlockY - 1) / kBlockY);
   dataCostsKernel<<<grid, block, 0, stream>>>(q, data_cost, outlier_only);
   MCFLOW_CUDA_CHECK_LAUNCH("dataCostsKernel");

@@ -11,6 +11,7 @@
 #include "cuda_check.h"
 #include "device_stages.h"
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/soft_labels_pixel.h"
 
 namespace mc_flow {
 namespace cuda_detail {
@@ -48,23 +49,16 @@ __global__ void downsampleKernel(const float* __restrict__ in, int w, int h, int
                                  int ow, int oh) {
   const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
   if (x >= ow || y >= oh) return;
-  const int y0 = min(2 * y, h - 1), y1 = min(2 * y + 1, h - 1), x0 = min(2 * x, w - 1), x1 = min(2 * x + 1, w - 1);
+  int x0, x1, y0, y1;
+  soft_labels_pixel::downsampleSources(x, w, x0, x1);
+  soft_labels_pixel::downsampleSources(y, h, y0, y1);
   const std::size_t plane = std::size_t(w) * h, out_plane = std::size_t(ow) * oh;
   for (int i = 0; i < count; ++i) {
     const float* src = in + i * plane;
-    const float s = __fadd_rn(__fadd_rn(__fadd_rn(src[std::size_t(y0) * w + x0], src[std::size_t(y0) * w + x1]),
-                                        src[std::size_t(y1) * w + x0]),
-                              src[std::size_t(y1) * w + x1]);
-    out[i * out_plane + std::size_t(y) * ow + x] = __fmul_rn(0.25f, s);
+    out[i * out_plane + std::size_t(y) * ow + x] =
+        soft_labels_pixel::average4(src[std::size_t(y0) * w + x0], src[std::size_t(y0) * w + x1],
+                                    src[std::size_t(y1) * w + x0], src[std::size_t(y1) * w + x1]);
   }
-}
-
-// Tap of upsampleLabels: coarse coordinate of a fine pixel centre (computed in double as on the CPU).
-__device__ __forceinline__ void tap(int fine_x, int coarse, double ratio, int& i0, int& i1, float& a) {
-  const double c = fmin(fmax((fine_x + 0.5) * ratio - 0.5, 0.0), double(coarse - 1));
-  i0 = int(c);
-  i1 = min(i0 + 1, coarse - 1);
-  a = float(c - i0);
 }
 
 __global__ void upsampleKernel(const float* __restrict__ in, int w, int h, int count, float* __restrict__ out,
@@ -73,21 +67,19 @@ __global__ void upsampleKernel(const float* __restrict__ in, int w, int h, int c
   if (x >= ow || y >= oh) return;
   int x0, x1, y0, y1;
   float ax, ay;
-  tap(x, w, ratio_x, x0, x1, ax);
-  tap(y, h, ratio_y, y0, y1, ay);
+  soft_labels_pixel::upsampleTap(x, w, ratio_x, x0, x1, ax);
+  soft_labels_pixel::upsampleTap(y, h, ratio_y, y0, y1, ay);
   const std::size_t plane = std::size_t(w) * h, out_plane = std::size_t(ow) * oh, o = std::size_t(y) * ow + x;
   float sum = 0.f;
   for (int i = 0; i < count; ++i) {
     const float* r0 = in + i * plane + std::size_t(y0) * w;
     const float* r1 = in + i * plane + std::size_t(y1) * w;
-    const float top = __fadd_rn(r0[x0], __fmul_rn(ax, __fsub_rn(r0[x1], r0[x0])));
-    const float bottom = __fadd_rn(r1[x0], __fmul_rn(ax, __fsub_rn(r1[x1], r1[x0])));
-    const float v = __fadd_rn(top, __fmul_rn(ay, __fsub_rn(bottom, top)));
+    const float v = soft_labels_pixel::interpolate(r0[x0], r0[x1], r1[x0], r1[x1], ax, ay);
     out[i * out_plane + o] = v;
     sum = __fadd_rn(sum, v);
   }
   // Renormalised as on the CPU; a pixel without mass goes to the outlier label.
-  const float scale = sum > 0.f ? __fdiv_rn(1.f, sum) : 0.f;
+  const float scale = soft_labels_pixel::renormalisation(sum);
   for (int i = 0; i < count; ++i) out[i * out_plane + o] = __fmul_rn(out[i * out_plane + o], scale);
   if (scale == 0.f) out[std::size_t(count - 1) * out_plane + o] = 1.f;
 }
@@ -234,8 +226,8 @@ void launchDownsampleLabels(const float* in, int width, int height, int count, f
 void launchUpsampleLabels(const float* in, int width, int height, int count, float* out, int out_width,
                           int out_height, cudaStream_t stream) {
   upsampleKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(
-      in, width, height, count, out, out_width, out_height, 1.0 / levelScale(out_width, width),
-      1.0 / levelScale(out_height, height));
+      in, width, height, count, out, out_width, out_height, soft_labels_pixel::upsampleRatio(out_width, width),
+      soft_labels_pixel::upsampleRatio(out_height, height));
   MCFLOW_CUDA_CHECK_LAUNCH("upsampleKernel");
 }
 

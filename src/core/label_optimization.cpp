@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/label_step_pixel.h"
 #include "mc_flow/core/motion_estimation.h"
 #include "mc_flow/core/sampling.h"
 #include "mc_flow/core/simplex_projection.h"
@@ -20,17 +21,11 @@ void geometricWeights(const PyramidLevel& frame1, double min_weight, ImageF& wei
   const int W = P.width, H = P.height;
   weight_x = ImageF(W, H, 1, 0.f);
   weight_y = ImageF(W, H, 1, 0.f);
-  const float fmean = float(0.5 * (frame1.intrinsics.fx + frame1.intrinsics.fy));
+  const float fmean = label_pixel::geometricWeightFocal(frame1.intrinsics);
   const float wmin = float(min_weight);
-  // r = footprint / max(footprint, distance): 1 on a fronto-parallel surface at any depth and resolution,
-  // falling as 1/distance across depth discontinuities (the paper's inverse 3D distance, normalised).
   auto weight = [&](int x0, int y0, int x1, int y1) {
-    const float z0 = P(x0, y0, 2), z1 = P(x1, y1, 2);
-    if (!std::isfinite(z0) || !std::isfinite(z1)) return wmin;
-    const float dx = P(x0, y0, 0) - P(x1, y1, 0), dy = P(x0, y0, 1) - P(x1, y1, 1), dz = z0 - z1;
-    const float distance = std::sqrt(dx * dx + dy * dy + dz * dz);
-    const float footprint = 0.5f * (z0 + z1) / fmean;
-    return std::max(wmin, footprint / std::max(footprint, distance));
+    return label_pixel::geometricWeight(P(x0, y0, 0), P(x0, y0, 1), P(x0, y0, 2), P(x1, y1, 0), P(x1, y1, 1),
+                                        P(x1, y1, 2), fmean, wmin);
   };
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y) {
@@ -56,11 +51,9 @@ void computeDataCosts(const PyramidLevel& frame1, const PyramidLevel& frame2, co
 
   std::vector<Eigen::Matrix<float, 3, 4>> transforms(static_cast<std::size_t>(motion_labels));
   for (int i = 0; i < motion_labels; ++i) transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
-  const Intrinsics& K = frame2.intrinsics;
-  const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
-  const float cI = float(config.cauchy_c_intensity), cZ = float(config.cauchy_c_depth), alpha = float(config.alpha);
-  const float outlier_cost = float(config.outlier_cost), out_of_view = float(config.out_of_view_cost);
-  const float missing_depth_cost = alpha * std::log(2.f);  // as if |r_Z| = c_Z: no evidence either way
+  const label_pixel::DataCostTerms terms = label_pixel::dataCostTerms(frame2.intrinsics, config);
+  const float outlier_cost = float(config.outlier_cost);
+  const sampling_detail::HostChannel intensity2{frame2.intensity, 0}, depth2{frame2.depth, 0};
   const std::size_t plane = std::size_t(W) * H;
 
 #pragma omp parallel for schedule(static)
@@ -78,22 +71,8 @@ void computeDataCosts(const PyramidLevel& frame1, const PyramidLevel& frame2, co
       const float I1 = frame1.intensity(x, y);
       for (int i = 0; i < motion_labels; ++i) {
         const Eigen::Vector3f P2 = transforms[std::size_t(i)] * P.homogeneous();
-        float cost = out_of_view;
-        if (P2.z() > 1e-3f) {
-          float u = fx * P2.x() / P2.z() + cx, v = fy * P2.y() / P2.z() + cy;
-          float I2, Z2;
-          if (clampIntoView(W, H, u, v) && sampleBilinear(frame2.intensity, u, v, 0, I2)) {
-            const float rI = (I1 - I2) / cI;
-            cost = std::log1p(rI * rI);
-            if (sampleDepthBilinear(frame2.depth, u, v, Z2)) {
-              const float rZ = (P2.z() - Z2) / cZ;
-              cost += alpha * std::log1p(rZ * rZ);
-            } else {
-              cost += missing_depth_cost;
-            }
-          }
-        }
-        problem.data_cost[std::size_t(i) * plane + idx] = cost;
+        problem.data_cost[std::size_t(i) * plane + idx] =
+            label_pixel::motionLabelCost(P2.data(), I1, intensity2, depth2, W, H, terms);
       }
     }
   }
@@ -162,8 +141,8 @@ void dualRowQuadratic(int W, const float* __restrict ub, const float* __restrict
                       float* __restrict py, const float* __restrict step_x, const float* __restrict step_y,
                       const float* __restrict shrink_x, const float* __restrict shrink_y) {
   for (int x = 0; x < W; ++x) {
-    px[x] = (px[x] + step_x[x] * (ub[x + 1] - ub[x])) * shrink_x[x];
-    py[x] = (py[x] + step_y[x] * (ub_down[x] - ub[x])) * shrink_y[x];
+    px[x] = label_pixel::dualQuadratic(label_pixel::dualAscent(px[x], step_x[x], ub[x + 1] - ub[x]), shrink_x[x]);
+    py[x] = label_pixel::dualQuadratic(label_pixel::dualAscent(py[x], step_y[x], ub_down[x] - ub[x]), shrink_y[x]);
   }
 }
 
@@ -171,9 +150,9 @@ void dualRowTv(int W, const float* __restrict ub, const float* __restrict ub_dow
                float* __restrict py, const float* __restrict step_x, const float* __restrict step_y,
                float inv_lambda) {
   for (int x = 0; x < W; ++x) {
-    const float qx = px[x] + step_x[x] * (ub[x + 1] - ub[x]);
-    const float qy = py[x] + step_y[x] * (ub_down[x] - ub[x]);
-    const float scale = 1.f / std::max(1.f, std::sqrt(qx * qx + qy * qy) * inv_lambda);
+    const float qx = label_pixel::dualAscent(px[x], step_x[x], ub[x + 1] - ub[x]);
+    const float qy = label_pixel::dualAscent(py[x], step_y[x], ub_down[x] - ub[x]);
+    const float scale = label_pixel::dualTvScale(qx, qy, inv_lambda);
     px[x] = qx * scale;
     py[x] = qy * scale;
   }
@@ -184,10 +163,12 @@ void primalRowCandidate(int W, const float* __restrict u, const float* __restric
                         const float* __restrict rx, const float* __restrict ry, const float* __restrict rx_left,
                         const float* __restrict ry_up, const float* __restrict tau, float* __restrict out) {
   // K^T p = -(weighted backward divergence of p); x = 0 has no left neighbour (rx_left = 0).
-  out[0] = u[0] - tau[0] * (-(rx[0] * px[0] + ry[0] * py[0] - ry_up[0] * py_up[0]) + data_cost[0]);
+  out[0] = label_pixel::primalCandidate(
+      u[0], tau[0], label_pixel::divergence(rx[0], px[0], ry[0], py[0], 0.f, 0.f, ry_up[0], py_up[0]), data_cost[0]);
   for (int x = 1; x < W; ++x) {
-    const float divergence = rx[x] * px[x] + ry[x] * py[x] - rx_left[x] * px[x - 1] - ry_up[x] * py_up[x];
-    out[x] = u[x] - tau[x] * (-divergence + data_cost[x]);
+    const float divergence =
+        label_pixel::divergence(rx[x], px[x], ry[x], py[x], rx_left[x], px[x - 1], ry_up[x], py_up[x]);
+    out[x] = label_pixel::primalCandidate(u[x], tau[x], divergence, data_cost[x]);
   }
 }
 
@@ -195,10 +176,9 @@ float primalRowCommit(int W, const float* __restrict candidate, float* __restric
   float max_change = 0.f;
   for (int x = 0; x < W; ++x) {
     const float old = u[x];
-    const float change = candidate[x] - old;
-    max_change = std::max(max_change, change < 0.f ? -change : change);
+    max_change = std::max(max_change, label_pixel::change(candidate[x], old));
     u[x] = candidate[x];
-    u_bar[x] = 2.f * candidate[x] - old;
+    u_bar[x] = label_pixel::extrapolate(candidate[x], old);
   }
   return max_change;
 }
@@ -221,10 +201,7 @@ class CpuLabelOptimizer final : public LabelOptimizer {
     const bool tv = problem.regularizer == Regularizer::TotalVariation;
     const float lambda = float(problem.lambda);
 
-    // Diagonal preconditioning (Pock & Chambolle 2011, alpha = 1). Row sums of |K| give sigma, column sums tau.
-    // TV projects p onto a disc, which is only the proximal map when both components share one sigma:
-    // use the smaller of the two there (a smaller step keeps the convergence condition).
-    // The quadratic prox p / (1 + sigma / (2 lambda)) is folded into one factor per pixel.
+    // Diagonal preconditioning (label_pixel::stepSizes).
     sigma_x_.resize(plane);
     sigma_y_.resize(plane);
     shrink_x_.resize(plane);
@@ -235,20 +212,14 @@ class CpuLabelOptimizer final : public LabelOptimizer {
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
         const std::size_t i = std::size_t(y) * W + x;
-        float sx = rx[i] > 0.f ? 1.f / (2.f * rx[i]) : 0.f;
-        float sy = ry[i] > 0.f ? 1.f / (2.f * ry[i]) : 0.f;
-        if (tv) {
-          const float m = std::max(rx[i], ry[i]);
-          sx = sy = m > 0.f ? 1.f / (2.f * m) : 0.f;
-        }
-        sigma_x_[i] = sx * rx[i];  // sigma times the weight of the forward difference
-        sigma_y_[i] = sy * ry[i];
-        shrink_x_[i] = 1.f / (1.f + sx / (2.f * lambda));
-        shrink_y_[i] = 1.f / (1.f + sy / (2.f * lambda));
         rx_left_[i] = x > 0 ? rx[i - 1] : 0.f;
         ry_up_[i] = y > 0 ? ry[i - W] : 0.f;
-        const float column = rx[i] + ry[i] + rx_left_[i] + ry_up_[i];
-        tau_[i] = column > 0.f ? 1.f / column : 1e3f;
+        const label_pixel::StepSizes s = label_pixel::stepSizes(rx[i], ry[i], rx_left_[i], ry_up_[i], tv, lambda);
+        sigma_x_[i] = s.sigma_rx;
+        sigma_y_[i] = s.sigma_ry;
+        shrink_x_[i] = s.shrink_x;
+        shrink_y_[i] = s.shrink_y;
+        tau_[i] = s.tau;
       }
     // u_bar carries W + 1 padding floats so the forward differences of the last row/column read valid memory
     // (their weights are 0, so the padding never contributes).

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/soft_labels_pixel.h"
 
 namespace mc_flow {
 
@@ -71,15 +72,17 @@ SoftLabels downsampleLabels(const SoftLabels& u, int out_width, int out_height) 
   const int w = u.width, h = u.height;
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < out_height; ++y) {
-    const int y0 = std::min(2 * y, h - 1), y1 = std::min(2 * y + 1, h - 1);
+    int y0, y1;
+    soft_labels_pixel::downsampleSources(y, h, y0, y1);
     for (int i = 0; i < u.count; ++i) {
       const float* src = u.plane(i);
       float* dst = out.plane(i) + std::size_t(y) * out_width;
       const float* r0 = src + std::size_t(y0) * w;
       const float* r1 = src + std::size_t(y1) * w;
       for (int x = 0; x < out_width; ++x) {
-        const int x0 = std::min(2 * x, w - 1), x1 = std::min(2 * x + 1, w - 1);
-        dst[x] = 0.25f * (r0[x0] + r0[x1] + r1[x0] + r1[x1]);
+        int x0, x1;
+        soft_labels_pixel::downsampleSources(x, w, x0, x1);
+        dst[x] = soft_labels_pixel::average4(r0[x0], r0[x1], r1[x0], r1[x1]);
       }
     }
   }
@@ -92,20 +95,17 @@ SoftLabels upsampleLabels(const SoftLabels& u, int out_width, int out_height) {
   SoftLabels out(out_width, out_height, u.count);
   const int w = u.width, h = u.height;
 
-  // Pixel-centre alignment: fine centre x_f maps to coarse coordinate (x_f + 0.5) / s - 0.5, with s the
-  // power of two nearest to the size ratio: pyramid levels halve with integer division (an odd last
-  // column/row is dropped), so the exact scale between levels is 2^k, not the ratio of the sizes.
+  // Pixel-centre-aligned taps (soft_labels_pixel::upsampleTap), once per column and per row.
   struct Tap {
     int i0, i1;
     float a;
   };
   auto taps = [](int fine, int coarse) {
     std::vector<Tap> t(static_cast<std::size_t>(fine));
-    const double ratio = 1.0 / std::exp2(std::round(std::log2(double(fine) / double(coarse))));
+    const double ratio = soft_labels_pixel::upsampleRatio(fine, coarse);
     for (int x = 0; x < fine; ++x) {
-      const double c = std::clamp((x + 0.5) * ratio - 0.5, 0.0, double(coarse - 1));
-      const int i0 = int(c);
-      t[std::size_t(x)] = {i0, std::min(i0 + 1, coarse - 1), float(c - i0)};
+      Tap& tap = t[std::size_t(x)];
+      soft_labels_pixel::upsampleTap(x, coarse, ratio, tap.i0, tap.i1, tap.a);
     }
     return t;
   };
@@ -124,9 +124,7 @@ SoftLabels upsampleLabels(const SoftLabels& u, int out_width, int out_height) {
         float* dst = out.plane(i) + std::size_t(y) * out_width;
         for (int x = 0; x < out_width; ++x) {
           const Tap& vx = tx[std::size_t(x)];
-          const float top = r0[vx.i0] + vx.a * (r0[vx.i1] - r0[vx.i0]);
-          const float bottom = r1[vx.i0] + vx.a * (r1[vx.i1] - r1[vx.i0]);
-          dst[x] = top + vy.a * (bottom - top);
+          dst[x] = soft_labels_pixel::interpolate(r0[vx.i0], r0[vx.i1], r1[vx.i0], r1[vx.i1], vx.a, vy.a);
           row_sum[std::size_t(x)] += dst[x];
         }
       }
@@ -134,7 +132,7 @@ SoftLabels upsampleLabels(const SoftLabels& u, int out_width, int out_height) {
       // Row-wise (plane by plane) so that memory is read contiguously.
       for (int x = 0; x < out_width; ++x) {
         float& s = row_sum[std::size_t(x)];
-        s = s > 0.f ? 1.f / s : 0.f;
+        s = soft_labels_pixel::renormalisation(s);
       }
       for (int i = 0; i < u.count; ++i) {
         float* dst = out.plane(i) + std::size_t(y) * out_width;
