@@ -7,8 +7,8 @@
  * label on the GPU) and reduces the largest change its own way.
  *
  * Rounding: every float operation is rounded on its own (rounded.h) in the order the CPU evaluates it, so both
- * backends compute the same bits except for log1p (the device's log1pf in the data costs). The derivation is in
- * docs/ALGORITHM.md.
+ * backends compute the same bits except for log1p (motion_pixel::log1pF: the device's log1pf in the data costs).
+ * The derivation is in docs/ALGORITHM.md.
  */
 #pragma once
 
@@ -17,6 +17,7 @@
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/host_device.h"
 #include "mc_flow/core/image.h"
+#include "mc_flow/core/motion_estimation_pixel.h"
 #include "mc_flow/core/rounded.h"
 #include "mc_flow/core/sampling.h"
 
@@ -43,15 +44,6 @@ MCFLOW_HOST_DEVICE inline bool finite(float a) {
   return isfinite(a);
 #else
   return std::isfinite(a);
-#endif
-}
-
-/// @brief log(1 + a): the host's std::log1p, the device's log1pf (the one place where the backends' bits differ).
-MCFLOW_HOST_DEVICE inline float log1pF(float a) {
-#if defined(__CUDA_ARCH__)
-  return log1pf(a);
-#else
-  return std::log1p(a);
 #endif
 }
 
@@ -108,10 +100,10 @@ MCFLOW_HOST_DEVICE float motionLabelCost(const float P2[3], float I1, const Inte
   if (!clampIntoView(width, height, u, v) || !sampleBilinearAt(intensity2, width, height, u, v, I2))
     return t.out_of_view;
   const float rI = divRn(subRn(I1, I2), t.c_intensity);
-  const float cost = log1pF(mulRn(rI, rI));
+  const float cost = motion_pixel::log1pF(mulRn(rI, rI));
   if (!sampleDepthBilinearAt(depth2, width, height, u, v, Z2)) return addRn(cost, t.missing_depth);
   const float rZ = divRn(subRn(P2[2], Z2), t.c_depth);
-  return addRn(cost, mulRn(t.alpha, log1pF(mulRn(rZ, rZ))));
+  return addRn(cost, mulRn(t.alpha, motion_pixel::log1pF(mulRn(rZ, rZ))));
 }
 
 /// @brief A pixel's diagonal preconditioners (Pock & Chambolle 2011, alpha = 1), in the form the iteration uses.
