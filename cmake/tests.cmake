@@ -48,3 +48,7 @@ if(MCFLOW_WITH_OPENCV)
     target_compile_definitions(test_io PRIVATE MCFLOW_CLI_HAS_BAG=1)
   endif()
 endif()
+# Every tracked C++ and CUDA file formatted as .clang-format says (not in the sanitized builds: one check is enough).
+if(NOT MCFLOW_SANITIZE)
+  add_test(NAME format.ClangFormat COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/scripts/check_format.sh)
+endif()

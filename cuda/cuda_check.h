@@ -23,8 +23,8 @@ inline std::atomic<std::uint64_t> kernel_launches{0}, device_allocations{0}, pin
 inline void check(cudaError_t status, const char* what, const char* file, int line) {
   if (status == cudaSuccess) return;
   throw BackendError(std::string("CUDA error in ") + what + " at " + file + ":" + std::to_string(line) + ": " +
-                     cudaGetErrorName(status) + " (" + std::to_string(int(status)) + "): " +
-                     cudaGetErrorString(status));
+                     cudaGetErrorName(status) + " (" + std::to_string(int(status)) +
+                     "): " + cudaGetErrorString(status));
 }
 
 /// @brief Device memory of T that is reallocated only when a larger size is requested.
@@ -63,11 +63,11 @@ class DeviceBuffer {
 /// Checks a CUDA runtime call; throws mc_flow::BackendError with the CUDA error string.
 #define MCFLOW_CUDA_CHECK(call) ::mc_flow::cuda_detail::check((call), #call, __FILE__, __LINE__)
 /// Checks the launch of the kernel just enqueued (configuration errors, missing kernel image).
-#define MCFLOW_CUDA_CHECK_LAUNCH(kernel_name)                                                   \
-  (::mc_flow::cuda_detail::kernel_launches.fetch_add(1, std::memory_order_relaxed),            \
+#define MCFLOW_CUDA_CHECK_LAUNCH(kernel_name)                                       \
+  (::mc_flow::cuda_detail::kernel_launches.fetch_add(1, std::memory_order_relaxed), \
    ::mc_flow::cuda_detail::check(cudaGetLastError(), "launch of " kernel_name, __FILE__, __LINE__))
 /// Checks a CUB device algorithm call that launches kernels (counted as one launch).
-#define MCFLOW_CUDA_CHECK_CUB(call)                                                  \
+#define MCFLOW_CUDA_CHECK_CUB(call)                                                 \
   (::mc_flow::cuda_detail::kernel_launches.fetch_add(1, std::memory_order_relaxed), \
    ::mc_flow::cuda_detail::check((call), #call, __FILE__, __LINE__))
 

@@ -35,9 +35,15 @@ struct DeviceLevel {
 
 // ---------------------------------------------------------------- SE(3) in double (as src/core/se3.cpp)
 __device__ __forceinline__ void skew3(const double w[3], double S[9]) {
-  S[0] = 0; S[1] = -w[2]; S[2] = w[1];
-  S[3] = w[2]; S[4] = 0; S[5] = -w[0];
-  S[6] = -w[1]; S[7] = w[0]; S[8] = 0;
+  S[0] = 0;
+  S[1] = -w[2];
+  S[2] = w[1];
+  S[3] = w[2];
+  S[4] = 0;
+  S[5] = -w[0];
+  S[6] = -w[1];
+  S[7] = w[0];
+  S[8] = 0;
 }
 
 __device__ __forceinline__ void mul3(const double A[9], const double B[9], double C[9]) {
@@ -78,8 +84,8 @@ inline std::size_t chunkCount(std::size_t pixels) {
 /// @brief Block (chunk, label): `pixel(label, k, sums)` adds pixel k's V values into `sums` for every k of the
 /// chunk; the block's sums go to partials[(label * chunks + chunk) * V + v].
 template <int V, class Pixel>
-__global__ void __launch_bounds__(kChunkThreads) chunkSumsKernel(Pixel pixel, std::size_t pixels,
-                                                                 std::size_t chunk_pixels, double* partials) {
+__global__ void __launch_bounds__(kChunkThreads)
+    chunkSumsKernel(Pixel pixel, std::size_t pixels, std::size_t chunk_pixels, double* partials) {
   constexpr int kWarps = kChunkThreads / 32;
   __shared__ double warp_sums[kWarps * V];
   const int label = int(blockIdx.y);
@@ -132,8 +138,8 @@ void launchChunkSums(Pixel pixel, std::size_t pixels, int labels, DeviceBuffer<d
   const std::size_t chunks = chunkCount(pixels);
   partials.reserve(chunks * std::size_t(labels) * V);
   const std::size_t chunk_pixels = (pixels + chunks - 1) / chunks;
-  chunkSumsKernel<V><<<dim3(unsigned(chunks), unsigned(labels)), kChunkThreads, 0, stream>>>(pixel, pixels,
-                                                                                           chunk_pixels, partials.get());
+  chunkSumsKernel<V><<<dim3(unsigned(chunks), unsigned(labels)), kChunkThreads, 0, stream>>>(
+      pixel, pixels, chunk_pixels, partials.get());
   kernel_launches.fetch_add(1, std::memory_order_relaxed);
   check(cudaGetLastError(), what, __FILE__, __LINE__);
   const unsigned warps_per_block = kChunkThreads / 32;
@@ -182,9 +188,8 @@ void launchBuildPyramid(const std::vector<DevicePyramidLevel>& levels, const Con
 /// @brief The per-pixel outputs at level 0: pixels without a valid point go to the outlier label in `u` (in
 /// place); every point is warped by its interpolated motion; scene flow (3 channels), optical flow (2), moved
 /// depth and the argmax ids (1..m, 0 = outlier or no depth) are written; NaN where undefined.
-void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, const double* motions,
-                            const Intrinsics& K, float* scene_flow, float* optical_flow, float* moved_depth,
-                            int* ids, cudaStream_t stream);
+void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, const double* motions, const Intrinsics& K,
+                            float* scene_flow, float* optical_flow, float* moved_depth, int* ids, cudaStream_t stream);
 /// @brief labelCentroids: per motion label the u-weighted sums of the valid points and of u (4 doubles:
 /// x, y, z, weight), in a fixed order.
 void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels,
@@ -226,10 +231,10 @@ void launchGeometricWeights(const DeviceLevel& level, double min_weight, float* 
                             cudaStream_t stream);
 /// @brief computeDataCosts: count = transforms + 1 planes of data costs and the outlier-only mask.
 void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms, int motion_labels,
-                     const std::uint8_t* occluded, const Config& config, float* data_cost,
-                     std::uint8_t* outlier_only, cudaStream_t stream);
-/// @brief switchingEnergy without the cost factor: the sum of 1 - u_carried over the carried pixels with depth (`out`: one
-/// double on the device).
+                     const std::uint8_t* occluded, const Config& config, float* data_cost, std::uint8_t* outlier_only,
+                     cudaStream_t stream);
+/// @brief switchingEnergy without the cost factor: the sum of 1 - u_carried over the carried pixels with depth (`out`:
+/// one double on the device).
 void launchSwitchingShare(const float* u, const int* carried, const std::uint8_t* outlier_only, std::size_t plane,
                           DeviceBuffer<double>& scratch, double* out, cudaStream_t stream);
 /// @brief Carried labels of the pixels a cut moved (u > 0 on planes first_new .. first_new + cut_count - 1) set to -1.
@@ -276,11 +281,11 @@ void launchAllValidAsOne(const DeviceImage& points, float* u, cudaStream_t strea
 void launchDownsampleLabels(const float* in, int width, int height, int count, float* out, int out_width,
                             int out_height, cudaStream_t stream);
 /// @brief upsampleLabels: pixel-centre aligned bilinear, renormalised, empty pixels to the outlier label.
-void launchUpsampleLabels(const float* in, int width, int height, int count, float* out, int out_width,
-                          int out_height, cudaStream_t stream);
+void launchUpsampleLabels(const float* in, int width, int height, int count, float* out, int out_width, int out_height,
+                          cudaStream_t stream);
 /// @brief Nearest-pixel resampling of a mask between pyramid levels.
-void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint8_t* out, int out_width,
-                        int out_height, cudaStream_t stream);
+void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint8_t* out, int out_width, int out_height,
+                        cudaStream_t stream);
 void launchResampleMask(const int* in, int width, int height, int* out, int out_width, int out_height,
                         cudaStream_t stream);
 /// @brief SolveBackend::holdCarriedLabels: the hard initial label where it is below `carried_labels` and the point

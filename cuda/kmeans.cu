@@ -36,7 +36,9 @@ __global__ void nearestCentreKernel(const DeviceImage points, const KMeansCentre
   hard[idx] = isfinite(x) && isfinite(y) && isfinite(z) ? nearestCentreIndex(x, y, z, centres.xyz, centres.count) : -1;
 }
 
-__device__ __forceinline__ bool validPoint(const float* p) { return isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2]); }
+__device__ __forceinline__ bool validPoint(const float* p) {
+  return isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2]);
+}
 
 struct MinInt {
   __device__ __forceinline__ int operator()(int a, int b) const { return b < a ? b : a; }
@@ -89,10 +91,9 @@ __device__ void assignAndSum(const float* points, int n, int* assignment, KMeans
   __syncthreads();
 }
 
-__global__ void __launch_bounds__(kKMeansThreads) kmeansKernel(const DeviceImage image, const KMeansRun run,
-                                                              float* __restrict__ points, double* __restrict__ distance,
-                                                              int* __restrict__ assignment,
-                                                              KMeansOutcome* __restrict__ outcome) {
+__global__ void __launch_bounds__(kKMeansThreads)
+    kmeansKernel(const DeviceImage image, const KMeansRun run, float* __restrict__ points,
+                 double* __restrict__ distance, int* __restrict__ assignment, KMeansOutcome* __restrict__ outcome) {
   using IntScan = cub::BlockScan<int, kKMeansThreads>;
   using DoubleScan = cub::BlockScan<double, kKMeansThreads>;
   using IntReduce = cub::BlockReduce<int, kKMeansThreads>;
@@ -172,7 +173,8 @@ __global__ void __launch_bounds__(kKMeansThreads) kmeansKernel(const DeviceImage
     __syncthreads();
     const float* added = s.centres + 3 * (s.count - 1);
     for (int i = begin; i < end; ++i)
-      distance[i] = fmin(distance[i], double(kmeansSquaredDistance(points[3 * i], points[3 * i + 1], points[3 * i + 2], added)));
+      distance[i] =
+          fmin(distance[i], double(kmeansSquaredDistance(points[3 * i], points[3 * i + 1], points[3 * i + 2], added)));
   }
 
   // Lloyd iterations (assignAll + updateCentres): empty clusters are dropped, a drop counts as an infinite move.

@@ -36,10 +36,10 @@ namespace {
 
 using cuda_detail::DeviceBuffer;
 
-constexpr int kMaxLabels = 128;                 // these kernels' bound (the CPU has none); Config allows 65: 64 + outlier
-constexpr int kConvergenceCheckInterval = 10;   // iterations between two max-change reductions
-constexpr int kRoundsBetweenReads = 5;          // checked rounds queued between two host reads of the stop flag
-constexpr int kBlockX = 32, kBlockY = 8;        // a warp spans 32 consecutive pixels of a row
+constexpr int kMaxLabels = 128;  // these kernels' bound (the CPU has none); Config allows 65: 64 + outlier
+constexpr int kConvergenceCheckInterval = 10;  // iterations between two max-change reductions
+constexpr int kRoundsBetweenReads = 5;         // checked rounds queued between two host reads of the stop flag
+constexpr int kBlockX = 32, kBlockY = 8;       // a warp spans 32 consecutive pixels of a row
 
 // Rounded float operations that the compiler may not contract into FMAs (keeps the CPU's rounding).
 __device__ __forceinline__ float sub(float a, float b) { return __fsub_rn(a, b); }
@@ -176,9 +176,9 @@ __global__ void pixelEnergy(const float* __restrict__ u, const float* __restrict
 
 // The state of a label step's iteration loop on the device.
 struct LoopState {
-  int stopped;          // 1 once a checked round's largest change fell below the tolerance
-  int iterations;       // iterations run (the end of the last round that ran)
-  float last_change;    // the largest change of the last checked iteration that ran
+  int stopped;        // 1 once a checked round's largest change fell below the tolerance
+  int iterations;     // iterations run (the end of the last round that ran)
+  float last_change;  // the largest change of the last checked iteration that ran
 };
 
 // After the checked iteration that ends a round at `round_end`: records it and stops the loop below the tolerance.
@@ -200,8 +200,8 @@ void validateProblem(const LabelProblem& problem, const SoftLabels& u) {
     throw InputError("label step: labels are " + imageSizeText(u.width, u.height, u.count) + " but the problem is " +
                      imageSizeText(W, H, n));
   if (u.data.size() != plane * n)
-    throw InputError("CUDA label step: soft-label buffer holds " + std::to_string(u.data.size()) + " values, expected " +
-                     std::to_string(plane * n));
+    throw InputError("CUDA label step: soft-label buffer holds " + std::to_string(u.data.size()) +
+                     " values, expected " + std::to_string(plane * n));
   if (problem.data_cost.size() != plane * n)
     throw InputError("CUDA label step: data_cost holds " + std::to_string(problem.data_cost.size()) +
                      " values, expected " + std::to_string(plane * n) + " (" + imageSizeText(W, H, n) + ")");
@@ -216,7 +216,6 @@ void validateProblem(const LabelProblem& problem, const SoftLabels& u) {
   requirePlane("outlier_only", problem.outlier_only.width, problem.outlier_only.height,
                problem.outlier_only.data.size());
 }
-
 
 struct PinnedScalars {
   LoopState loop{};
@@ -264,9 +263,9 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     MCFLOW_CUDA_CHECK(cudaMemsetAsync(loop_state_.get(), 0, sizeof(LoopState), s));
     int done = 0, rounds_queued = 0;
     while (done < iterations) {
-      const int round_end = tolerance > 0 ? std::min(iterations, (done / kConvergenceCheckInterval + 1) *
-                                                                      kConvergenceCheckInterval)
-                                          : iterations;
+      const int round_end =
+          tolerance > 0 ? std::min(iterations, (done / kConvergenceCheckInterval + 1) * kConvergenceCheckInterval)
+                        : iterations;
       int unchecked = round_end - 1 - done;
       for (; unchecked >= kGraphIterations; unchecked -= kGraphIterations) {
         MCFLOW_CUDA_CHECK(cudaGraphLaunch(graphFor(launch), s));
@@ -275,25 +274,29 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
       launchIteration(launch, true);
       done = round_end;
       std::size_t bytes = temp_bytes_;
-      MCFLOW_CUDA_CHECK_CUB(cub::DeviceReduce::Max(temp_.get(), bytes, change_.get(), max_change_.get(), int(plane), s));
+      MCFLOW_CUDA_CHECK_CUB(
+          cub::DeviceReduce::Max(temp_.get(), bytes, change_.get(), max_change_.get(), int(plane), s));
       checkConvergence<<<1, 1, 0, s>>>(max_change_.get(), tolerance, round_end, loop_state_.get());
       MCFLOW_CUDA_CHECK_LAUNCH("checkConvergence");
       // A long loop (a large iteration limit with a tolerance) reads the flag now and then, so that a converged loop
       // does not leave thousands of queued iterations behind it (each a few microseconds even when it returns at once).
       if (++rounds_queued % kRoundsBetweenReads == 0 && done < iterations) {
-        MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->loop, loop_state_.get(), sizeof(LoopState), cudaMemcpyDeviceToHost, s));
+        MCFLOW_CUDA_CHECK(
+            cudaMemcpyAsync(&scalars_->loop, loop_state_.get(), sizeof(LoopState), cudaMemcpyDeviceToHost, s));
         MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
         if (scalars_->loop.stopped) break;
       }
     }
 
-    pixelEnergy<<<launch.grid, launch.block, 0, s>>>(u, problem.data_cost, problem.weight_x, problem.weight_y, W, H,
-                                                     n, tv, problem.lambda, pixel_energy_.get());
+    pixelEnergy<<<launch.grid, launch.block, 0, s>>>(u, problem.data_cost, problem.weight_x, problem.weight_y, W, H, n,
+                                                     tv, problem.lambda, pixel_energy_.get());
     MCFLOW_CUDA_CHECK_LAUNCH("pixelEnergy");
     std::size_t bytes = temp_bytes_;
-    MCFLOW_CUDA_CHECK_CUB(cub::DeviceReduce::Sum(temp_.get(), bytes, pixel_energy_.get(), energy_.get(), int(plane), s));
+    MCFLOW_CUDA_CHECK_CUB(
+        cub::DeviceReduce::Sum(temp_.get(), bytes, pixel_energy_.get(), energy_.get(), int(plane), s));
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->energy, energy_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->loop, loop_state_.get(), sizeof(LoopState), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(&scalars_->loop, loop_state_.get(), sizeof(LoopState), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
     LabelStats stats;
     stats.iterations = scalars_->loop.iterations;
@@ -319,7 +322,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     const float* ry = nullptr;
     const std::uint8_t* outlier_only = nullptr;
     const int* stopped = nullptr;  // the loop state's stop flag
-    std::uint64_t buffers = 0;  // generation of the engine's buffers (pointers change when they grow)
+    std::uint64_t buffers = 0;     // generation of the engine's buffers (pointers change when they grow)
     // `stopped` is not compared: it points into loop_state_, whose reallocation changes `buffers`.
     bool operator==(const Launch& o) const {
       return width == o.width && height == o.height && count == o.count && tv == o.tv && lambda == o.lambda &&
@@ -355,8 +358,8 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     l.primal_grid = dim3((W + kBlockX - 1) / kBlockX, unsigned(H));
     l.primal_shared_bytes = (std::size_t(n) + std::size_t(label_threads)) * kBlockX * sizeof(float);
     if (l.primal_shared_bytes > primal_shared_limit_) {
-      const cudaError_t status = cudaFuncSetAttribute(primalStep, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                                      int(l.primal_shared_bytes));
+      const cudaError_t status =
+          cudaFuncSetAttribute(primalStep, cudaFuncAttributeMaxDynamicSharedMemorySize, int(l.primal_shared_bytes));
       if (status != cudaSuccess) {
         cudaGetLastError();
         throw BackendError("CUDA label step: " + std::to_string(n) + " labels need " +
@@ -512,8 +515,8 @@ __global__ void geometricWeightsKernel(const cuda_detail::DeviceImage points, fl
   const int W = points.width, H = points.height;
   if (x >= W || y >= H) return;
   auto weight = [&](int x1, int y1) {
-    return label_pixel::geometricWeight(points.at(x, y, 0), points.at(x, y, 1), points.at(x, y, 2), points.at(x1, y1, 0),
-                                        points.at(x1, y1, 1), points.at(x1, y1, 2), fmean, wmin);
+    return label_pixel::geometricWeight(points.at(x, y, 0), points.at(x, y, 1), points.at(x, y, 2),
+                                        points.at(x1, y1, 0), points.at(x1, y1, 1), points.at(x1, y1, 2), fmean, wmin);
   };
   const std::size_t i = std::size_t(y) * W + x;
   weight_x[i] = x + 1 < W ? weight(x + 1, y) : 0.f;
@@ -624,7 +627,8 @@ std::unique_ptr<DevicePrimalDual> makeDevicePrimalDual(cudaStream_t stream) {
 
 void launchGeometricWeights(const DeviceLevel& level, double min_weight, float* weight_x, float* weight_y,
                             cudaStream_t stream) {
-  const dim3 block(kBlockX, kBlockY), grid((level.width + kBlockX - 1) / kBlockX, (level.height + kBlockY - 1) / kBlockY);
+  const dim3 block(kBlockX, kBlockY),
+      grid((level.width + kBlockX - 1) / kBlockX, (level.height + kBlockY - 1) / kBlockY);
   const float fmean = label_pixel::geometricWeightFocal(level.intrinsics);
   geometricWeightsKernel<<<grid, block, 0, stream>>>(level.points1, fmean, float(min_weight), weight_x, weight_y);
   MCFLOW_CUDA_CHECK_LAUNCH("geometricWeightsKernel");
@@ -640,7 +644,8 @@ void launchDataCosts(const DeviceLevel& level, const DeviceTransform* transforms
   q.occluded = occluded;
   q.terms = label_pixel::dataCostTerms(level.intrinsics, config);
   q.outlier_cost = float(config.outlier_cost);
-  const dim3 block(kBlockX, kBlockY), grid((level.width + kBlockX - 1) / kBlockX, (level.height + kBlockY - 1) / kBlockY);
+  const dim3 block(kBlockX, kBlockY),
+      grid((level.width + kBlockX - 1) / kBlockX, (level.height + kBlockY - 1) / kBlockY);
   dataCostsKernel<<<grid, block, 0, stream>>>(q, data_cost, outlier_only);
   MCFLOW_CUDA_CHECK_LAUNCH("dataCostsKernel");
 }
@@ -679,7 +684,7 @@ void launchSwitchingShare(const float* u, const int* carried, const std::uint8_t
 void launchAddSwitchingCost(const int* carried, float cost, std::size_t plane, int count,
                             const std::uint8_t* outlier_only, float* data_cost, cudaStream_t stream) {
   addSwitchingCostKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(carried, cost, plane, count, outlier_only,
-                                                                           data_cost);
+                                                                            data_cost);
   MCFLOW_CUDA_CHECK_LAUNCH("addSwitchingCostKernel");
 }
 

@@ -4,10 +4,10 @@
 //
 // Arithmetic. The per-pixel rules are motion_estimation_pixel.h's, shared with the CPU: warping, projection, the
 // in-view test, the bilinear samples (sampling.h) and the residuals use explicitly rounded float operations in the
-// CPU's order, so every discrete decision (in view, depth jump, active labels) is the CPU's. The Jacobians and the per-pixel 6x6 products may be contracted into
-// FMAs (a few float ulps per pixel) and the sums run in another order than the CPU's, so the results agree
-// with the CPU to a relative ~1e-7, not bit for bit (test/cuda/test_motion_estimation_cuda.cpp states the
-// tolerances).
+// CPU's order, so every discrete decision (in view, depth jump, active labels) is the CPU's. The Jacobians and the
+// per-pixel 6x6 products may be contracted into FMAs (a few float ulps per pixel) and the sums run in another order
+// than the CPU's, so the results agree with the CPU to a relative ~1e-7, not bit for bit
+// (test/cuda/test_motion_estimation_cuda.cpp states the tolerances).
 //
 // Reduction (deterministic: the same sums in the same order on every run, as the CPU's static schedule
 // gives; the Solver's results must not depend on scheduling). A pixel adds to the diagonal block, the
@@ -33,7 +33,6 @@
 #include <memory>
 #include <string>
 #include <vector>
-
 
 #include "cuda_check.h"
 #include "mc_flow/core/error.h"
@@ -62,7 +61,7 @@ constexpr int kWarps = kThreads / 32;
 constexpr int kUpper = 21;
 constexpr int kLabelStride = kUpper + 6 + 2;
 constexpr int kPairChunkPixels = 4 * kThreads;  // pixels per block of accumulatePairs: 4 per thread
-constexpr long long kPairBlocks = 16384;         // accumulatePairs' grid: above this, several pairs per block
+constexpr long long kPairBlocks = 16384;        // accumulatePairs' grid: above this, several pairs per block
 constexpr int kLabelMaskWords = (kMaxMotionLabels + 63) / 64;
 constexpr int kLabelCost = kUpper + 6, kLabelPixels = kUpper + 7;
 
@@ -131,8 +130,8 @@ __device__ void se3LeftJacobianDevice(const double xi[6], float J[36]) {
     for (int col = 0; col < 3; ++col) {
       const int e = r * 3 + col;
       const float so3 = float((r == col ? 1.0 : 0.0) + a * F[e] + b * F2[e]);
-      const double q = 0.5 * P[e] + b * (FP[e] + PF[e] + FPF[e]) + c * (F2P[e] + PF2[e] - 3.0 * FPF[e]) +
-                       d * (FPF2[e] + F2PF[e]);
+      const double q =
+          0.5 * P[e] + b * (FP[e] + PF[e] + FPF[e]) + c * (F2P[e] + PF2[e] - 3.0 * FPF[e]) + d * (FPF2[e] + F2PF[e]);
       J[r * 6 + col] = so3;
       J[(r + 3) * 6 + col + 3] = so3;
       J[r * 6 + col + 3] = float(q);
@@ -149,7 +148,6 @@ __device__ __forceinline__ float rawWeight(const KernelParams& p, std::size_t pl
   return motion_pixel::labelShare(__ldg(p.labels + i * plane + idx), mass);
 }
 
-
 // The warp's total in every lane (an xor butterfly: lanes i and i^offset add the same two values, so all lanes end
 // with the same bits).
 __device__ __forceinline__ float warpAllSum(float v) {
@@ -159,7 +157,6 @@ __device__ __forceinline__ float warpAllSum(float v) {
 }
 
 using cuda_detail::warpSum;
-
 
 // Three blocks per SM (at most 80 registers, a few spilled): a 320x240 level's 300 blocks then run in one wave instead
 // of 1.14 (128 registers, two blocks per SM); 320x240 solves took 11.8-12.2 ms against 13.2-13.7 ms (H100, same run).
@@ -314,8 +311,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
   }
 
   // Pixel totals (every lane takes part in the shuffles).
-  const double total_cost =
-      warpSum(!valid ? 0.0 : in_view ? double(mass) * cost : double(mass) * p.out_of_view_cost);
+  const double total_cost = warpSum(!valid ? 0.0 : in_view ? double(mass) * cost : double(mass) * p.out_of_view_cost);
   const double total_pixels = warpSum(in_view ? 1.0 : 0.0);
 
   // Per-label sums: each warp into its region; warps sharing a region take turns (a fixed order of the
@@ -339,42 +335,43 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
       }
 #pragma unroll
       for (int word = 0; word < kLabelMaskWords; ++word)
-      for (unsigned long long remaining = warp_labels[word]; remaining != 0ull; remaining &= remaining - 1ull) {
-        const int label = word * 64 + __ffsll(static_cast<long long>(remaining)) - 1;
-        const bool mine = valid && ((active_labels[word] >> (label % 64)) & 1ull) != 0ull;
-        double w = 0.0;
-        float w_float = 0.f;
-        if (mine) {
-          w_float = divRn(rawWeight(p, plane, idx, label, mass), active_mass);
-          w = double(w_float);
-        }
-        double* sums = region + label * kLabelStride;
-        // The 27 values of H and g: each warp total in float (32 float products; the CPU's double sums agree to
-        // ~1e-7 relative, test_motion_estimation_cuda.cpp), then lane k adds value k to the double sums, all lanes at
-        // once. Double shuffle trees and 27 additions by lane 0 in turn took about 60 % of this kernel (ncu, H100).
-        // (A reduce-scatter over the lanes, 31 shuffles instead of 27 x 5, was tried: 5-15 % slower at every level.)
-        const float ww = float(w * w), wf = float(w);
-        float lane_total = 0.f;
+        for (unsigned long long remaining = warp_labels[word]; remaining != 0ull; remaining &= remaining - 1ull) {
+          const int label = word * 64 + __ffsll(static_cast<long long>(remaining)) - 1;
+          const bool mine = valid && ((active_labels[word] >> (label % 64)) & 1ull) != 0ull;
+          double w = 0.0;
+          float w_float = 0.f;
+          if (mine) {
+            w_float = divRn(rawWeight(p, plane, idx, label, mass), active_mass);
+            w = double(w_float);
+          }
+          double* sums = region + label * kLabelStride;
+          // The 27 values of H and g: each warp total in float (32 float products; the CPU's double sums agree to
+          // ~1e-7 relative, test_motion_estimation_cuda.cpp), then lane k adds value k to the double sums, all lanes at
+          // once. Double shuffle trees and 27 additions by lane 0 in turn took about 60 % of this kernel (ncu, H100).
+          // (A reduce-scatter over the lanes, 31 shuffles instead of 27 x 5, was tried: 5-15 % slower at every level.)
+          const float ww = float(w * w), wf = float(w);
+          float lane_total = 0.f;
 #pragma unroll
-        for (int k = 0; k < kUpper; ++k) {
-          const float s = warpAllSum(in_view ? ww * Hm[k] : 0.f);
-          if (lane == k) lane_total = s;
-        }
+          for (int k = 0; k < kUpper; ++k) {
+            const float s = warpAllSum(in_view ? ww * Hm[k] : 0.f);
+            if (lane == k) lane_total = s;
+          }
 #pragma unroll
-        for (int k = 0; k < 6; ++k) {
-          const float s = warpAllSum(in_view ? wf * gm[k] : 0.f);
-          if (lane == kUpper + k) lane_total = s;
+          for (int k = 0; k < 6; ++k) {
+            const float s = warpAllSum(in_view ? wf * gm[k] : 0.f);
+            if (lane == kUpper + k) lane_total = s;
+          }
+          if (lane < kUpper + 6) sums[lane] += double(lane_total);
+          const double label_cost = !mine     ? 0.0
+                                    : in_view ? w * double(mass) * cost
+                                              : double(mulRn(mass, w_float)) * p.out_of_view_cost;
+          const double s_cost = warpSum(label_cost);
+          const double s_pixels = warpSum(mine && in_view ? w * double(mass) : 0.0);
+          if (lane == 0) {
+            sums[kLabelCost] += s_cost;
+            sums[kLabelPixels] += s_pixels;
+          }
         }
-        if (lane < kUpper + 6) sums[lane] += double(lane_total);
-        const double label_cost =
-            !mine ? 0.0 : in_view ? w * double(mass) * cost : double(mulRn(mass, w_float)) * p.out_of_view_cost;
-        const double s_cost = warpSum(label_cost);
-        const double s_pixels = warpSum(mine && in_view ? w * double(mass) : 0.0);
-        if (lane == 0) {
-          sums[kLabelCost] += s_cost;
-          sums[kLabelPixels] += s_pixels;
-        }
-      }
     }
     __syncthreads();
   }
@@ -385,7 +382,6 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
     partial[k] = sum;
   }
 }
-
 
 // Adds the blocks' partial sums in block order: one warp per value, lane l takes blocks l, l + 32, ...
 __global__ void reduceBlockPartials(const double* __restrict__ partials, int blocks, int values,
@@ -448,8 +444,8 @@ __device__ __forceinline__ void accumulatePairInChunk(const KernelParams& p, int
 // Block (chunk, y) takes the pairs y, y + gridDim.y, ...: one pair per block where chunks are few (coarse levels), a
 // few where they are many, so that a fine level's chunks x pairs blocks, nearly all of which find the pair absent
 // and exit, do not cost a launch wave each. The sums per (chunk, pair) are the same whatever the stride.
-__global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p, int chunk_pixels,
-                                                            double* __restrict__ partials) {
+__global__ void __launch_bounds__(kThreads)
+    accumulatePairs(const KernelParams p, int chunk_pixels, double* __restrict__ partials) {
   if (p.skip && *p.skip) return;
   __shared__ double warp_sums[kWarps][kUpper];
   const int n = p.motion_labels, pairs = n * (n - 1) / 2;
@@ -470,7 +466,6 @@ __global__ void __launch_bounds__(kThreads) accumulatePairs(const KernelParams p
     accumulatePairInChunk(p, chunk_pixels, plane, a, b, warp_sums, out);
   }
 }
-
 
 // ----------------------------------------------------------------- the IRLS loop on the device
 // One iteration's step control and solve after the sums (estimateMotionsWith's host loop, the same
@@ -496,10 +491,11 @@ struct StepParams {
   bool last = false;  // the last iteration only checks the previous step
   double min_label_pixels = 0, min_damping = 0, min_update = 0, min_coupling = 0;
   MotionLabelControl* control = nullptr;
-  double* twists = nullptr;  // 6 per label: the current linearisation point
+  double* twists = nullptr;        // 6 per label: the current linearisation point
   LabelMotion* motions = nullptr;  // written for the next accumulation
   IrlsState* state = nullptr;
-  double* matrix = nullptr;  // a group of coupled labels: (6n + 1)^2 with its right-hand side (global when shared is too small)
+  double* matrix =
+      nullptr;  // a group of coupled labels: (6n + 1)^2 with its right-hand side (global when shared is too small)
   bool matrix_in_shared = false;  // dynamic shared memory: the matrix (when it fits), then the 6 x 6n panel
 };
 
@@ -546,7 +542,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   __shared__ double rhs[6 * kMaxMotionLabels];
   __shared__ double inverse_diagonal[6 * kMaxMotionLabels];  // of the group's Cholesky factor
   __shared__ double label_factor[21 * kMaxMotionLabels];     // each damped block's factor (reciprocal pivots): the
-                                                              // coupling test, then the label's own solve
+                                                             // coupling test, then the label's own solve
   __shared__ unsigned coupled[(kMaxMotionLabels * (kMaxMotionLabels - 1) / 2 + 31) / 32];
   __shared__ double largest_step[kStepThreads / 32];
   const int n = q.n, tid = threadIdx.x;
@@ -609,7 +605,8 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     double strength = 0.0;
     if (nonzero && q.min_coupling > 0.0) {
       double C[36];
-      for (int k = 0; k < kUpper; ++k) C[kUpperRow[k] * 6 + kUpperCol[k]] = C[kUpperCol[k] * 6 + kUpperRow[k]] = block[k];
+      for (int k = 0; k < kUpper; ++k)
+        C[kUpperRow[k] * 6 + kUpperCol[k]] = C[kUpperCol[k] * 6 + kUpperRow[k]] = block[k];
       strength = motionCouplingStrength<PivotForm::Reciprocal>(label_factor + 21 * a, C, label_factor + 21 * b);
     }
     if (motionLabelsCoupled(strength, nonzero != 0, q.min_coupling)) {
@@ -839,7 +836,8 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
     }
     return;
   }
-  for (int offset = 16; offset > 0; offset >>= 1) largest = fmax(largest, __shfl_xor_sync(0xffffffffu, largest, offset));
+  for (int offset = 16; offset > 0; offset >>= 1)
+    largest = fmax(largest, __shfl_xor_sync(0xffffffffu, largest, offset));
   if ((tid & 31) == 0) largest_step[tid >> 5] = largest;
   __syncthreads();
   // Twists move by the (scaled) step and the next accumulation's linearisation points follow.
@@ -925,8 +923,8 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     if (labels.width != W || labels.height != H || labels.count < 1 ||
         labels.data.size() != plane * std::size_t(labels.count))
       throw InputError("CUDA motion step: labels are " + imageSizeText(labels.width, labels.height, labels.count) +
-                       " with " + std::to_string(labels.data.size()) + " values, the level is " +
-                       std::to_string(W) + "x" + std::to_string(H));
+                       " with " + std::to_string(labels.data.size()) + " values, the level is " + std::to_string(W) +
+                       "x" + std::to_string(H));
     if (occluded && (occluded->width != W || occluded->height != H || occluded->data.size() != plane))
       throw InputError("CUDA motion step: occlusion mask is " + imageSizeText(occluded->width, occluded->height, 1) +
                        ", the level is " + std::to_string(W) + "x" + std::to_string(H));
@@ -995,8 +993,8 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     for (int i = 0; i < n; ++i) host_motions_.get()[i] = labelMotion(twists[std::size_t(i)]);
     upload(motions_.get(), host_motions_.get(), std::size_t(n));
     enqueueSums(layout, nullptr);
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(host_sums_.get(), sums_.get(), layout.sum_values * sizeof(double),
-                                      cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(host_sums_.get(), sums_.get(), layout.sum_values * sizeof(double), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
     unpack(layout, out);
   }
@@ -1168,7 +1166,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     MCFLOW_CUDA_CHECK_LAUNCH("accumulateNormalEquations");
     const unsigned reduce_blocks = unsigned((l.block_values * 32 + kThreads - 1) / kThreads);
     reduceBlockPartials<<<reduce_blocks, kThreads, 0, s>>>(partials_.get(), int(l.blocks), int(l.block_values),
-                                                          sums_.get(), skip);
+                                                           sums_.get(), skip);
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
     if (l.pairs > 0) {
       const int chunks = int(l.pair_chunks);
@@ -1179,7 +1177,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       MCFLOW_CUDA_CHECK_LAUNCH("accumulatePairs");
       const unsigned add_blocks = unsigned((l.pairs * kUpper * 32 + kThreads - 1) / kThreads);
       cuda_detail::addChunksKernel<kUpper><<<add_blocks, kThreads, 0, s>>>(pair_partials_.get(), chunks, int(l.pairs),
-                                                                          sums_.get() + l.block_values, skip);
+                                                                           sums_.get() + l.block_values, skip);
       MCFLOW_CUDA_CHECK_LAUNCH("addChunksKernel (label pairs)");
     }
   }

@@ -19,7 +19,8 @@ constexpr int kCentroidValues = 4;
 
 __global__ void outputsKernel(const DeviceImage points, float* __restrict__ u, int count,
                               const double* __restrict__ motions, Intrinsics K, float* __restrict__ scene_flow,
-                              float* __restrict__ optical_flow, float* __restrict__ moved_depth, int* __restrict__ ids) {
+                              float* __restrict__ optical_flow, float* __restrict__ moved_depth,
+                              int* __restrict__ ids) {
   const int W = points.width, H = points.height;
   const std::size_t plane = std::size_t(W) * H;
   const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
@@ -74,9 +75,8 @@ struct CentroidPixel {
 
 }  // namespace
 
-void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, const double* motions,
-                            const Intrinsics& K, float* scene_flow, float* optical_flow, float* moved_depth,
-                            int* ids, cudaStream_t stream) {
+void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, const double* motions, const Intrinsics& K,
+                            float* scene_flow, float* optical_flow, float* moved_depth, int* ids, cudaStream_t stream) {
   const std::size_t plane = std::size_t(points.width) * points.height;
   outputsKernel<<<unsigned((plane + kThreads - 1) / kThreads), kThreads, 0, stream>>>(
       points, u, count, motions, K, scene_flow, optical_flow, moved_depth, ids);

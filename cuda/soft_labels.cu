@@ -26,8 +26,7 @@ dim3 gridFor(int width, int height) {
   return dim3(unsigned((width + kBlockX - 1) / kBlockX), unsigned((height + kBlockY - 1) / kBlockY));
 }
 
-__global__ void oneHotKernel(const DeviceImage points, const int* __restrict__ hard, int count,
-                             float* __restrict__ u) {
+__global__ void oneHotKernel(const DeviceImage points, const int* __restrict__ hard, int count, float* __restrict__ u) {
   const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
   if (x >= points.width || y >= points.height) return;
   const std::size_t plane = std::size_t(points.width) * points.height, idx = std::size_t(y) * points.width + x;
@@ -45,8 +44,8 @@ __global__ void allValidAsOneKernel(const DeviceImage points, float* __restrict_
   u[plane + idx] = valid ? 0.f : 1.f;
 }
 
-__global__ void downsampleKernel(const float* __restrict__ in, int w, int h, int count, float* __restrict__ out,
-                                 int ow, int oh) {
+__global__ void downsampleKernel(const float* __restrict__ in, int w, int h, int count, float* __restrict__ out, int ow,
+                                 int oh) {
   const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
   if (x >= ow || y >= oh) return;
   int x0, x1, y0, y1;
@@ -61,8 +60,8 @@ __global__ void downsampleKernel(const float* __restrict__ in, int w, int h, int
   }
 }
 
-__global__ void upsampleKernel(const float* __restrict__ in, int w, int h, int count, float* __restrict__ out,
-                               int ow, int oh, double ratio_x, double ratio_y) {
+__global__ void upsampleKernel(const float* __restrict__ in, int w, int h, int count, float* __restrict__ out, int ow,
+                               int oh, double ratio_x, double ratio_y) {
   const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
   if (x >= ow || y >= oh) return;
   int x0, x1, y0, y1;
@@ -218,21 +217,21 @@ void launchAllValidAsOne(const DeviceImage& points, float* u, cudaStream_t strea
 
 void launchDownsampleLabels(const float* in, int width, int height, int count, float* out, int out_width,
                             int out_height, cudaStream_t stream) {
-  downsampleKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(in, width, height, count,
-                                                                                          out, out_width, out_height);
+  downsampleKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(in, width, height, count, out,
+                                                                                          out_width, out_height);
   MCFLOW_CUDA_CHECK_LAUNCH("downsampleKernel");
 }
 
-void launchUpsampleLabels(const float* in, int width, int height, int count, float* out, int out_width,
-                          int out_height, cudaStream_t stream) {
+void launchUpsampleLabels(const float* in, int width, int height, int count, float* out, int out_width, int out_height,
+                          cudaStream_t stream) {
   upsampleKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(
       in, width, height, count, out, out_width, out_height, soft_labels_pixel::upsampleRatio(out_width, width),
       soft_labels_pixel::upsampleRatio(out_height, height));
   MCFLOW_CUDA_CHECK_LAUNCH("upsampleKernel");
 }
 
-void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint8_t* out, int out_width,
-                        int out_height, cudaStream_t stream) {
+void launchResampleMask(const std::uint8_t* in, int width, int height, std::uint8_t* out, int out_width, int out_height,
+                        cudaStream_t stream) {
   resampleMaskKernel<<<gridFor(out_width, out_height), dim3(kBlockX, kBlockY), 0, stream>>>(
       in, width, height, out, out_width, out_height, levelScale(width, out_width));
   MCFLOW_CUDA_CHECK_LAUNCH("resampleMaskKernel");

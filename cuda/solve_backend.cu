@@ -133,8 +133,8 @@ class CudaSolveBackend final : public SolveBackend {
     int* staged = staged_ints_.reserve(p);
     std::copy_n(hard.data.data(), p, staged);
     hard_labels_.reserve(p);
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(hard_labels_.get(), staged, p * sizeof(int), cudaMemcpyHostToDevice,
-                                      stream_.stream));
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(hard_labels_.get(), staged, p * sizeof(int), cudaMemcpyHostToDevice, stream_.stream));
     labelsFromHardLabels(level, motion_labels);
     // The staging buffer is reused by the next small transfer: wait for this one.
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
@@ -163,7 +163,8 @@ class CudaSolveBackend final : public SolveBackend {
     download(&outcome, kmeans_outcome_.get(), 1, staged_kmeans_);
     std::vector<Eigen::Vector3f> centres(std::size_t(outcome.centres.count));
     for (std::size_t c = 0; c < centres.size(); ++c)
-      centres[c] = Eigen::Vector3f(outcome.centres.xyz[3 * c], outcome.centres.xyz[3 * c + 1], outcome.centres.xyz[3 * c + 2]);
+      centres[c] =
+          Eigen::Vector3f(outcome.centres.xyz[3 * c], outcome.centres.xyz[3 * c + 1], outcome.centres.xyz[3 * c + 2]);
     return centres;
   }
 
@@ -195,8 +196,6 @@ class CudaSolveBackend final : public SolveBackend {
                                        stream_.stream);
     carried_held_ = true;
   }
-
-
 
   void moveLabels(int level) override {
     const DeviceLevel& to = levelAt(level);
@@ -339,8 +338,8 @@ class CudaSolveBackend final : public SolveBackend {
     if (carried_held_)
       cuda_detail::launchSwitchingShare(labels(), carried(), outlier_only_.get(), p, partials_, scalar_.get() + 1, s);
     double* sums = staged_doubles_.reserve(2);
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(sums, scalar_.get(), (carried_held_ ? 2 : 1) * sizeof(double),
-                                      cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(sums, scalar_.get(), (carried_held_ ? 2 : 1) * sizeof(double), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
     LabelStepStats out;
     out.iterations = ls.iterations;
@@ -400,8 +399,9 @@ class CudaSolveBackend final : public SolveBackend {
     down(staged_moved, moved_depth_.get(), p * sizeof(float));
     down(staged_ids, ids_.get(), p * sizeof(int));
     down(staged_occlusion, occlusion_.get(), p);
-    if (n > 0) MCFLOW_CUDA_CHECK(cudaMemcpyAsync(staged_sums, scalar_.get(), std::size_t(4 * n) * sizeof(double),
-                                                 cudaMemcpyDeviceToHost, s));
+    if (n > 0)
+      MCFLOW_CUDA_CHECK(
+          cudaMemcpyAsync(staged_sums, scalar_.get(), std::size_t(4 * n) * sizeof(double), cudaMemcpyDeviceToHost, s));
 
     StagedOutputs staged;
     staged.width = W;
@@ -576,7 +576,8 @@ class CudaSolveBackend final : public SolveBackend {
     cuts_.reserve(std::size_t(m) * 7);
     moved_.reserve(std::size_t(m));
     cudaStream_t s = stream_.stream;
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(cuts_.get(), staged, std::size_t(m) * 7 * sizeof(double), cudaMemcpyHostToDevice, s));
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(cuts_.get(), staged, std::size_t(m) * 7 * sizeof(double), cudaMemcpyHostToDevice, s));
     reserveLabels(plane(), count_ + m);  // may move the labels to the other buffer
     cuda_detail::launchCutLabels(labels(), levels_[std::size_t(level_)].points1, count_, cuts_.get(), m, scratch(),
                                  moved_.get(), s);
@@ -592,8 +593,8 @@ class CudaSolveBackend final : public SolveBackend {
     double* staged = staged_motions_.reserve(n * 18);
     packMotions(twists, staged);
     motions_.reserve(std::max<std::size_t>(n * 18, 1));
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(motions_.get(), staged, n * 18 * sizeof(double), cudaMemcpyHostToDevice,
-                                      stream_.stream));
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(motions_.get(), staged, n * 18 * sizeof(double), cudaMemcpyHostToDevice, stream_.stream));
     MCFLOW_CUDA_CHECK(cudaEventRecord(motions_uploaded_.event, stream_.stream));
     motions_uploaded_.recorded = true;
   }
@@ -615,8 +616,8 @@ class CudaSolveBackend final : public SolveBackend {
       throw InputError("CUDA backend: a pyramid image holds " + std::to_string(host.size()) + " values, expected " +
                        std::to_string(count));
     buffer.reserve(std::max<std::size_t>(count, 1));
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(buffer.get(), host.data(), count * sizeof(T), cudaMemcpyHostToDevice,
-                                      stream_.stream));
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(buffer.get(), host.data(), count * sizeof(T), cudaMemcpyHostToDevice, stream_.stream));
   }
 
   // One-hot labels at `level` from hard_labels_ (motion_labels + 1 planes); clears the occlusion and the dual.
@@ -650,9 +651,9 @@ class CudaSolveBackend final : public SolveBackend {
   PinnedBuffer<std::uint8_t> staged_bytes_;
   PinnedBuffer<double> staged_motions_;
   PinnedBuffer<cuda_detail::KMeansOutcome> staged_kmeans_;
-  static constexpr int kOutputImages = 6;  // StagedOutputs' images
+  static constexpr int kOutputImages = 6;                     // StagedOutputs' images
   cuda_detail::EventHolder image_downloaded_[kOutputImages];  // each output image has reached its staging buffer
-  cuda_detail::EventHolder motions_uploaded_;  // the last upload from staged_motions_ has finished
+  cuda_detail::EventHolder motions_uploaded_;                 // the last upload from staged_motions_ has finished
   PinnedBuffer<float> staged_frames_;
   Intrinsics K_;
   std::vector<int> valid_counts_;

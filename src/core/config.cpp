@@ -173,9 +173,9 @@ void Config::validate() const {
 const std::vector<ConfigFieldInfo>& configFieldTable() {
   static const std::vector<ConfigFieldInfo> table = {
 #define MCFLOW_SECTION(title)
-#define MCFLOW_PARAM(type, name, default_value, min, max, unit, description) \
-  ConfigFieldInfo{#name, #type, valueText(type(default_value)), valueText(type(min)), valueText(type(max)), unit, \
-                  description},
+#define MCFLOW_PARAM(type, name, default_value, min, max, unit, description)                                     \
+  ConfigFieldInfo{#name, #type,      valueText(type(default_value)), valueText(type(min)), valueText(type(max)), \
+                  unit,  description},
 #include "mc_flow/core/config_fields.def"
 #undef MCFLOW_PARAM
 #undef MCFLOW_SECTION
@@ -216,10 +216,11 @@ std::vector<std::pair<std::string, std::string>> Config::fields() const {
   std::vector<std::pair<std::string, std::string>> out;
   out.reserve(sizeof(kFields) / sizeof(kFields[0]));
   for (const FieldEntry& field : kFields) {
-    const std::string text = std::visit(Overloaded{
-                                            [&](auto Config::*p) { return valueText(this->*p); },
-                                        },
-                                        field.pointer);
+    const std::string text = std::visit(
+        Overloaded{
+            [&](auto Config::*p) { return valueText(this->*p); },
+        },
+        field.pointer);
     out.emplace_back(field.name, text);
   }
   return out;

@@ -22,7 +22,8 @@ void Intrinsics::validate() const {
   const char* names[4] = {"fx", "fy", "cx", "cy"};
   const double values[4] = {fx, fy, cx, cy};
   for (int i = 0; i < 4; ++i)
-    if (!std::isfinite(values[i])) throw InputError(std::string("intrinsics: ") + names[i] + " = " + number(values[i]) + " is not finite");
+    if (!std::isfinite(values[i]))
+      throw InputError(std::string("intrinsics: ") + names[i] + " = " + number(values[i]) + " is not finite");
   if (!(fx > 0)) throw InputError("intrinsics: fx = " + number(fx) + " must be > 0 [px]");
   if (!(fy > 0)) throw InputError("intrinsics: fy = " + number(fy) + " must be > 0 [px]");
 }
@@ -36,7 +37,8 @@ void RgbdFrame::validate(const std::string& name) const {
   if (depth.empty()) throw InputError(name + ": depth image is empty (" + imageSizeText(depth) + ")");
   if (intensity.channels != 1)
     throw InputError(name + ": intensity has " + std::to_string(intensity.channels) + " channels, expected 1");
-  if (depth.channels != 1) throw InputError(name + ": depth has " + std::to_string(depth.channels) + " channels, expected 1");
+  if (depth.channels != 1)
+    throw InputError(name + ": depth has " + std::to_string(depth.channels) + " channels, expected 1");
   if (!depth.sameSize(intensity))
     throw InputError(name + ": depth is " + imageSizeText(depth) + " but intensity is " + imageSizeText(intensity));
   if (intensity.data.size() != intensity.pixelCount() || depth.data.size() != depth.pixelCount())

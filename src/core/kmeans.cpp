@@ -84,7 +84,8 @@ std::vector<Eigen::Vector3f> seedCentres(const std::vector<Eigen::Vector3f>& poi
           break;
         }
     centres.push_back(points[chosen]);
-    for (std::size_t i = 0; i < n; ++i) dist2[i] = std::min(dist2[i], double(squaredDistance(points[i], centres.back())));
+    for (std::size_t i = 0; i < n; ++i)
+      dist2[i] = std::min(dist2[i], double(squaredDistance(points[i], centres.back())));
   }
   return centres;
 }
@@ -152,7 +153,8 @@ KMeansResult kmeansPoints(const ImageF& points, int k, int max_iterations, doubl
     if (kept.size() == result.centres.size()) break;
     result.centres.swap(kept);
   }
-  for (std::size_t i = 0; i < valid.points.size(); ++i) result.assignment.data[std::size_t(valid.pixel[i])] = assignment[i];
+  for (std::size_t i = 0; i < valid.points.size(); ++i)
+    result.assignment.data[std::size_t(valid.pixel[i])] = assignment[i];
   return result;
 }
 

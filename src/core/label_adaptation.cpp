@@ -25,11 +25,8 @@ constexpr double kRidge = 1e-6;
 // the TUM excerpt: docs/ALGORITHM.md), while distinct motions are priced hundreds of times above.
 constexpr double kRefitCandidateRatio = 20.0;
 
-
 // Newton decrement g^T H^-1 g: how much the cost falls when the label takes its Gauss-Newton step.
-double newtonDecrement(const Matrix6d& H, const Vector6d& g) {
-  return g.dot(withRidge(H).ldlt().solve(g));
-}
+double newtonDecrement(const Matrix6d& H, const Vector6d& g) { return g.dot(withRidge(H).ldlt().solve(g)); }
 
 Vector6d gaussNewtonStep(const Matrix6d& H, const Vector6d& g) {
   // The motion step's step limits: 5 cm and 0.1 rad per update, so one bad linearisation cannot fling
@@ -138,14 +135,15 @@ void validateRemap(const std::vector<int>& target, int old_count, int new_count)
                      " planes, new count " + std::to_string(new_count));
   for (int i = 0; i < old_count; ++i)
     if (target[std::size_t(i)] < 0 || target[std::size_t(i)] >= new_count)
-      throw InputError("label remap: plane " + std::to_string(i) + " maps to " + std::to_string(target[std::size_t(i)]) +
-                       ", outside [0, " + std::to_string(new_count) + ")");
+      throw InputError("label remap: plane " + std::to_string(i) + " maps to " +
+                       std::to_string(target[std::size_t(i)]) + ", outside [0, " + std::to_string(new_count) + ")");
   if (target.back() != new_count - 1)
     throw InputError("label remap: the outlier plane must stay last, it maps to " + std::to_string(target.back()));
 }
 
 AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twists, LabelCostModel& model,
-                                int valid_pixels, const Config& config, bool remove_small, std::vector<LabelLineage>* lineage) {
+                                int valid_pixels, const Config& config, bool remove_small,
+                                std::vector<LabelLineage>* lineage) {
   AdaptationStats stats;
   stats.smallest_refused_merge = std::numeric_limits<double>::infinity();
   const int n0 = labels.labelCount() - 1;
@@ -157,8 +155,8 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
                      " gradients and " + std::to_string(model.cost.size()) + " costs for " + std::to_string(n0) +
                      " motion labels");
   if (lineage && int(lineage->size()) != n0)
-    throw InputError("adaptLabelCount: " + std::to_string(lineage->size()) + " lineages for " +
-                     std::to_string(n0) + " motion labels");
+    throw InputError("adaptLabelCount: " + std::to_string(lineage->size()) + " lineages for " + std::to_string(n0) +
+                     " motion labels");
   const double price = labelCost(config, valid_pixels);
   std::vector<double> support = labels.supports();
   auto switchingCost = [&](int a, int b) { return mergeSwitchingCost(lineage, support, a, b, config); };
@@ -206,13 +204,15 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
     const int drop = keep == best_a ? best_b : best_a;
     const double data_increase = best - switchingCost(keep, drop);  // still less the price
     const Matrix6d H = model.curvature[std::size_t(keep)] + model.curvature[std::size_t(drop)];
-    twists[std::size_t(keep)] = withRidge(H).ldlt().solve(model.curvature[std::size_t(keep)] * twists[std::size_t(keep)] +
-                                                            model.curvature[std::size_t(drop)] * twists[std::size_t(drop)]);
+    twists[std::size_t(keep)] =
+        withRidge(H).ldlt().solve(model.curvature[std::size_t(keep)] * twists[std::size_t(keep)] +
+                                  model.curvature[std::size_t(drop)] * twists[std::size_t(drop)]);
     model.curvature[std::size_t(keep)] = H;
     model.gradient[std::size_t(keep)] += model.gradient[std::size_t(drop)];
     // The union pays both costs and the predicted increase (best is the increase less the price).
-    model.cost[std::size_t(keep)] += model.cost[std::size_t(drop)] + data_increase +
-                                     priceFor(price, model.cost[std::size_t(keep)], model.cost[std::size_t(drop)], config);
+    model.cost[std::size_t(keep)] +=
+        model.cost[std::size_t(drop)] + data_increase +
+        priceFor(price, model.cost[std::size_t(keep)], model.cost[std::size_t(drop)], config);
     support[std::size_t(keep)] += support[std::size_t(drop)];
     model.pixels[std::size_t(keep)] += model.pixels[std::size_t(drop)];
     model.pixels.erase(model.pixels.begin() + drop);
@@ -341,8 +341,8 @@ AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vecto
   // Each configuration with its own occlusions, as the energy counts them (occluded pixels pay nothing): every other
   // label under the host's motion at once, then the labels under their own motions (whose mask then stays).
   backend.updateOcclusion(std::vector<Vector6d>(std::size_t(n), twists[std::size_t(host)]), config);
-  const LabelCostModel under_host = backend.costModel(std::vector<Vector6d>(std::size_t(n), twists[std::size_t(host)]),
-                                                      true, config);
+  const LabelCostModel under_host =
+      backend.costModel(std::vector<Vector6d>(std::size_t(n), twists[std::size_t(host)]), true, config);
   backend.updateOcclusion(twists, config);
   const LabelCostModel own = backend.costModel(twists, true, config);
   const double price = labelCost(config, valid_pixels);
@@ -367,7 +367,8 @@ AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vecto
     if (target[std::size_t(i)] < 0) {
       target[std::size_t(i)] = into;
       // As a merge in adaptLabelCount.
-      if (lineage) kept_lineage[std::size_t(into)] = mergedLineage(kept_lineage[std::size_t(into)], (*lineage)[std::size_t(i)]);
+      if (lineage)
+        kept_lineage[std::size_t(into)] = mergedLineage(kept_lineage[std::size_t(into)], (*lineage)[std::size_t(i)]);
     }
   const int kept = int(kept_twists.size());
   target[std::size_t(n)] = kept;  // the outlier label stays last
@@ -389,7 +390,8 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
   std::vector<int> owner(std::size_t(n), -1);
   for (std::size_t g = 0; g < groups.size(); ++g)
     for (const int i : groups[g]) {
-      if (i < 0 || i >= n) throw InputError("refitUnions: label " + std::to_string(i) + " outside [0, " + std::to_string(n) + ")");
+      if (i < 0 || i >= n)
+        throw InputError("refitUnions: label " + std::to_string(i) + " outside [0, " + std::to_string(n) + ")");
       if (owner[std::size_t(i)] >= 0) throw InputError("refitUnions: label " + std::to_string(i) + " is in two groups");
       owner[std::size_t(i)] = int(g);
     }
@@ -435,7 +437,8 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
       Vector6d d = -damped.ldlt().solve(gradient[g]);
       d /= std::max({1.0, d.head<3>().norm() / 0.1, d.tail<3>().norm() / 0.1});
       // A non-finite step is no step: an infinite trial cost below rejects it and damps harder.
-      proposed[g] = d.allFinite() ? Vector6d(proposed[g] + d) : Vector6d::Constant(std::numeric_limits<double>::infinity());
+      proposed[g] =
+          d.allFinite() ? Vector6d(proposed[g] + d) : Vector6d::Constant(std::numeric_limits<double>::infinity());
     }
     // Groups whose step was not finite keep their twist in the pass and are rejected after it.
     std::vector<bool> finite(groups.size(), true);
@@ -488,8 +491,8 @@ bool oneMotionExplains(const MergeEvidence& e, double own_tolerance, double nois
 }
 
 AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
-                                            bool use_occlusion, const Config& config, std::vector<LabelLineage>* lineage,
-                                            const LabelCostModel* own_model) {
+                                            bool use_occlusion, const Config& config,
+                                            std::vector<LabelLineage>* lineage, const LabelCostModel* own_model) {
   AdaptationStats stats;
   if (int(twists.size()) != labels.labelCount() - 1)
     throw InputError("mergeWhereOneMotionExplains: " + std::to_string(twists.size()) + " twists for " +
@@ -534,8 +537,8 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
     // Two carried labels whose previous motions moved them apart: a part at the turn of its motion (momentarily at
     // rest) is not merged, so it keeps its segment and id; after a pair at rest it is tested like any other.
     auto deferred = [&](int a, int b) {
-      return lineage && movedApartBefore((*lineage)[std::size_t(a)], (*lineage)[std::size_t(b)],
-                                         config.merge_memory_displacement);
+      return lineage &&
+             movedApartBefore((*lineage)[std::size_t(a)], (*lineage)[std::size_t(b)], config.merge_memory_displacement);
     };
     // Candidates, most alike first: the quadratic model's predicted increase against what the pair may pay. A pair
     // the model prices far beyond that (a distinct motion) is not refitted.
@@ -604,7 +607,8 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
       const int drop = keep == a ? b : a;
       group[std::size_t(drop)] = keep;
       merged_twists[std::size_t(keep)] = f.twist;
-      if (lineage) (*lineage)[std::size_t(keep)] = mergedLineage((*lineage)[std::size_t(keep)], (*lineage)[std::size_t(drop)]);
+      if (lineage)
+        (*lineage)[std::size_t(keep)] = mergedLineage((*lineage)[std::size_t(keep)], (*lineage)[std::size_t(drop)]);
       ++merged;
     }
     if (merged == 0) continue;  // the same labels: the refused pairs stay refused, the others get their turn
@@ -706,8 +710,8 @@ CutTrial HostLabelStore::trialCuts(const std::vector<LabelCut>& cuts, const std:
                                    bool use_occlusion, const Config& config) {
   CutTrial trial;
   const SoftLabels grown = withCuts(cuts, trial.moved);
-  trial.model = labelCostModel(frame1_, frame2_, grown, use_occlusion ? occluded_ : nullptr, twists, config,
-                               *accumulator_);
+  trial.model =
+      labelCostModel(frame1_, frame2_, grown, use_occlusion ? occluded_ : nullptr, twists, config, *accumulator_);
   return trial;
 }
 

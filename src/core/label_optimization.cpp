@@ -50,7 +50,8 @@ void computeDataCosts(const PyramidLevel& frame1, const PyramidLevel& frame2, co
   problem.outlier_only = ImageU8(W, H, 1, 0);
 
   std::vector<Eigen::Matrix<float, 3, 4>> transforms(static_cast<std::size_t>(motion_labels));
-  for (int i = 0; i < motion_labels; ++i) transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
+  for (int i = 0; i < motion_labels; ++i)
+    transforms[std::size_t(i)] = se3Exp(twists[std::size_t(i)]).topRows<3>().cast<float>();
   const label_pixel::DataCostTerms terms = label_pixel::dataCostTerms(frame2.intrinsics, config);
   const float outlier_cost = float(config.outlier_cost);
   const sampling_detail::HostChannel intensity2{frame2.intensity, 0}, depth2{frame2.depth, 0};
@@ -147,8 +148,7 @@ void dualRowQuadratic(int W, const float* __restrict ub, const float* __restrict
 }
 
 void dualRowTv(int W, const float* __restrict ub, const float* __restrict ub_down, float* __restrict px,
-               float* __restrict py, const float* __restrict step_x, const float* __restrict step_y,
-               float inv_lambda) {
+               float* __restrict py, const float* __restrict step_x, const float* __restrict step_y, float inv_lambda) {
   for (int x = 0; x < W; ++x) {
     const float qx = label_pixel::dualAscent(px[x], step_x[x], ub[x + 1] - ub[x]);
     const float qy = label_pixel::dualAscent(py[x], step_y[x], ub_down[x] - ub[x]);
@@ -158,10 +158,10 @@ void dualRowTv(int W, const float* __restrict ub, const float* __restrict ub_dow
   }
 }
 
-void primalRowCandidate(int W, const float* __restrict u, const float* __restrict data_cost,
-                        const float* __restrict px, const float* __restrict py, const float* __restrict py_up,
-                        const float* __restrict rx, const float* __restrict ry, const float* __restrict rx_left,
-                        const float* __restrict ry_up, const float* __restrict tau, float* __restrict out) {
+void primalRowCandidate(int W, const float* __restrict u, const float* __restrict data_cost, const float* __restrict px,
+                        const float* __restrict py, const float* __restrict py_up, const float* __restrict rx,
+                        const float* __restrict ry, const float* __restrict rx_left, const float* __restrict ry_up,
+                        const float* __restrict tau, float* __restrict out) {
   // K^T p = -(weighted backward divergence of p); x = 0 has no left neighbour (rx_left = 0).
   out[0] = label_pixel::primalCandidate(
       u[0], tau[0], label_pixel::divergence(rx[0], px[0], ry[0], py[0], 0.f, 0.f, ry_up[0], py_up[0]), data_cost[0]);
@@ -192,8 +192,8 @@ class CpuLabelOptimizer final : public LabelOptimizer {
     const int W = problem.width, H = problem.height, n = problem.count;
     if (u.width != W || u.height != H || u.count != n)
       throw InputError("label step: labels are " + std::to_string(u.width) + "x" + std::to_string(u.height) + "x" +
-                       std::to_string(u.count) + " but the problem is " + std::to_string(W) + "x" +
-                       std::to_string(H) + "x" + std::to_string(n));
+                       std::to_string(u.count) + " but the problem is " + std::to_string(W) + "x" + std::to_string(H) +
+                       "x" + std::to_string(n));
     if (dual.width != W || dual.height != H || dual.count != n) dual.reset(W, H, n);
     const std::size_t plane = std::size_t(W) * H;
     const float* rx = problem.weight_x.ptr();
@@ -242,8 +242,10 @@ class CpuLabelOptimizer final : public LabelOptimizer {
           const float* ub = u_bar_.data() + label * plane + row;
           float* px = dual.p.data() + (2 * label) * plane + row;
           float* py = dual.p.data() + (2 * label + 1) * plane + row;
-          if (tv) dualRowTv(W, ub, ub + W, px, py, sxr, syr, inv_lambda);
-          else dualRowQuadratic(W, ub, ub + W, px, py, sxr, syr, kxr, kyr);
+          if (tv)
+            dualRowTv(W, ub, ub + W, px, py, sxr, syr, inv_lambda);
+          else
+            dualRowQuadratic(W, ub, ub + W, px, py, sxr, syr, kxr, kyr);
         }
       }
       // Primal descent, projection onto the simplex per pixel, extrapolation (theta = 1).
@@ -265,19 +267,21 @@ class CpuLabelOptimizer final : public LabelOptimizer {
             const float* py_up = y > 0 ? py - W : zero_row_.data();
             const float* ur = u.data.data() + label * plane + row;
             const float* dr = problem.data_cost.data() + label * plane + row;
-            primalRowCandidate(W, ur, dr, px, py, py_up, rxr, ryr, rlr, rur, taur, candidate.data() + std::size_t(label) * W);
+            primalRowCandidate(W, ur, dr, px, py, py_up, rxr, ryr, rlr, rur, taur,
+                               candidate.data() + std::size_t(label) * W);
           }
           for (int x = 0; x < W; ++x) {
             if (problem.outlier_only.data[row + x]) {
-              for (int label = 0; label < n; ++label) candidate[std::size_t(label) * W + x] = label == n - 1 ? 1.f : 0.f;
+              for (int label = 0; label < n; ++label)
+                candidate[std::size_t(label) * W + x] = label == n - 1 ? 1.f : 0.f;
               continue;
             }
             projectOntoSimplexStrided(candidate.data() + x, n, W);
           }
           for (int label = 0; label < n; ++label)
-            max_change = std::max(max_change, primalRowCommit(W, candidate.data() + std::size_t(label) * W,
-                                                               u.data.data() + label * plane + row,
-                                                               u_bar_.data() + label * plane + row));
+            max_change = std::max(
+                max_change, primalRowCommit(W, candidate.data() + std::size_t(label) * W,
+                                            u.data.data() + label * plane + row, u_bar_.data() + label * plane + row));
         }
       }
       stats.iterations = it + 1;

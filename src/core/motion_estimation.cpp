@@ -78,111 +78,112 @@ class CpuMotionAccumulator final : public MotionAccumulator {
     for (auto& a : accumulators_) a.reset(motion_labels);
 
 #pragma omp parallel
-      {
-        int thread = 0;
+    {
+      int thread = 0;
 #ifdef _OPENMP
-        thread = omp_get_thread_num();
+      thread = omp_get_thread_num();
 #endif
-        MotionNormalEquations& acc = accumulators_[std::size_t(thread)];
-        std::vector<int> active(static_cast<std::size_t>(motion_labels));
-        std::vector<float> weights(static_cast<std::size_t>(motion_labels));
-  // Static schedule: each thread always sums the same rows, and the per-thread sums are added in thread
-  // order below, so the result is the same from run to run for a given thread count.
+      MotionNormalEquations& acc = accumulators_[std::size_t(thread)];
+      std::vector<int> active(static_cast<std::size_t>(motion_labels));
+      std::vector<float> weights(static_cast<std::size_t>(motion_labels));
+      // Static schedule: each thread always sums the same rows, and the per-thread sums are added in thread
+      // order below, so the result is the same from run to run for a given thread count.
 #pragma omp for schedule(static)
-        for (int y = 0; y < H; ++y) {
-          for (int x = 0; x < W; ++x) {
-            const std::size_t idx = std::size_t(y) * W + x;
-            const float P[3] = {frame1.points(x, y, 0), frame1.points(x, y, 1), frame1.points(x, y, 2)};
-            if (!std::isfinite(P[2])) continue;
-            if (occluded && occluded->data[idx]) continue;
-            // Interpolation weights over the motion labels; the outlier share scales the pixel down.
-            float mass = 0.f;
-            for (int i = 0; i < motion_labels; ++i) mass += labels.data[i * plane + idx];
-            if (!motion_pixel::usableMass(mass)) continue;
-            int n_active = 0;
-            float active_mass = 0.f;
-            for (int i = 0; i < motion_labels; ++i) {
-              const float w = motion_pixel::labelShare(labels.data[i * plane + idx], mass);
-              if (w >= min_weight) {
-                active[std::size_t(n_active)] = i;
-                weights[std::size_t(n_active)] = w;
-                active_mass += w;
-                ++n_active;
-              }
+      for (int y = 0; y < H; ++y) {
+        for (int x = 0; x < W; ++x) {
+          const std::size_t idx = std::size_t(y) * W + x;
+          const float P[3] = {frame1.points(x, y, 0), frame1.points(x, y, 1), frame1.points(x, y, 2)};
+          if (!std::isfinite(P[2])) continue;
+          if (occluded && occluded->data[idx]) continue;
+          // Interpolation weights over the motion labels; the outlier share scales the pixel down.
+          float mass = 0.f;
+          for (int i = 0; i < motion_labels; ++i) mass += labels.data[i * plane + idx];
+          if (!motion_pixel::usableMass(mass)) continue;
+          int n_active = 0;
+          float active_mass = 0.f;
+          for (int i = 0; i < motion_labels; ++i) {
+            const float w = motion_pixel::labelShare(labels.data[i * plane + idx], mass);
+            if (w >= min_weight) {
+              active[std::size_t(n_active)] = i;
+              weights[std::size_t(n_active)] = w;
+              active_mass += w;
+              ++n_active;
             }
-            if (n_active == 0) continue;
-            for (int k = 0; k < n_active; ++k) weights[std::size_t(k)] /= active_mass;
-
-            float P2[3];
-            RowMajor34f blended_transform;
-            RowMajor6f blended_jacobian;
-            const RowMajor34f* transform = &transforms[std::size_t(active[0])];
-            const RowMajor6f* left_jacobian = &left_jacobians[std::size_t(active[0])];
-            if (n_active > 1) {
-              Vector6d xi_bar = Vector6d::Zero();
-              for (int k = 0; k < n_active; ++k) xi_bar += double(weights[std::size_t(k)]) * twists[std::size_t(active[std::size_t(k)])];
-              blended_transform = se3Exp(xi_bar).topRows<3>().cast<float>();
-              blended_jacobian = se3LeftJacobian(xi_bar).cast<float>();
-              transform = &blended_transform;
-              left_jacobian = &blended_jacobian;
-            }
-            transformPoint(transform->data(), P, P2);
-            motion_pixel::Projection proj;
-            const bool in_view = motion_pixel::project(P2, fx, fy, cx, cy, W, H, proj);
-            const float u = proj.u, v = proj.v;
-            float I2, gIx = 0.f, gIy = 0.f;
-            if (!in_view || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
-              for (int a = 0; a < n_active; ++a)
-                acc.label_cost(active[std::size_t(a)]) += mass * weights[std::size_t(a)] * out_of_view_cost;
-              acc.cost += mass * out_of_view_cost;
-              continue;
-            }
-            sampleBilinear(frame2.intensity_grad, u, v, 0, gIx);
-            sampleBilinear(frame2.intensity_grad, u, v, 1, gIy);
-            const float rI = subRn(frame1.intensity(x, y), I2);
-            float row[3];
-            Vector6f JI;
-            motion_pixel::intensityRow(proj, gIx, gIy, row);
-            motion_pixel::residualJacobian(P2, row, left_jacobian->data(), JI.data());
-            const float wI = motion_pixel::cauchyWeight(1.f, cI, rI);
-            Eigen::Matrix<float, 6, 6> Hp = wI * JI * JI.transpose();
-            Vector6f gp = wI * rI * JI;
-            double cost = motion_pixel::cauchyCost(cI, rI);
-
-            float Z2;
-            if (sampleDepthBilinearSmooth(frame2.depth, u, v, motion_pixel::kDepthEdgeJump, Z2)) {
-              float gZx = 0.f, gZy = 0.f;
-              sampleBilinear(frame2.depth_grad, u, v, 0, gZx);
-              sampleBilinear(frame2.depth_grad, u, v, 1, gZy);
-              const float rZ = subRn(P2[2], Z2);
-              Vector6f JZ;
-              motion_pixel::depthRow(proj, gZx, gZy, row);
-              motion_pixel::residualJacobian(P2, row, left_jacobian->data(), JZ.data());
-              const float wZ = motion_pixel::cauchyWeight(alpha, cZ, rZ);
-              Hp += wZ * JZ * JZ.transpose();
-              gp += wZ * rZ * JZ;
-              cost += mulRn(alpha, motion_pixel::cauchyCost(cZ, rZ));
-            } else {
-              cost += motion_pixel::missingDepthCost(alpha);
-            }
-            const Eigen::Matrix<double, 6, 6> Hd = (mass * Hp).cast<double>();
-            const Vector6d gd = (mass * gp).cast<double>();
-            for (int a = 0; a < n_active; ++a) {
-              const int ia = active[std::size_t(a)];
-              const double wa = weights[std::size_t(a)];
-              acc.g.segment<6>(6 * ia) += wa * gd;
-              acc.label_cost(ia) += wa * mass * cost;
-              acc.label_pixels(ia) += wa * mass;
-              for (int b = 0; b < n_active; ++b) {
-                const int ib = active[std::size_t(b)];
-                acc.H.block<6, 6>(6 * ia, 6 * ib) += (wa * weights[std::size_t(b)]) * Hd;
-              }
-            }
-            acc.cost += mass * cost;
-            ++acc.pixels;
           }
+          if (n_active == 0) continue;
+          for (int k = 0; k < n_active; ++k) weights[std::size_t(k)] /= active_mass;
+
+          float P2[3];
+          RowMajor34f blended_transform;
+          RowMajor6f blended_jacobian;
+          const RowMajor34f* transform = &transforms[std::size_t(active[0])];
+          const RowMajor6f* left_jacobian = &left_jacobians[std::size_t(active[0])];
+          if (n_active > 1) {
+            Vector6d xi_bar = Vector6d::Zero();
+            for (int k = 0; k < n_active; ++k)
+              xi_bar += double(weights[std::size_t(k)]) * twists[std::size_t(active[std::size_t(k)])];
+            blended_transform = se3Exp(xi_bar).topRows<3>().cast<float>();
+            blended_jacobian = se3LeftJacobian(xi_bar).cast<float>();
+            transform = &blended_transform;
+            left_jacobian = &blended_jacobian;
+          }
+          transformPoint(transform->data(), P, P2);
+          motion_pixel::Projection proj;
+          const bool in_view = motion_pixel::project(P2, fx, fy, cx, cy, W, H, proj);
+          const float u = proj.u, v = proj.v;
+          float I2, gIx = 0.f, gIy = 0.f;
+          if (!in_view || !sampleBilinear(frame2.intensity, u, v, 0, I2)) {
+            for (int a = 0; a < n_active; ++a)
+              acc.label_cost(active[std::size_t(a)]) += mass * weights[std::size_t(a)] * out_of_view_cost;
+            acc.cost += mass * out_of_view_cost;
+            continue;
+          }
+          sampleBilinear(frame2.intensity_grad, u, v, 0, gIx);
+          sampleBilinear(frame2.intensity_grad, u, v, 1, gIy);
+          const float rI = subRn(frame1.intensity(x, y), I2);
+          float row[3];
+          Vector6f JI;
+          motion_pixel::intensityRow(proj, gIx, gIy, row);
+          motion_pixel::residualJacobian(P2, row, left_jacobian->data(), JI.data());
+          const float wI = motion_pixel::cauchyWeight(1.f, cI, rI);
+          Eigen::Matrix<float, 6, 6> Hp = wI * JI * JI.transpose();
+          Vector6f gp = wI * rI * JI;
+          double cost = motion_pixel::cauchyCost(cI, rI);
+
+          float Z2;
+          if (sampleDepthBilinearSmooth(frame2.depth, u, v, motion_pixel::kDepthEdgeJump, Z2)) {
+            float gZx = 0.f, gZy = 0.f;
+            sampleBilinear(frame2.depth_grad, u, v, 0, gZx);
+            sampleBilinear(frame2.depth_grad, u, v, 1, gZy);
+            const float rZ = subRn(P2[2], Z2);
+            Vector6f JZ;
+            motion_pixel::depthRow(proj, gZx, gZy, row);
+            motion_pixel::residualJacobian(P2, row, left_jacobian->data(), JZ.data());
+            const float wZ = motion_pixel::cauchyWeight(alpha, cZ, rZ);
+            Hp += wZ * JZ * JZ.transpose();
+            gp += wZ * rZ * JZ;
+            cost += mulRn(alpha, motion_pixel::cauchyCost(cZ, rZ));
+          } else {
+            cost += motion_pixel::missingDepthCost(alpha);
+          }
+          const Eigen::Matrix<double, 6, 6> Hd = (mass * Hp).cast<double>();
+          const Vector6d gd = (mass * gp).cast<double>();
+          for (int a = 0; a < n_active; ++a) {
+            const int ia = active[std::size_t(a)];
+            const double wa = weights[std::size_t(a)];
+            acc.g.segment<6>(6 * ia) += wa * gd;
+            acc.label_cost(ia) += wa * mass * cost;
+            acc.label_pixels(ia) += wa * mass;
+            for (int b = 0; b < n_active; ++b) {
+              const int ib = active[std::size_t(b)];
+              acc.H.block<6, 6>(6 * ia, 6 * ib) += (wa * weights[std::size_t(b)]) * Hd;
+            }
+          }
+          acc.cost += mass * cost;
+          ++acc.pixels;
         }
       }
+    }
     total = accumulators_[0];
     for (std::size_t t = 1; t < accumulators_.size(); ++t) total.add(accumulators_[t]);
   }
@@ -235,12 +236,14 @@ std::unique_ptr<MotionAccumulator> makeCpuMotionAccumulator() { return std::make
 
 #ifndef MCFLOW_HAVE_CUDA
 std::unique_ptr<MotionAccumulator> makeCudaMotionAccumulator() {
-  throw BackendError("CUDA motion step requested but this build has no CUDA (built without nvcc or MCFLOW_WITH_CUDA=OFF)");
+  throw BackendError(
+      "CUDA motion step requested but this build has no CUDA (built without nvcc or MCFLOW_WITH_CUDA=OFF)");
 }
 #endif
 
-MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
-                                        const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
+MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2,
+                                        const SoftLabels& labels, const ImageU8* occluded,
+                                        std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator) {
   const int motion_labels = labels.count - 1;
   if (labels.count < 1 || int(twists.size()) != motion_labels)
@@ -272,10 +275,10 @@ int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen
   auto coupled = [&](int a, int b) {
     const Block pair = H.block<6, 6>(6 * a, 6 * b);
     const bool any_entry = pair.cwiseAbs().maxCoeff() > 0.0;
-    const double strength = any_entry && min_coupling > 0.0
-                                ? motionCouplingStrength(factor[std::size_t(a)].data(), pair.data(),
-                                                         factor[std::size_t(b)].data())
-                                : 0.0;
+    const double strength =
+        any_entry && min_coupling > 0.0
+            ? motionCouplingStrength(factor[std::size_t(a)].data(), pair.data(), factor[std::size_t(b)].data())
+            : 0.0;
     return motionLabelsCoupled(strength, any_entry, min_coupling);
   };
   // Groups of coupled labels: union-find over the couplings at least min_coupling strong.
@@ -355,9 +358,9 @@ MotionLevelStats estimateMotionsWith(MotionAccumulator& bound_accumulator, std::
     // Accept or undo each label's last step; undone and unsupported labels get a zero update now.
     std::vector<bool> frozen(static_cast<std::size_t>(motion_labels), false);
     for (int i = 0; i < motion_labels; ++i)
-      frozen[std::size_t(i)] = controlMotionLabel(total.label_cost(i), total.label_pixels(i),
-                                                  config.motion_min_label_pixels, config.motion_damping,
-                                                  twists[std::size_t(i)].data(), control[std::size_t(i)]);
+      frozen[std::size_t(i)] =
+          controlMotionLabel(total.label_cost(i), total.label_pixels(i), config.motion_min_label_pixels,
+                             config.motion_damping, twists[std::size_t(i)].data(), control[std::size_t(i)]);
     // The last iteration only checks the previous step: an unchecked step could leave a label worse off.
     if (iteration + 1 == config.motion_iterations_per_level) break;
     for (int i = 0; i < motion_labels; ++i) {

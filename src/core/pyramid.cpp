@@ -191,10 +191,9 @@ ImageF downsampleIntensity(const ImageF& image) {
       for (int x = 0; x < ow; ++x)
         for (int ch = 0; ch < c; ++ch) {
           const auto at = [&](int xi, int yi) { return horizontal(xi, yi, ch); };
-          out(x, y, ch) = pyramid_pixel::filter1331(at(x, pyramid_pixel::clampIndex(2 * y - 1, h)),
-                                                    at(x, pyramid_pixel::clampIndex(2 * y, h)),
-                                                    at(x, pyramid_pixel::clampIndex(2 * y + 1, h)),
-                                                    at(x, pyramid_pixel::clampIndex(2 * y + 2, h)));
+          out(x, y, ch) = pyramid_pixel::filter1331(
+              at(x, pyramid_pixel::clampIndex(2 * y - 1, h)), at(x, pyramid_pixel::clampIndex(2 * y, h)),
+              at(x, pyramid_pixel::clampIndex(2 * y + 1, h)), at(x, pyramid_pixel::clampIndex(2 * y + 2, h)));
         }
   }
   return out;
@@ -202,7 +201,8 @@ ImageF downsampleIntensity(const ImageF& image) {
 
 ImageF downsampleDepth(const ImageF& depth, double range) {
   if (depth.empty()) throw InputError("downsampleDepth: empty image");
-  if (depth.channels != 1) throw InputError("downsampleDepth: " + std::to_string(depth.channels) + " channels, expected 1");
+  if (depth.channels != 1)
+    throw InputError("downsampleDepth: " + std::to_string(depth.channels) + " channels, expected 1");
   const int w = depth.width, h = depth.height, ow = halved(w), oh = halved(h);
   const float max_diff = float(range);
   const auto at = [&](int x, int y) { return depth(x, y); };
@@ -247,7 +247,8 @@ ImageF backProject(const ImageF& depth, const Intrinsics& K) {
 }
 
 ImageF blendedGradient(const ImageF& f, const ImageF* validity_source, float eps) {
-  if (f.channels != 1) throw InputError("blendedGradient: image has " + std::to_string(f.channels) + " channels, expected 1");
+  if (f.channels != 1)
+    throw InputError("blendedGradient: image has " + std::to_string(f.channels) + " channels, expected 1");
   if (validity_source && !validity_source->sameSize(f))
     throw InputError("blendedGradient: validity source size differs from the image");
   const int w = f.width, h = f.height;

@@ -67,7 +67,9 @@ ImageF warpPoints(const ImageF& points, const SoftLabels& u, const std::vector<V
           continue;
         }
         const std::size_t k = std::size_t(y) * w + x;
-        auto largest = [&u, k]() { return scene_flow_pixel::largestMotionLabel(u.data.data(), u.planeSize(), k, u.count - 1); };
+        auto largest = [&u, k]() {
+          return scene_flow_pixel::largestMotionLabel(u.data.data(), u.planeSize(), k, u.count - 1);
+        };
         double q[3];
         scene_flow_pixel::warpPoint(P, sums[std::size_t(x)], motions.data(), largest, q);
         Q[0] = float(q[0]), Q[1] = float(q[1]), Q[2] = float(q[2]);

@@ -23,7 +23,8 @@ bool isPowerOfTwo(int v) { return v > 0 && (v & (v - 1)) == 0; }
 
 int chooseDownsample(int requested, int width) {
   if (requested < 0 || (requested > 0 && !isPowerOfTwo(requested)))
-    throw ConfigError("downsample = " + std::to_string(requested) + " is invalid: must be 0 (automatic) or a power of two");
+    throw ConfigError("downsample = " + std::to_string(requested) +
+                      " is invalid: must be 0 (automatic) or a power of two");
   if (requested > 0) return requested;
   int best = 1;
   for (int factor = 2; factor <= 16; factor *= 2)
@@ -32,12 +33,12 @@ int chooseDownsample(int requested, int width) {
 }
 
 RgbdFrame downsampleFrame(RgbdFrame frame, int factor, double depth_range) {
-  if (!isPowerOfTwo(factor)) throw ConfigError("downsample factor " + std::to_string(factor) + " is not a power of two");
+  if (!isPowerOfTwo(factor))
+    throw ConfigError("downsample factor " + std::to_string(factor) + " is not a power of two");
   RgbdFrame out = std::move(frame);
   // The pyramid's halving expects 0 for invalid depth (NaN never enters it): NaN, infinities and negatives
   // become 0 (written without isfinite, so that the loop vectorises).
-  for (float& z : out.depth.data)
-    z = (z >= 0.f && z <= std::numeric_limits<float>::max()) ? z : 0.f;
+  for (float& z : out.depth.data) z = (z >= 0.f && z <= std::numeric_limits<float>::max()) ? z : 0.f;
   for (int f = factor; f > 1; f /= 2) {
     out.intensity = downsampleIntensity(out.intensity);
     out.depth = downsampleDepth(out.depth, depth_range);
@@ -63,7 +64,8 @@ SequencePipeline::SequencePipeline(const Config& config, int downsample, double 
       make_backend_(std::move(make_backend)) {
   chooseDownsample(downsample, 320);  // validates the request
   if (!(max_pair_interval > 0) || !std::isfinite(max_pair_interval))
-    throw ConfigError("max_pair_interval = " + std::to_string(max_pair_interval) + " s is invalid: must be finite and > 0");
+    throw ConfigError("max_pair_interval = " + std::to_string(max_pair_interval) +
+                      " s is invalid: must be finite and > 0");
   solver_ = makeSolver(config_, &backend_unavailable_);
 }
 
@@ -115,10 +117,12 @@ PreparedFrame SequencePipeline::prepare(StreamFrame frame) const {
   out.downsample = chooseDownsample(downsample_request_, out.input_width);
   const int w = out.input_width / out.downsample, h = out.input_height / out.downsample;
   if (w < 16 || h < 16)
-    throw InputError("processing size " + imageSizeText(w, h) + " (input " + imageSizeText(out.input_width, out.input_height) +
-                     " / downsample " + std::to_string(out.downsample) + ") is too small: at least 16x16");
-  out.frame = out.downsample == 1 ? std::move(frame.frame)
-                                  : downsampleFrame(std::move(frame.frame), out.downsample, config_.depth_downsample_range);
+    throw InputError("processing size " + imageSizeText(w, h) + " (input " +
+                     imageSizeText(out.input_width, out.input_height) + " / downsample " +
+                     std::to_string(out.downsample) + ") is too small: at least 16x16");
+  out.frame = out.downsample == 1
+                  ? std::move(frame.frame)
+                  : downsampleFrame(std::move(frame.frame), out.downsample, config_.depth_downsample_range);
   out.K = frame.K.scaled(1.0 / out.downsample);
   out.stamp = frame.stamp;
   out.source = std::move(frame.source);

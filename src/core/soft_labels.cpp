@@ -25,8 +25,8 @@ void requireLabels(const char* what, const SoftLabels& u) {
 }  // namespace
 
 double SoftLabels::support(int i) const {
-  if (i < 0 || i >= count) throw InputError("SoftLabels::support: label " + std::to_string(i) + " out of [0, " +
-                                            std::to_string(count) + ")");
+  if (i < 0 || i >= count)
+    throw InputError("SoftLabels::support: label " + std::to_string(i) + " out of [0, " + std::to_string(count) + ")");
   const float* p = plane(i);
   const std::size_t n = planeSize();
   double s = 0;

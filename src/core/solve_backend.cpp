@@ -116,7 +116,6 @@ class CpuSolveBackend final : public SolveBackend {
       if (initial.data[k] < std::min(carried_labels, u_.count - 1)) carried_.data[k] = initial.data[k];
   }
 
-
   void moveLabels(int level) override {
     const PyramidLevel& to = levelOf(pyramid1_, level);  // checks the level
     if (!carried_.data.empty()) carried_ = resampleMask(carried_, to.points.width, to.points.height);
@@ -184,9 +183,10 @@ class CpuSolveBackend final : public SolveBackend {
     const ImageF warped = warpPoints(F0.points, result.soft_labels, twists);
     sceneAndOpticalFlow(F0.points, warped, K_, result.scene_flow, result.optical_flow);
     result.moved_depth = ImageF(W, H, 1);
-    for (std::size_t k = 0; k < result.moved_depth.data.size(); ++k) result.moved_depth.data[k] = warped.data[k * 3 + 2];
-    result.occlusion = config.detect_occlusions ? detectOcclusions(warped, pyramid2_[0].depth, K_, config)
-                                                : ImageU8(W, H, 1, 0);
+    for (std::size_t k = 0; k < result.moved_depth.data.size(); ++k)
+      result.moved_depth.data[k] = warped.data[k * 3 + 2];
+    result.occlusion =
+        config.detect_occlusions ? detectOcclusions(warped, pyramid2_[0].depth, K_, config) : ImageU8(W, H, 1, 0);
     const ImageI32 argmax = result.soft_labels.argmax();
     result.labels = ImageI32(W, H, 1, 0);
     for (std::size_t k = 0; k < argmax.data.size(); ++k) {
@@ -282,38 +282,33 @@ int fillOutputImages(const StagedOutputs& s, Result& result) {
   std::vector<int> status(std::size_t(tasks), 0);
   const int labels_status = s.wait_for_image ? s.wait_for_image(0) : 0;
   auto copy = [](auto& data, const auto* from, std::size_t count) {
-    if (data.size() == count) std::copy_n(from, count, data.begin());
-    else data.assign(from, from + count);
+    if (data.size() == count)
+      std::copy_n(from, count, data.begin());
+    else
+      data.assign(from, from + count);
   };
   auto fill = [&](int task) {
     const int image = task < label_tasks ? 0 : task - label_tasks + 1;
-    if (image == 0) status[std::size_t(task)] = labels_status;
-    else if (s.wait_for_image) status[std::size_t(task)] = s.wait_for_image(image);
+    if (image == 0)
+      status[std::size_t(task)] = labels_status;
+    else if (s.wait_for_image)
+      status[std::size_t(task)] = s.wait_for_image(image);
     if (status[std::size_t(task)] != 0) return;
     switch (image) {
       case 0:
         if (labels_in_place) {
           const std::size_t begin = std::size_t(task) * kChunk, end = std::min(label_values, begin + kChunk);
-          std::copy(s.soft_labels + begin, s.soft_labels + end, result.soft_labels.data.begin() + std::ptrdiff_t(begin));
+          std::copy(s.soft_labels + begin, s.soft_labels + end,
+                    result.soft_labels.data.begin() + std::ptrdiff_t(begin));
         } else {
           result.soft_labels.data.assign(s.soft_labels, s.soft_labels + label_values);
         }
         break;
-      case 1:
-        copy(result.scene_flow.data, s.scene_flow, 3 * p);
-        break;
-      case 2:
-        copy(result.optical_flow.data, s.optical_flow, 2 * p);
-        break;
-      case 3:
-        copy(result.moved_depth.data, s.moved_depth, p);
-        break;
-      case 4:
-        copy(result.labels.data, s.labels, p);
-        break;
-      default:
-        copy(result.occlusion.data, s.occlusion, p);
-        break;
+      case 1: copy(result.scene_flow.data, s.scene_flow, 3 * p); break;
+      case 2: copy(result.optical_flow.data, s.optical_flow, 2 * p); break;
+      case 3: copy(result.moved_depth.data, s.moved_depth, p); break;
+      case 4: copy(result.labels.data, s.labels, p); break;
+      default: copy(result.occlusion.data, s.occlusion, p); break;
     }
   };
   // Threads pay off where page faults and copies outweigh waking them: from about 2 MB of images (a 320x240 pair
@@ -376,7 +371,8 @@ Backend resolveBackend(Backend requested, std::string* note, int cuda_device) {
       if (note) *note = "cpu (requested)";
       return Backend::Cpu;
     case Backend::Cuda:
-      if (!cudaBackendAvailable(&why, cuda_device)) throw BackendError("CUDA backend requested but unavailable: " + why);
+      if (!cudaBackendAvailable(&why, cuda_device))
+        throw BackendError("CUDA backend requested but unavailable: " + why);
       if (note) *note = "cuda (requested, device " + std::to_string(cuda_device) + ")";
       return Backend::Cuda;
     case Backend::Auto:

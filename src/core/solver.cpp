@@ -75,8 +75,8 @@ struct Start {
   std::vector<LabelLineage> carried_lineage;
   int outer_iterations = 1;
   int label_iterations = 1, label_iterations_final = 1;  // per label step inside the loop / the final one
-  int first_motion_coarsest = 0;  // the first motion step's coarsest level
-  bool first_motion_refines = false;  // the first motion step uses motion_iterations_refine
+  int first_motion_coarsest = 0;                         // the first motion step's coarsest level
+  bool first_motion_refines = false;                     // the first motion step uses motion_iterations_refine
   // The first motion step drops weak label couplings (motion_min_coupling): K-means' labels, whose seams are cuts
   // through rigid parts; from the first label step on the labels' blends are its decisions, and every coupling counts.
   bool first_motion_drops_weak_couplings = false;
@@ -155,8 +155,7 @@ Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Int
 
 Result Solver::solve(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K, const Result* previous,
                      const Eigen::Matrix4d& camera_motion_prior) {
-  if (!camera_motion_prior.allFinite())
-    throw InputError("camera motion prior: not finite");
+  if (!camera_motion_prior.allFinite()) throw InputError("camera motion prior: not finite");
   return impl_->run(frame1, frame2, K, previous, &camera_motion_prior);
 }
 
@@ -228,7 +227,8 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
     t = Clock::now();
     carried_ids = carrySegmentIds(*previous, backend->framePoints(0), config.warm_depth_tolerance);
     if (!previous->dormant_ids.empty())
-      carried_dormant = carryIds(previous->dormant_regions, *previous, backend->framePoints(0), config.warm_depth_tolerance);
+      carried_dormant =
+          carryIds(previous->dormant_regions, *previous, backend->framePoints(0), config.warm_depth_tolerance);
     result.timings.initialisation += elapsedMs(t);
   }
 
@@ -254,8 +254,8 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
         Result cold = emptyResult(p, K);
         cold.timings = result.timings;
         solveCold(cold);
-        const std::string why = "warm energy per pixel " + std::to_string(warm_per_pixel) + " > warm_max_energy_ratio x " +
-                                std::to_string(previous_per_pixel);
+        const std::string why = "warm energy per pixel " + std::to_string(warm_per_pixel) +
+                                " > warm_max_energy_ratio x " + std::to_string(previous_per_pixel);
         if (cold.energy < result.energy) {
           cold.start = StartKind::ColdFallback;
           cold.start_note = why + "; the cold solve's energy is lower";
@@ -302,9 +302,8 @@ Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
   // K-means on 3D points at a coarse level (a few hundred to a few thousand points; the CUDA backend runs it on the
   // device and downloads only the centres), assigned at the label level.
   const auto t = Clock::now();
-  std::vector<Eigen::Vector3f> centres = backend->kmeansCentres(p.kmeans_level, config.initial_labels,
-                                                                config.kmeans_max_iterations, config.kmeans_tolerance,
-                                                                config.seed);
+  std::vector<Eigen::Vector3f> centres = backend->kmeansCentres(
+      p.kmeans_level, config.initial_labels, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
   // Every label starts from the dominant motion (one label over all valid pixels, coarse to fine down to the
   // label level): with a moving camera all labels then start near the truth, and a small segment that is
   // frozen at the coarse levels (too few pixels there) does not have to find a large motion from zero.
@@ -312,7 +311,8 @@ Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
   if (config.dominant_motion_init) {
     for (int level = p.levels - 1; level >= p.label_level; --level) {
       std::vector<Vector6d> single{dominant};
-      estimateMotionsWith(backend->motionAccumulator(level, MotionLabels::AllValidAsOne, false, config), single, config);
+      estimateMotionsWith(backend->motionAccumulator(level, MotionLabels::AllValidAsOne, false, config), single,
+                          config);
       dominant = single[0];
     }
   }
@@ -376,7 +376,8 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
         kmeansPoints(open_points, clusters, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
     const int base = int(carried.ids.size());
     for (std::size_t k = 0; k < start.hard.data.size(); ++k)
-      if (start.hard.data[k] < 0 && kmeans.assignment.data[k] >= 0) start.hard.data[k] = base + kmeans.assignment.data[k];
+      if (start.hard.data[k] < 0 && kmeans.assignment.data[k] >= 0)
+        start.hard.data[k] = base + kmeans.assignment.data[k];
     for (std::size_t c = 0; c < kmeans.centres.size(); ++c) start.twists.push_back(widest);
   }
   start.motion_labels = int(start.twists.size());
@@ -421,7 +422,8 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     const int coarsest =
         k == 0 ? start.first_motion_coarsest : std::min(p.levels - 1, finest + config.motion_coarse_levels_after_first);
     Config motion_config = config;
-    if (k > 0 || start.first_motion_refines) motion_config.motion_iterations_per_level = config.motion_iterations_refine;
+    if (k > 0 || start.first_motion_refines)
+      motion_config.motion_iterations_per_level = config.motion_iterations_refine;
     if (k > 0 || !start.first_motion_drops_weak_couplings) motion_config.motion_min_coupling = 0.0;
     for (int level = coarsest; level >= finest; --level) {
       MotionLevelStats ms = estimateMotionsWith(
@@ -436,7 +438,8 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     // result is the same as merging one step later, but the label step then runs on a few labels, not 20.
     t = Clock::now();
     LabelCostModel early_model = labels.costModel(twists, occlusions, config);
-    const AdaptationStats early = adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false, lineage_or_null);
+    const AdaptationStats early =
+        adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false, lineage_or_null);
     stats.merged += early.merged;
     // Labels whose pixels the largest label's motion explains as well (Config::merge_occlusion_absorbers), from the
     // second outer iteration on: in the first, small labels' motions are still poor, and merging them there cost the
@@ -453,7 +456,8 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
 
     // 2. label step
     t = Clock::now();
-    const LabelStepStats ls = labels.labelStep(twists, occlusions, start.label_iterations, config.label_tolerance, config);
+    const LabelStepStats ls =
+        labels.labelStep(twists, occlusions, start.label_iterations, config.label_tolerance, config);
     stats.label_iterations = ls.iterations;
     stats.energy = ls.energy;
     stats.label_change = ls.mean_change;
@@ -462,7 +466,8 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     // 3. update n: merges and removals on the energy, then (while a motion step follows) splits
     t = Clock::now();
     LabelCostModel model = labels.costModel(twists, occlusions, config);
-    const AdaptationStats as = adaptLabelCount(labels, twists, model, p.valid_label_level, config, true, lineage_or_null);
+    const AdaptationStats as =
+        adaptLabelCount(labels, twists, model, p.valid_label_level, config, true, lineage_or_null);
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.smallest_refused_merge = as.smallest_refused_merge;
@@ -470,8 +475,8 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     // segments too (no switching cost), so that a stream's splits cannot accumulate.
     // The update's cost model is the labels' own where it changed nothing: the merge test needs no pass for it.
     const bool unchanged = as.merged + as.removed == 0;
-    const AdaptationStats explained = mergeWhereOneMotionExplains(labels, twists, p.valid_label_level, occlusions,
-                                                                  config, lineage_or_null, unchanged ? &model : nullptr);
+    const AdaptationStats explained = mergeWhereOneMotionExplains(
+        labels, twists, p.valid_label_level, occlusions, config, lineage_or_null, unchanged ? &model : nullptr);
     stats.merged += explained.merged;
     if (k + 1 < most_outer) {
       stats.split = proposeSplits(labels, twists, occlusions, p.valid_label_level, config).split;
@@ -482,10 +487,13 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     result.timings.adaptation += elapsedMs(t);
     result.energy = ls.energy;
     result.iterations.push_back(stats);
-    progress("outer iteration %d: %d motion labels (merged %d, removed %d, split %d; cheapest refused merge %.1f, label cost %.1f), label change %.5f",
-             k, stats.labels_after, stats.merged, stats.removed, stats.split, stats.smallest_refused_merge,
-             labelCost(config, p.valid_label_level), stats.label_change);
-    if (k > 0 && as.merged + explained.merged + as.removed + stats.split == 0 && stats.label_change < config.outer_convergence)
+    progress(
+        "outer iteration %d: %d motion labels (merged %d, removed %d, split %d; cheapest refused merge %.1f, label "
+        "cost %.1f), label change %.5f",
+        k, stats.labels_after, stats.merged, stats.removed, stats.split, stats.smallest_refused_merge,
+        labelCost(config, p.valid_label_level), stats.label_change);
+    if (k > 0 && as.merged + explained.merged + as.removed + stats.split == 0 &&
+        stats.label_change < config.outer_convergence)
       break;
   }
 

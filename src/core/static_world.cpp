@@ -39,8 +39,8 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
   for (const Segment& s : segments) twists.push_back(s.twist);
   const LabelCostModel own = labels.costModel(twists, use_occlusion, config);
   for (int i = 0; i < n; ++i)
-    segment_covariances[std::size_t(i)] = twistCovariance(own.curvature[std::size_t(i)], own.cost[std::size_t(i)],
-                                                          own.pixels[std::size_t(i)], config);
+    segment_covariances[std::size_t(i)] =
+        twistCovariance(own.curvature[std::size_t(i)], own.cost[std::size_t(i)], own.pixels[std::size_t(i)], config);
   const int widest = int(std::max_element(own.pixels.begin(), own.pixels.end()) - own.pixels.begin());
   const double noise = own.cost[std::size_t(widest)] / std::max(1.0, own.pixels[std::size_t(widest)]);
 

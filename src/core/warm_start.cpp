@@ -51,7 +51,8 @@ ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& poi
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x)
-      if (splat(x, y) > 0 && std::isfinite(observed(x, y)) && std::abs(nearest(x, y) - observed(x, y)) <= depth_tolerance)
+      if (splat(x, y) > 0 && std::isfinite(observed(x, y)) &&
+          std::abs(nearest(x, y) - observed(x, y)) <= depth_tolerance)
         carried(x, y) = splat(x, y);
   // Close the one-pixel gaps that rounding leaves where a surface comes closer (it covers more pixels):
   // a pixel without an id takes the most common id of its 8 neighbours whose observed depth is close.
@@ -89,9 +90,9 @@ CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& le
     throw InputError("carried labels: scale " + std::to_string(scale) + " is not a power of two");
   const int w = level_points.width, h = level_points.height;
   if (carried_ids.width < w * scale || carried_ids.height < h * scale)
-    throw InputError("carried labels: a " + std::to_string(carried_ids.width) + "x" + std::to_string(carried_ids.height) +
-                     " id image cannot cover a " + std::to_string(w) + "x" + std::to_string(h) + " level at scale " +
-                     std::to_string(scale));
+    throw InputError("carried labels: a " + std::to_string(carried_ids.width) + "x" +
+                     std::to_string(carried_ids.height) + " id image cannot cover a " + std::to_string(w) + "x" +
+                     std::to_string(h) + " level at scale " + std::to_string(scale));
   CarriedLabels out;
   out.hard = ImageI32(w, h, 1, -1);
   // Each level pixel's majority id (0: none, -1: no depth), in parallel; then the label indices in raster order, so
@@ -159,7 +160,8 @@ std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, cons
   }
   std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
     return std::get<0>(a) > std::get<0>(b) ||
-           (std::get<0>(a) == std::get<0>(b) && std::tie(std::get<1>(a), std::get<2>(a)) < std::tie(std::get<1>(b), std::get<2>(b)));
+           (std::get<0>(a) == std::get<0>(b) &&
+            std::tie(std::get<1>(a), std::get<2>(a)) < std::tie(std::get<1>(b), std::get<2>(b)));
   });
   std::vector<int> ids(std::size_t(segment_count), 0);
   std::map<int, bool> taken;

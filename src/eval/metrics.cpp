@@ -180,7 +180,8 @@ double segmentationAgreement(const ImageI32& estimate, const ImageI32& truth) {
   // Greedy one-to-one matching: largest overlaps first (ties broken by ids so the result is deterministic).
   std::vector<std::tuple<std::size_t, std::int32_t, std::int32_t>> pairs;
   pairs.reserve(overlap.size());
-  for (const auto& [key, count] : overlap) pairs.emplace_back(count, std::int32_t(key >> 32), std::int32_t(key & 0xffffffffu));
+  for (const auto& [key, count] : overlap)
+    pairs.emplace_back(count, std::int32_t(key >> 32), std::int32_t(key & 0xffffffffu));
   std::sort(pairs.begin(), pairs.end(), [](const auto& a, const auto& b) {
     if (std::get<0>(a) != std::get<0>(b)) return std::get<0>(a) > std::get<0>(b);
     if (std::get<1>(a) != std::get<1>(b)) return std::get<1>(a) < std::get<1>(b);
@@ -240,9 +241,7 @@ RegionOverlap regionOverlap(const ImageI32& labels, const std::vector<int>& ids,
   return o;
 }
 
-double nees(const Vector6d& error, const Matrix6d& covariance) {
-  return error.dot(covariance.ldlt().solve(error));
-}
+double nees(const Vector6d& error, const Matrix6d& covariance) { return error.dot(covariance.ldlt().solve(error)); }
 
 double chiSquareQuantile(double dof, double probability) {
   if (!(dof > 0) || !(probability > 0 && probability < 1))
@@ -299,7 +298,8 @@ TrajectoryErrors evaluateTrajectory(const StampedPoses& ground_truth, const Stam
   // RPE over consecutive matched frames, and over about one second.
   double t_sum = 0, r_sum = 0, t_sum_s = 0, r_sum_s = 0;
   auto add = [&](std::size_t i, std::size_t j, double& ts, double& rs, int& count) {
-    const Eigen::Matrix4d error = relative(relative(matched[i].first, matched[j].first), relative(matched[i].second, matched[j].second));
+    const Eigen::Matrix4d error =
+        relative(relative(matched[i].first, matched[j].first), relative(matched[i].second, matched[j].second));
     ts += error.topRightCorner<3, 1>().squaredNorm();
     const double r = rotationDeg(error);
     rs += r * r;

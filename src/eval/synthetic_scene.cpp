@@ -1,6 +1,7 @@
 /**
  * @file synthetic_scene.cpp
- * @brief Ray-cast synthetic RGB-D scenes with exact ground truth (see mc_flow/eval/synthetic_scene.h; library mc_flow_eval, not part of the core).
+ * @brief Ray-cast synthetic RGB-D scenes with exact ground truth (see mc_flow/eval/synthetic_scene.h; library
+ * mc_flow_eval, not part of the core).
  *
  * Geometry (camera optical frame of frame 0, metres): a closed room (walls, floor, ceiling; a window in the
  * back wall through which nothing is seen, so depth is invalid there), rigid boxes and one articulated arm.
@@ -356,7 +357,6 @@ struct LocalRayFrame {
   }
 };
 
-
 enum class SurfaceKind { kNone, kRoom, kBox, kArm };
 
 struct Hit {
@@ -671,16 +671,13 @@ SyntheticPair renderSyntheticPair(const SyntheticSceneOptions& options) {
       const Vector3d P = hit.depth * pixelRay(K, x, y);
       Matrix4d M;
       switch (hit.kind) {
-        case SurfaceKind::kRoom:
-          M = background_motion;
-          break;
-        case SurfaceKind::kBox:
-          M = box_motion[hit.box_index];
-          break;
+        case SurfaceKind::kRoom: M = background_motion; break;
+        case SurfaceKind::kBox: M = box_motion[hit.box_index]; break;
         default:
-          M = hit.blend == 0.0   ? upper_motion
-              : hit.blend == 1.0 ? fore_motion
-                                 : se3Exp(arm_step * ((1.0 - hit.blend) * motion.upper_arm + hit.blend * motion.forearm));
+          M = hit.blend == 0.0 ? upper_motion
+              : hit.blend == 1.0
+                  ? fore_motion
+                  : se3Exp(arm_step * ((1.0 - hit.blend) * motion.upper_arm + hit.blend * motion.forearm));
       }
       const Vector3d P2 = M.topLeftCorner<3, 3>() * P + M.topRightCorner<3, 1>();
       for (int c = 0; c < 3; ++c) pair.gt_scene_flow(x, y, c) = static_cast<float>(P2[c] - P[c]);

@@ -27,9 +27,9 @@ StageTimings medianTimings(const std::vector<StageTimings>& runs) {
     return median(values);
   };
   StageTimings t;
-  for (double StageTimings::*m : {&StageTimings::preprocessing, &StageTimings::initialisation, &StageTimings::motion,
-                                  &StageTimings::labels, &StageTimings::adaptation, &StageTimings::occlusion,
-                                  &StageTimings::outputs, &StageTimings::total})
+  for (double StageTimings::*m :
+       {&StageTimings::preprocessing, &StageTimings::initialisation, &StageTimings::motion, &StageTimings::labels,
+        &StageTimings::adaptation, &StageTimings::occlusion, &StageTimings::outputs, &StageTimings::total})
     t.*m = stage(m);
   return t;
 }
@@ -48,7 +48,9 @@ Result solveRepeated(const RealPair& pair, const Config& config, int repeat, Sta
 
 }  // namespace
 
-std::vector<std::string> realPairNames() { return {"two_people_walking", "robot", "cleaning_whiteboard", "tum_fr2_desk"}; }
+std::vector<std::string> realPairNames() {
+  return {"two_people_walking", "robot", "cleaning_whiteboard", "tum_fr2_desk"};
+}
 
 Intrinsics realPairIntrinsics640(const std::string& name) {
   if (name == "tum_fr2_desk") return {520.9, 521.0, 325.1, 249.7};
@@ -98,10 +100,12 @@ RealPair loadRealPair(const std::string& data_dir, const std::string& name, int 
 }
 
 ImageU8 commonExclusionMask(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K,
-                            const std::vector<const ImageF*>& scene_flows, const std::vector<const ImageU8*>& occlusions) {
+                            const std::vector<const ImageF*>& scene_flows,
+                            const std::vector<const ImageU8*>& occlusions) {
   const int w = frame1.depth.width, h = frame1.depth.height;
   for (const ImageU8* o : occlusions)
-    if (!o || !o->sameSize(w, h)) throw InputError("commonExclusionMask: an occlusion mask is missing or of another size");
+    if (!o || !o->sameSize(w, h))
+      throw InputError("commonExclusionMask: an occlusion mask is missing or of another size");
   for (const ImageF* f : scene_flows)
     if (f && (!f->sameSize(w, h) || f->channels != 3))
       throw InputError("commonExclusionMask: a scene flow is not 3 channels of the frame's size");
@@ -162,10 +166,9 @@ PairSolves solveRealPair(const RealPair& pair, const Config& base, int repeat) {
 PairScores scoreRealPair(const RealPair& pair, const PairSolves& solves, ExclusionMask mask) {
   std::vector<const ImageU8*> occlusions = {&solves.tv.occlusion, &solves.quad.occlusion};
   if (mask == ExclusionMask::UnionOfAll) occlusions.push_back(&solves.one_label.occlusion);
-  const ImageU8 excluded =
-      commonExclusionMask(pair.frame1, pair.frame2, pair.intrinsics,
-                          {nullptr, &solves.one_label.scene_flow, &solves.tv.scene_flow, &solves.quad.scene_flow},
-                          occlusions);
+  const ImageU8 excluded = commonExclusionMask(
+      pair.frame1, pair.frame2, pair.intrinsics,
+      {nullptr, &solves.one_label.scene_flow, &solves.tv.scene_flow, &solves.quad.scene_flow}, occlusions);
 
   PairScores scores;
   scores.pair = pair.name;
@@ -174,7 +177,8 @@ PairScores scoreRealPair(const RealPair& pair, const PairSolves& solves, Exclusi
   auto add = [&](const std::string& name, const Result* result, const StageTimings* timings) {
     MethodScore m;
     m.method = name;
-    m.rmse = warpResidualRmse(pair.frame1, pair.frame2, pair.intrinsics, result ? &result->scene_flow : nullptr, &excluded);
+    m.rmse =
+        warpResidualRmse(pair.frame1, pair.frame2, pair.intrinsics, result ? &result->scene_flow : nullptr, &excluded);
     if (result) {
       m.solved = true;
       m.segments = int(result->segments.size());
@@ -237,15 +241,15 @@ std::string realBenchTable(const std::vector<PairScores>& scores) {
       photometric += m.rmse.photometric;
       geometric += m.rmse.geometric;
       segments += m.segments;
-      for (double StageTimings::*s : {&StageTimings::preprocessing, &StageTimings::initialisation, &StageTimings::motion,
-                                      &StageTimings::labels, &StageTimings::adaptation, &StageTimings::occlusion,
-                                      &StageTimings::outputs, &StageTimings::total})
+      for (double StageTimings::*s :
+           {&StageTimings::preprocessing, &StageTimings::initialisation, &StageTimings::motion, &StageTimings::labels,
+            &StageTimings::adaptation, &StageTimings::occlusion, &StageTimings::outputs, &StageTimings::total})
         mean.*s += m.timings.*s;
     }
     const double n = double(scores.size());
-    for (double StageTimings::*s : {&StageTimings::preprocessing, &StageTimings::initialisation, &StageTimings::motion,
-                                    &StageTimings::labels, &StageTimings::adaptation, &StageTimings::occlusion,
-                                    &StageTimings::outputs, &StageTimings::total})
+    for (double StageTimings::*s :
+         {&StageTimings::preprocessing, &StageTimings::initialisation, &StageTimings::motion, &StageTimings::labels,
+          &StageTimings::adaptation, &StageTimings::occlusion, &StageTimings::outputs, &StageTimings::total})
       mean.*s /= n;
     char segs[32];
     std::snprintf(segs, sizeof segs, "%.1f", segments / n);
@@ -256,7 +260,8 @@ std::string realBenchTable(const std::vector<PairScores>& scores) {
   for (const PairScores& p : scores)
     for (const MethodScore& m : p.methods)
       if (m.solved && m.method != "one label") {
-        std::snprintf(line, sizeof line, "#   %-20s %-9s %s\n", p.pair.c_str(), m.method.c_str(), m.label_trace.c_str());
+        std::snprintf(line, sizeof line, "#   %-20s %-9s %s\n", p.pair.c_str(), m.method.c_str(),
+                      m.label_trace.c_str());
         out += line;
       }
   return out;

@@ -16,7 +16,6 @@ namespace mc_flow {
 namespace io {
 namespace {
 
-
 bool parseNumber(const std::string& text, double& value) {
   const std::string t = trimWhitespace(text);
   if (t.empty()) return false;
@@ -34,7 +33,7 @@ std::string position(const YAML::Mark& mark) {
 // {rows, cols, data: [...]} mapping (camera_calibration_parsers form, `camera_matrix:`).
 struct MatrixEntry {
   bool present = false;
-  std::string where;    // the key and its position, for messages
+  std::string where;  // the key and its position, for messages
   std::vector<double> values;
   std::string problem;  // why the values are unusable ("" when they are usable)
 };

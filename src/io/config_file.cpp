@@ -13,7 +13,6 @@ namespace mc_flow {
 namespace io {
 namespace {
 
-
 // yaml-cpp marks count lines from 0; people count from 1.
 std::string lineOf(const YAML::Mark& mark) { return "line " + std::to_string(mark.line + 1); }
 
@@ -63,8 +62,7 @@ void applyConfigFile(const std::string& path, Config& config) {
 
 void applyConfigAssignment(const std::string& assignment, Config& config) {
   const std::size_t eq = assignment.find('=');
-  if (eq == std::string::npos || eq == 0)
-    throw ConfigError("--set '" + assignment + "': expected name=value");
+  if (eq == std::string::npos || eq == 0) throw ConfigError("--set '" + assignment + "': expected name=value");
   try {
     config.set(trimWhitespace(assignment.substr(0, eq)), trimWhitespace(assignment.substr(eq + 1)));
   } catch (const std::exception& e) {

@@ -97,7 +97,8 @@ void checkPayload(std::ifstream& in, std::uint64_t width, std::uint64_t height, 
 std::string headerToken(std::ifstream& in, const std::string& path) {
   std::string token;
   int c;
-  while ((c = in.get()) != EOF && std::isspace(c)) {}
+  while ((c = in.get()) != EOF && std::isspace(c)) {
+  }
   while (c != EOF && !std::isspace(c)) {
     token.push_back(char(c));
     c = in.get();
@@ -132,7 +133,8 @@ ImageF readFlo(const std::string& path) {
   }
   if (magic != kFloMagic) throw InputError(".flo '" + path + "': bad magic (expected \"PIEH\")");
   if (size[0] <= 0 || size[1] <= 0)
-    throw InputError(".flo '" + path + "': implausible size " + std::to_string(size[0]) + "x" + std::to_string(size[1]));
+    throw InputError(".flo '" + path + "': implausible size " + std::to_string(size[0]) + "x" +
+                     std::to_string(size[1]));
   checkPayload(in, std::uint64_t(size[0]), std::uint64_t(size[1]), 2, ".flo '" + path + "'");
   ImageF flow(size[0], size[1], 2);
   readExactly(in, flow.ptr(), flow.data.size() * sizeof(float), path);
@@ -154,9 +156,12 @@ ImageF readPfm(const std::string& path) {
   std::ifstream in = openForReading(path);
   const std::string type = headerToken(in, path);
   int channels;
-  if (type == "PF") channels = 3;
-  else if (type == "Pf") channels = 1;
-  else throw InputError("PFM '" + path + "': bad magic '" + type + "' (expected PF or Pf)");
+  if (type == "PF")
+    channels = 3;
+  else if (type == "Pf")
+    channels = 1;
+  else
+    throw InputError("PFM '" + path + "': bad magic '" + type + "' (expected PF or Pf)");
   int width = 0, height = 0;
   double scale = 0;
   try {
@@ -252,7 +257,8 @@ NpyArray readNpy(const std::string& path) {
   {
     const std::size_t p = field("shape");
     const std::size_t open = header.find('(', p), close = header.find(')', p);
-    if (open == std::string::npos || close == std::string::npos) throw InputError(".npy '" + path + "': malformed shape");
+    if (open == std::string::npos || close == std::string::npos)
+      throw InputError(".npy '" + path + "': malformed shape");
     std::stringstream dims(header.substr(open + 1, close - open - 1));
     std::string item;
     while (std::getline(dims, item, ',')) {

@@ -64,10 +64,14 @@ bool fileExists(const std::string& path) {
 
 ImageF intensityFromMat(const cv::Mat& image, const std::string& what) {
   double full_scale = 0;
-  if (image.depth() == CV_8U) full_scale = 255.0;
-  else if (image.depth() == CV_16U) full_scale = 65535.0;
-  else if (image.depth() == CV_32F) full_scale = 1.0;  // float images are taken as already in [0, 1]
-  else throw InputError(what + ": unsupported colour image type (" + describeType(image) + "); expected 8-bit or 16-bit");
+  if (image.depth() == CV_8U)
+    full_scale = 255.0;
+  else if (image.depth() == CV_16U)
+    full_scale = 65535.0;
+  else if (image.depth() == CV_32F)
+    full_scale = 1.0;  // float images are taken as already in [0, 1]
+  else
+    throw InputError(what + ": unsupported colour image type (" + describeType(image) + "); expected 8-bit or 16-bit");
   const int channels = image.channels();
   if (channels != 1 && channels != 3 && channels != 4)
     throw InputError(what + ": unsupported channel count " + std::to_string(channels) + "; expected 1, 3 or 4");
@@ -93,8 +97,9 @@ ImageF intensityFromMat(const cv::Mat& image, const std::string& what) {
 
 ImageF depthFromMat(const cv::Mat& image, double depth_scale, const std::string& what) {
   if (image.channels() != 1)
-    throw InputError(what + ": unsupported depth image type (" + describeType(image) +
-                     "); expected one channel of 16-bit unsigned (depth-scale units per metre) or 32-bit float (metres)");
+    throw InputError(
+        what + ": unsupported depth image type (" + describeType(image) +
+        "); expected one channel of 16-bit unsigned (depth-scale units per metre) or 32-bit float (metres)");
   ImageF out(image.cols, image.rows, 1);
   if (image.depth() == CV_16U) {
     if (!(depth_scale > 0) || !std::isfinite(depth_scale))
@@ -122,12 +127,17 @@ ImageF loadIntensity(const std::string& path, ImageU8* rgb) {
   if (rgb) {
     cv::Mat bgr8;
     cv::Mat eight = image;
-    if (image.depth() != CV_8U) image.convertTo(eight, CV_MAKETYPE(CV_8U, image.channels()), image.depth() == CV_16U ? 1.0 / 257.0 : 255.0);
-    if (eight.channels() == 1) cv::cvtColor(eight, bgr8, cv::COLOR_GRAY2RGB);
-    else if (eight.channels() == 4) cv::cvtColor(eight, bgr8, cv::COLOR_BGRA2RGB);
-    else cv::cvtColor(eight, bgr8, cv::COLOR_BGR2RGB);
+    if (image.depth() != CV_8U)
+      image.convertTo(eight, CV_MAKETYPE(CV_8U, image.channels()), image.depth() == CV_16U ? 1.0 / 257.0 : 255.0);
+    if (eight.channels() == 1)
+      cv::cvtColor(eight, bgr8, cv::COLOR_GRAY2RGB);
+    else if (eight.channels() == 4)
+      cv::cvtColor(eight, bgr8, cv::COLOR_BGRA2RGB);
+    else
+      cv::cvtColor(eight, bgr8, cv::COLOR_BGR2RGB);
     *rgb = ImageU8(bgr8.cols, bgr8.rows, 3);
-    for (int y = 0; y < bgr8.rows; ++y) std::copy_n(bgr8.ptr<std::uint8_t>(y), std::size_t(bgr8.cols) * 3, &(*rgb)(0, y));
+    for (int y = 0; y < bgr8.rows; ++y)
+      std::copy_n(bgr8.ptr<std::uint8_t>(y), std::size_t(bgr8.cols) * 3, &(*rgb)(0, y));
   }
   return intensity;
 }
@@ -185,7 +195,8 @@ ImageF toImageF(const cv::Mat& mat) {
   mat.convertTo(f, CV_MAKETYPE(CV_32F, mat.channels()));
   ImageF out(f.cols, f.rows, f.channels());
   for (int y = 0; y < f.rows; ++y)
-    std::copy_n(f.ptr<float>(y), std::size_t(f.cols) * f.channels(), out.ptr() + std::size_t(y) * f.cols * f.channels());
+    std::copy_n(f.ptr<float>(y), std::size_t(f.cols) * f.channels(),
+                out.ptr() + std::size_t(y) * f.cols * f.channels());
   return out;
 }
 
@@ -226,8 +237,10 @@ void saveLabels(const std::string& path, const ImageI32& labels) {
   for (int y = 0; y < labels.height; ++y)
     for (int x = 0; x < labels.width; ++x) {
       const int v = std::clamp<int>(labels(x, y), 0, 65535);
-      if (eight_bit) m.at<std::uint8_t>(y, x) = std::uint8_t(v);
-      else m.at<std::uint16_t>(y, x) = std::uint16_t(v);
+      if (eight_bit)
+        m.at<std::uint8_t>(y, x) = std::uint8_t(v);
+      else
+        m.at<std::uint16_t>(y, x) = std::uint16_t(v);
     }
   writeImage(path, m);
 }

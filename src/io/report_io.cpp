@@ -63,8 +63,9 @@ std::string segmentsJson(const Result& result) {
                         {"centroid", numbers({s.centroid.x(), s.centroid.y(), s.centroid.z()})},
                         {"speed", number(s.twist.head<3>().norm())},
                         {"rotation_angle", number(s.twist.tail<3>().norm())}});
-  return dump({{"frame", "camera optical frame of frame 1 (x right, y down, z forward); transform maps frame-1 "
-                         "points to their frame-2 positions"},
+  return dump({{"frame",
+                "camera optical frame of frame 1 (x right, y down, z forward); transform maps frame-1 "
+                "points to their frame-2 positions"},
                {"units", "twist: v [m], w [rad] over the frame interval; centroid [m]; support [pixels]"},
                {"segments", segments}});
 }
@@ -135,7 +136,8 @@ std::string evalJson(const EvalMetrics& m) {
   auto ifInputs = [&](double v) { return in ? number(v) : Json(nullptr); };
   Json part_ids = gt ? Json::array() : Json(nullptr);
   for (const EvalMetrics::PartId& p : m.part_ids)
-    part_ids.push_back({{"part", p.part}, {"pixels", p.pixels}, {"majority_id", p.majority_id}, {"share", number(p.share)}});
+    part_ids.push_back(
+        {{"part", p.part}, {"pixels", p.pixels}, {"majority_id", p.majority_id}, {"share", number(p.share)}});
   return dump({{"has_ground_truth", gt},
                {"has_inputs", in},
                {"segments", m.segments},

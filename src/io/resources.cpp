@@ -21,8 +21,10 @@ constexpr int kMaxSuggestedLevel = 6;
 
 std::string durationText(double seconds) {
   char buffer[64];
-  if (seconds < 90) std::snprintf(buffer, sizeof(buffer), "%.0f s", seconds);
-  else std::snprintf(buffer, sizeof(buffer), "%.0f min", seconds / 60.0);
+  if (seconds < 90)
+    std::snprintf(buffer, sizeof(buffer), "%.0f s", seconds);
+  else
+    std::snprintf(buffer, sizeof(buffer), "%.0f min", seconds / 60.0);
   return buffer;
 }
 
@@ -74,8 +76,10 @@ std::uint64_t availableMemoryBytes() {
 
 std::string formatBytes(std::uint64_t bytes) {
   char buffer[32];
-  if (bytes < 1000000000ull) std::snprintf(buffer, sizeof(buffer), "%.0f MB", double(bytes) / 1e6);
-  else std::snprintf(buffer, sizeof(buffer), "%.1f GB", double(bytes) / 1e9);
+  if (bytes < 1000000000ull)
+    std::snprintf(buffer, sizeof(buffer), "%.0f MB", double(bytes) / 1e6);
+  else
+    std::snprintf(buffer, sizeof(buffer), "%.1f GB", double(bytes) / 1e9);
   return buffer;
 }
 

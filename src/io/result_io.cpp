@@ -55,7 +55,8 @@ LoadedPair loadPair(const PairPaths& paths) {
   LoadedPair pair;
   pair.frame1 = loadRgbdFrame(paths.rgb1, paths.depth1, paths.depth_scale, &pair.rgb1);
   pair.frame2 = loadRgbdFrame(paths.rgb2, paths.depth2, paths.depth_scale, &pair.rgb2);
-  requireSameSize(pair.frame1.intensity, "rgb1 '" + paths.rgb1 + "'", pair.frame2.intensity, "rgb2 '" + paths.rgb2 + "'");
+  requireSameSize(pair.frame1.intensity, "rgb1 '" + paths.rgb1 + "'", pair.frame2.intensity,
+                  "rgb2 '" + paths.rgb2 + "'");
   return pair;
 }
 
@@ -141,7 +142,8 @@ PairPaths syntheticPairPaths(const std::string& dir) {
 ResultFiles loadResultDirectory(const std::string& dir) {
   for (const char* name : {"optical_flow.flo", "scene_flow.pfm", "labels.png", "occlusion.png"})
     if (!fileExists(join(dir, name)))
-      throw InputError("result directory '" + dir + "': missing '" + name + "' (run `mcflow run --out " + dir + "` first)");
+      throw InputError("result directory '" + dir + "': missing '" + name + "' (run `mcflow run --out " + dir +
+                       "` first)");
   ResultFiles r;
   r.optical_flow = readFlo(join(dir, "optical_flow.flo"));
   r.scene_flow = readPfm(join(dir, "scene_flow.pfm"));
@@ -162,8 +164,7 @@ bool hasGroundTruth(const std::string& dir) {
 
 GroundTruthFiles loadGroundTruthDirectory(const std::string& dir) {
   for (const char* name : {"gt_optical_flow.flo", "gt_scene_flow.pfm", "gt_occlusion.png", "gt_parts.png"})
-    if (!fileExists(join(dir, name)))
-      throw InputError("ground-truth directory '" + dir + "': missing '" + name + "'");
+    if (!fileExists(join(dir, name))) throw InputError("ground-truth directory '" + dir + "': missing '" + name + "'");
   GroundTruthFiles gt;
   gt.optical_flow = readFlo(join(dir, "gt_optical_flow.flo"));
   gt.scene_flow = readPfm(join(dir, "gt_scene_flow.pfm"));
@@ -239,7 +240,8 @@ EvalMetrics evaluateResult(const ResultFiles& result, const GroundTruthFiles* tr
   if (inputs && K) {
     m.has_inputs = true;
     requireSameSize(result.scene_flow, "result scene_flow.pfm", inputs->frame1.intensity, "input frame 1");
-    const ResidualRmse est = warpResidualRmse(inputs->frame1, inputs->frame2, *K, &result.scene_flow, &result.occlusion);
+    const ResidualRmse est =
+        warpResidualRmse(inputs->frame1, inputs->frame2, *K, &result.scene_flow, &result.occlusion);
     const ResidualRmse zero = warpResidualRmse(inputs->frame1, inputs->frame2, *K, nullptr, &result.occlusion);
     m.rmse_photometric = est.photometric;
     m.rmse_geometric = est.geometric;

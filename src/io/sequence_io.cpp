@@ -55,8 +55,7 @@ std::vector<std::vector<std::string>> readColumns(const std::string& path, std::
 double stampOf(const std::string& text, const std::string& path) {
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
-  if (!end || *end != '\0' || !std::isfinite(v))
-    throw InputError("'" + path + "': '" + text + "' is not a time stamp");
+  if (!end || *end != '\0' || !std::isfinite(v)) throw InputError("'" + path + "': '" + text + "' is not a time stamp");
   return v;
 }
 
@@ -121,8 +120,8 @@ std::vector<SequenceFrameFiles> listNumberedFrames(const std::string& dir, doubl
   if (!(fps > 0) || !std::isfinite(fps)) throw InputError("frame rate " + std::to_string(fps) + " must be > 0");
   const std::vector<std::string> rgb = imagesIn(inDir(dir, "rgb")), depth = imagesIn(inDir(dir, "depth"));
   if (rgb.empty() || depth.empty())
-    throw InputError("frame folder '" + dir + "': needs images in rgb/ and depth/ (found " + std::to_string(rgb.size()) +
-                     " and " + std::to_string(depth.size()) + ")");
+    throw InputError("frame folder '" + dir + "': needs images in rgb/ and depth/ (found " +
+                     std::to_string(rgb.size()) + " and " + std::to_string(depth.size()) + ")");
   if (rgb.size() != depth.size())
     throw InputError("frame folder '" + dir + "': " + std::to_string(rgb.size()) + " images in rgb/ but " +
                      std::to_string(depth.size()) + " in depth/");
@@ -194,8 +193,6 @@ std::vector<std::pair<double, Eigen::Matrix4d>> readTumTrajectory(const std::str
   }
   return out;
 }
-
-
 
 cv::Mat idsOverTimeImage(const std::vector<std::vector<std::pair<int, double>>>& ids_per_pair) {
   std::set<int> all;

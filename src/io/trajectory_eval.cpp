@@ -23,7 +23,8 @@ cv::Mat trajectoryPlot(const TrajectoryErrors& errors, int size_px) {
   const double span = std::max({max_x - min_x, max_z - min_z, 0.1});
   const double scale = 0.85 * size_px / span;
   auto at = [&](const Eigen::Vector3d& p) {
-    return cv::Point(int(0.075 * size_px + (p.x() - min_x) * scale), int(size_px - 0.075 * size_px - (p.z() - min_z) * scale));
+    return cv::Point(int(0.075 * size_px + (p.x() - min_x) * scale),
+                     int(size_px - 0.075 * size_px - (p.z() - min_z) * scale));
   };
   std::vector<cv::Point> truth, estimate;
   for (const auto& [g, a] : errors.positions) {
@@ -35,7 +36,8 @@ cv::Mat trajectoryPlot(const TrajectoryErrors& errors, int size_px) {
   const int bar = int(0.1 * scale);
   cv::line(image, {10, size_px - 10}, {10 + bar, size_px - 10}, cv::Scalar(0, 0, 0), 2);
   cv::putText(image, "10 cm", {12, size_px - 16}, cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
-  cv::putText(image, "ground truth", {10, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(120, 120, 120), 1, cv::LINE_AA);
+  cv::putText(image, "ground truth", {10, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(120, 120, 120), 1,
+              cv::LINE_AA);
   cv::putText(image, "estimate (aligned)", {10, 40}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 140, 255), 1,
               cv::LINE_AA);
   return image;

@@ -59,7 +59,8 @@ cv::Vec3b segmentColor(int id) {
 cv::Mat intensityImage(const ImageF& intensity) {
   cv::Mat grey(intensity.height, intensity.width, CV_8UC1);
   for (int y = 0; y < intensity.height; ++y)
-    for (int x = 0; x < intensity.width; ++x) grey.at<std::uint8_t>(y, x) = cv::saturate_cast<std::uint8_t>(255.f * intensity(x, y));
+    for (int x = 0; x < intensity.width; ++x)
+      grey.at<std::uint8_t>(y, x) = cv::saturate_cast<std::uint8_t>(255.f * intensity(x, y));
   cv::Mat bgr;
   cv::cvtColor(grey, bgr, cv::COLOR_GRAY2BGR);
   return bgr;

@@ -102,7 +102,8 @@ struct BagSequence::Impl {
     // memory stays at one image whatever the bag's length.
     for (const rosbag::MessageInstance& m : view) {
       const sensor_msgs::Image::ConstPtr image = m.instantiate<sensor_msgs::Image>();
-      if (!image) throw mc_flow::InputError("bag '" + path + "': a message on '" + topic + "' is not a sensor_msgs/Image");
+      if (!image)
+        throw mc_flow::InputError("bag '" + path + "': a message on '" + topic + "' is not a sensor_msgs/Image");
       entries.push_back({image->header.stamp, m});
     }
     return entries;
@@ -115,7 +116,8 @@ struct BagSequence::Impl {
     std::stable_sort(by_stamp.begin(), by_stamp.end(),
                      [&](std::size_t a, std::size_t b) { return depth_entries[a].stamp < depth_entries[b].stamp; });
     const double tolerance = options.max_stamp_difference;
-    std::map<std::size_t, std::pair<double, std::size_t>> claim;  // depth -> (|difference|, rgb) of its nearest claimant
+    std::map<std::size_t, std::pair<double, std::size_t>>
+        claim;  // depth -> (|difference|, rgb) of its nearest claimant
     std::vector<std::optional<std::size_t>> chosen(rgb_entries.size());
     for (std::size_t i = 0; i < rgb_entries.size(); ++i) {
       const ros::Time t = rgb_entries[i].stamp;
@@ -156,7 +158,8 @@ BagSequence::BagSequence(const std::string& path, const BagReadOptions& options)
     throw mc_flow::InputError("max stamp difference " + secondsText(options.max_stamp_difference) + " s: must be >= 0");
   std::error_code error;
   if (!std::filesystem::is_regular_file(path, error))
-    throw mc_flow::InputError("bag file '" + path + "': " + (std::filesystem::exists(path, error) ? "not a file" : "does not exist"));
+    throw mc_flow::InputError("bag file '" + path +
+                              "': " + (std::filesystem::exists(path, error) ? "not a file" : "does not exist"));
   try {
     d.bag.open(path, rosbag::bagmode::Read);
   } catch (const rosbag::BagException& e) {
@@ -188,8 +191,8 @@ BagSequence::BagSequence(const std::string& path, const BagReadOptions& options)
                                   stampText(first->header.stamp) + ") is unusable: " + e.what());
       }
       d.info = *first;
-      d.info_origin = "intrinsics from the first camera_info on " + topics.info + " (stamp " +
-                      stampText(first->header.stamp) + ")";
+      d.info_origin =
+          "intrinsics from the first camera_info on " + topics.info + " (stamp " + stampText(first->header.stamp) + ")";
     }
     d.rgb_entries = d.readStamps(topics.rgb);
     d.depth_entries = d.readStamps(topics.depth);
@@ -198,11 +201,10 @@ BagSequence::BagSequence(const std::string& path, const BagReadOptions& options)
   }
   d.pair();
   if (d.frames.empty()) {
-    throw mc_flow::InputError(
-        "bag '" + path + "': no message on '" + topics.rgb + "' has one on '" + topics.depth + "' within " +
-        secondsText(options.max_stamp_difference) + " s of its header stamp (first stamps: colour " +
-        stampText(d.rgb_entries.front().stamp) + ", depth " + stampText(d.depth_entries.front().stamp) +
-        "; see --max-stamp-difference)");
+    throw mc_flow::InputError("bag '" + path + "': no message on '" + topics.rgb + "' has one on '" + topics.depth +
+                              "' within " + secondsText(options.max_stamp_difference) +
+                              " s of its header stamp (first stamps: colour " + stampText(d.rgb_entries.front().stamp) +
+                              ", depth " + stampText(d.depth_entries.front().stamp) + "; see --max-stamp-difference)");
   }
 }
 
@@ -238,7 +240,8 @@ BagFrame BagSequence::frame(std::size_t index) const {
     // The nodelet's conversion: validation first, then the core's downsampling rule.
     input = toFrameInput(*rgb, *depth, d.info, d.options.downsample, d.options.max_pixels, d.options.depth_range);
   } catch (const FrameInputError& e) {
-    throw FrameInputError(e.problem, where + " on " + d.options.topics.rgb + " / " + d.options.topics.depth + ": " + e.what());
+    throw FrameInputError(e.problem,
+                          where + " on " + d.options.topics.rgb + " / " + d.options.topics.depth + ": " + e.what());
   }
   BagFrame out;
   out.frame.frame = std::move(input.frame);

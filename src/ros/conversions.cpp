@@ -111,7 +111,8 @@ void depthToMetres(const cv::Mat& image, const std::string& encoding, const cv::
     throw std::logic_error("depthToMetres: OpenCV reallocated the depth image");
 }
 
-sensor_msgs::ImagePtr emptyImage(const PairContext& pair, int w, int h, const std::string& encoding, int bytes_per_pixel) {
+sensor_msgs::ImagePtr emptyImage(const PairContext& pair, int w, int h, const std::string& encoding,
+                                 int bytes_per_pixel) {
   auto msg = boost::make_shared<sensor_msgs::Image>();
   msg->header = pair.header;
   msg->width = std::uint32_t(w);
@@ -161,14 +162,16 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs
   const int w = int(rgb.width), h = int(rgb.height), dw = int(depth.width), dh = int(depth.height);
   // Same aspect ratio within one pixel of the larger image, else the images do not show the same view.
   if (std::abs(double(w) * dh - double(h) * dw) > double(std::max(w, dw)) + double(std::max(h, dh))) {
-    throw FrameInputError(InputProblem::Size, "RGB " + mc_flow::imageSizeText(w, h) + " and depth " +
-                                                  mc_flow::imageSizeText(dw, dh) + " have different aspect ratios (is the depth registered to the colour camera?)");
+    throw FrameInputError(InputProblem::Size,
+                          "RGB " + mc_flow::imageSizeText(w, h) + " and depth " + mc_flow::imageSizeText(dw, dh) +
+                              " have different aspect ratios (is the depth registered to the colour camera?)");
   }
   const int factor = mc_flow::chooseDownsample(downsample_request, w);
   const int out_w = w / factor, out_h = h / factor;
   if (out_w < 16 || out_h < 16) {
-    throw FrameInputError(InputProblem::Size, "processing size " + mc_flow::imageSizeText(out_w, out_h) +
-                                                  " (RGB " + mc_flow::imageSizeText(w, h) + " / downsample " + std::to_string(factor) + ") is too small");
+    throw FrameInputError(InputProblem::Size, "processing size " + mc_flow::imageSizeText(out_w, out_h) + " (RGB " +
+                                                  mc_flow::imageSizeText(w, h) + " / downsample " +
+                                                  std::to_string(factor) + ") is too small");
   }
 
   cv_bridge::CvImageConstPtr rgb_cv, depth_cv;
@@ -213,7 +216,8 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs
   out.frame = factor == 1 ? std::move(full) : mc_flow::downsampleFrame(std::move(full), factor, depth_range);
   for (float z : out.frame.depth.data) out.valid_depth += mc_flow::isValidDepth(z) ? 1 : 0;
   if (out.valid_depth == 0) {
-    throw FrameInputError(InputProblem::Depth, "depth image (" + depth.encoding + ", " + mc_flow::imageSizeText(dw, dh) +
+    throw FrameInputError(InputProblem::Depth, "depth image (" + depth.encoding + ", " +
+                                                   mc_flow::imageSizeText(dw, dh) +
                                                    ") has no valid pixel: all zero or NaN");
   }
   return out;
@@ -233,7 +237,8 @@ sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input) {
 }
 
 Eigen::Vector3d centroidVelocity(const mc_flow::Segment& segment, double interval) {
-  const Eigen::Vector3d moved = segment.transform.topLeftCorner<3, 3>() * segment.centroid + segment.transform.topRightCorner<3, 1>();
+  const Eigen::Vector3d moved =
+      segment.transform.topLeftCorner<3, 3>() * segment.centroid + segment.transform.topRightCorner<3, 1>();
   return (moved - segment.centroid) / interval;
 }
 
@@ -311,8 +316,9 @@ sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairC
   return msg;
 }
 
-nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Time& stamp, const std::string& odom_frame,
-                                const std::string& child_frame, const Eigen::Isometry3d& base_from_camera) {
+nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Time& stamp,
+                                const std::string& odom_frame, const std::string& child_frame,
+                                const Eigen::Isometry3d& base_from_camera) {
   const Eigen::Matrix4d M = base_from_camera.matrix();
   const Eigen::Matrix4d pose = M * odometry.pose * M.inverse();
   // Twists and right perturbations of the camera, expressed in the base frame: the adjoint of the mount.
@@ -345,8 +351,8 @@ nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Ti
   return msg;
 }
 
-sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result, const std::vector<mc_flow::WorldVelocity>& world,
-                                          const PairContext& pair) {
+sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result,
+                                          const std::vector<mc_flow::WorldVelocity>& world, const PairContext& pair) {
   const mc_flow::ImageU8 mask = mc_flow::movingMask(result, world);
   auto msg = emptyImage(pair, mask.width, mask.height, enc::MONO8, 1);
   std::copy(mask.data.begin(), mask.data.end(), msg->data.begin());
@@ -376,7 +382,8 @@ sensor_msgs::ImagePtr makeSegmentationImage(const cv::Mat& picture, const PairCo
   return cv_bridge::CvImage(pair.header, enc::RGB8, picture).toImageMsg();
 }
 
-sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, const PairContext& pair, CloudColour colour) {
+sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, const PairContext& pair,
+                                               CloudColour colour) {
   auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
   cloud->header = pair.header;
   cloud->height = std::uint32_t(result.height);
@@ -433,8 +440,8 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
     for (int x = 0; x < result.width; ++x, point += step) {
       const float z = have_depth ? first->frame.depth(x, y) : nan;
       const bool valid = mc_flow::isValidDepth(z);
-      const float xyz[3] = {valid ? float(ray_x[std::size_t(x)] * z) : nan, valid ? float(ray_y[std::size_t(y)] * z) : nan,
-                            valid ? z : nan};
+      const float xyz[3] = {valid ? float(ray_x[std::size_t(x)] * z) : nan,
+                            valid ? float(ray_y[std::size_t(y)] * z) : nan, valid ? z : nan};
       put(point + at_x, xyz);
       const bool flow_ok = valid && have_flow;
       const float* flow = flow_ok ? &result.scene_flow(x, y, 0) : nullptr;
@@ -479,7 +486,8 @@ std::vector<geometry_msgs::TransformStamped> makeSegmentTransforms(const mc_flow
   return transforms;
 }
 
-visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result, const PairContext& pair, double seconds_ahead) {
+visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result, const PairContext& pair,
+                                                  double seconds_ahead) {
   visualization_msgs::MarkerArray markers;
   visualization_msgs::Marker clear;
   clear.header = pair.header;

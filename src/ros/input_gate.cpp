@@ -59,8 +59,8 @@ InputGate::Admission InputGate::admit(int topic, const std_msgs::Header& header,
     admission.warning = what + ": restarting the synchroniser";
   } else {
     admission.warning_key = "input_stamp:" + name;
-    admission.warning = what + ": message held back from the synchroniser (" + std::to_string(held) +
-                        " on this topic so far)";
+    admission.warning =
+        what + ": message held back from the synchroniser (" + std::to_string(held) + " on this topic so far)";
   }
   return admission;
 }

@@ -46,16 +46,22 @@ std::optional<InputWarning> describeInputSilence(const InputSnapshot& s, double 
 
   std::vector<const WatchedTopic*> never, stopped, arriving;
   for (const WatchedTopic& t : s.topics) {
-    if (t.received == 0) never.push_back(&t);
-    else if (t.seconds_since_last > warn_after) stopped.push_back(&t);
-    else arriving.push_back(&t);
+    if (t.received == 0)
+      never.push_back(&t);
+    else if (t.seconds_since_last > warn_after)
+      stopped.push_back(&t);
+    else
+      arriving.push_back(&t);
   }
 
   std::ostringstream text;
   if (!never.empty()) {
     text << "no synchronised input for " << silent << " s. Waiting for ";
     for (int i = 0; i < 3; ++i) {
-      text << s.topics[i].topic << " (" << s.topics[i].received << " received)" << (i == 0 ? ", " : i == 1 ? " and " : "");
+      text << s.topics[i].topic << " (" << s.topics[i].received << " received)"
+           << (i == 0   ? ", "
+               : i == 1 ? " and "
+                        : "");
     }
     text << ": nothing at all on " << joinLabels(never)
          << ". Check that all three are published (rostopic hz) and remapped to these names";
@@ -70,8 +76,8 @@ std::optional<InputWarning> describeInputSilence(const InputSnapshot& s, double 
     for (const WatchedTopic* t : stopped) newest = std::min(newest, t->seconds_since_last);
     if (arriving.empty()) {
       const WatchedTopic& rgb = s.topics[0];
-      text << "no input for " << wholeSeconds(newest) << " s; " << counts(s) << ", last at t = "
-           << secondsText(rgb.has_stamp, rgb.stamp) << " (stamp of the last rgb image)"
+      text << "no input for " << wholeSeconds(newest) << " s; " << counts(s)
+           << ", last at t = " << secondsText(rgb.has_stamp, rgb.stamp) << " (stamp of the last rgb image)"
            << ": the input stopped (a bag that ended, or a camera driver that stopped publishing)";
     } else {
       text << "no input on " << joinLabels(stopped) << " for " << wholeSeconds(newest) << " s while "

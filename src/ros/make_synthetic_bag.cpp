@@ -55,22 +55,38 @@ bool parse(int argc, char** argv, Options& o) {
       if (i + 1 >= argc) throw std::runtime_error("missing value after " + arg);
       return argv[++i];
     };
-    if (arg == "--frames") o.frames = std::stoi(next());
-    else if (arg == "--rate") o.rate = std::stod(next());
-    else if (arg == "--width") o.scene.width = std::stoi(next());
-    else if (arg == "--height") o.scene.height = std::stoi(next());
-    else if (arg == "--variant") o.scene.variant = std::stoi(next());
-    else if (arg == "--namespace") o.ns = next();
-    else if (arg == "--frame-id") o.frame_id = next();
-    else if (arg == "--base-frame") o.base_frame = next();
-    else if (arg == "--depth-encoding") o.depth_encoding = next();
-    else if (arg == "--depth-frame-id") o.depth_frame_id = next();
-    else if (arg == "--no-tf") o.write_tf = false;
-    else if (arg == "--depth-noise") o.scene.depth_noise = std::stod(next());
-    else if (arg == "--intensity-noise") o.scene.intensity_noise = std::stod(next());
-    else if (arg == "-h" || arg == "--help") return false;
-    else if (!arg.empty() && arg[0] == '-') throw std::runtime_error("unknown option " + arg);
-    else o.output = arg;
+    if (arg == "--frames")
+      o.frames = std::stoi(next());
+    else if (arg == "--rate")
+      o.rate = std::stod(next());
+    else if (arg == "--width")
+      o.scene.width = std::stoi(next());
+    else if (arg == "--height")
+      o.scene.height = std::stoi(next());
+    else if (arg == "--variant")
+      o.scene.variant = std::stoi(next());
+    else if (arg == "--namespace")
+      o.ns = next();
+    else if (arg == "--frame-id")
+      o.frame_id = next();
+    else if (arg == "--base-frame")
+      o.base_frame = next();
+    else if (arg == "--depth-encoding")
+      o.depth_encoding = next();
+    else if (arg == "--depth-frame-id")
+      o.depth_frame_id = next();
+    else if (arg == "--no-tf")
+      o.write_tf = false;
+    else if (arg == "--depth-noise")
+      o.scene.depth_noise = std::stod(next());
+    else if (arg == "--intensity-noise")
+      o.scene.intensity_noise = std::stod(next());
+    else if (arg == "-h" || arg == "--help")
+      return false;
+    else if (!arg.empty() && arg[0] == '-')
+      throw std::runtime_error("unknown option " + arg);
+    else
+      o.output = arg;
   }
   if (o.output.empty()) throw std::runtime_error("no output file given");
   if (o.frames < 2) throw std::runtime_error("--frames " + std::to_string(o.frames) + ": need at least 2");
@@ -158,7 +174,8 @@ int main(int argc, char** argv) {
         depth.data.resize(std::size_t(depth.step) * std::size_t(h));
         for (std::size_t i = 0; i < frame.depth.data.size(); ++i) {
           const float z = frame.depth.data[i];
-          const std::uint16_t mm = mc_flow::isValidDepth(z) ? std::uint16_t(std::lround(std::min(z * 1000.f, 65535.f))) : 0;
+          const std::uint16_t mm =
+              mc_flow::isValidDepth(z) ? std::uint16_t(std::lround(std::min(z * 1000.f, 65535.f))) : 0;
           std::memcpy(&depth.data[2 * i], &mm, 2);
         }
       }

@@ -61,17 +61,21 @@ void MCFlowNodelet::onInit() {
 
   it_in_ = std::make_unique<image_transport::ImageTransport>(nh_);
   it_out_ = std::make_unique<image_transport::ImageTransport>(pnh_);
-  gate_ = std::make_unique<InputGate>(std::array<std::string, 3>{
-      nh_.resolveName("rgb/image_rect_color"), nh_.resolveName("depth_registered/image_rect"),
-      nh_.resolveName("rgb/camera_info")});
+  gate_ = std::make_unique<InputGate>(std::array<std::string, 3>{nh_.resolveName("rgb/image_rect_color"),
+                                                                 nh_.resolveName("depth_registered/image_rect"),
+                                                                 nh_.resolveName("rgb/camera_info")});
   createSynchroniser();
   // Every message passes the gate on its way to the synchroniser.
-  rgb_sub_.registerCallback(boost::function<void(const sensor_msgs::ImageConstPtr&)>(
-      [this](const sensor_msgs::ImageConstPtr& m) { if (admit(InputGate::kRgb, m->header)) rgb_pass_.add(m); }));
-  depth_sub_.registerCallback(boost::function<void(const sensor_msgs::ImageConstPtr&)>(
-      [this](const sensor_msgs::ImageConstPtr& m) { if (admit(InputGate::kDepth, m->header)) depth_pass_.add(m); }));
-  info_sub_.registerCallback(boost::function<void(const sensor_msgs::CameraInfoConstPtr&)>(
-      [this](const sensor_msgs::CameraInfoConstPtr& m) {
+  rgb_sub_.registerCallback(
+      boost::function<void(const sensor_msgs::ImageConstPtr&)>([this](const sensor_msgs::ImageConstPtr& m) {
+        if (admit(InputGate::kRgb, m->header)) rgb_pass_.add(m);
+      }));
+  depth_sub_.registerCallback(
+      boost::function<void(const sensor_msgs::ImageConstPtr&)>([this](const sensor_msgs::ImageConstPtr& m) {
+        if (admit(InputGate::kDepth, m->header)) depth_pass_.add(m);
+      }));
+  info_sub_.registerCallback(
+      boost::function<void(const sensor_msgs::CameraInfoConstPtr&)>([this](const sensor_msgs::CameraInfoConstPtr& m) {
         if (admit(InputGate::kCameraInfo, m->header)) info_pass_.add(m);
       }));
 
@@ -95,14 +99,15 @@ void MCFlowNodelet::onInit() {
   {
     // Hold the lock while advertising: a connect callback must not subscribe before everything exists.
     std::lock_guard<std::mutex> lock(connect_mutex_);
-    outputs_ = std::make_unique<OutputPublishers>(pnh_, *it_out_, params_, [this] { connectCb(); }, tf_buffer_.get(),
-                                                  getName());
+    outputs_ = std::make_unique<OutputPublishers>(
+        pnh_, *it_out_, params_, [this] { connectCb(); }, tf_buffer_.get(), getName());
   }
   std::ostringstream s;
   s << "MC-Flow nodelet " << getName() << " started.\n  inputs (synchronised, "
     << (params_.approximate_sync ? "approximate" : "exact") << " time): " << gate_->topic(0) << ", " << gate_->topic(1)
-    << ", " << gate_->topic(2) << " (image_transport, parameter image_transport selects the transport)\n  outputs: "
-    << outputs_->topics() << "\n  node parameters: " << params_.describe() << "\n  solver parameters (dynamic_reconfigure):";
+    << ", " << gate_->topic(2)
+    << " (image_transport, parameter image_transport selects the transport)\n  outputs: " << outputs_->topics()
+    << "\n  node parameters: " << params_.describe() << "\n  solver parameters (dynamic_reconfigure):";
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
     const mc_flow::Config config = pending_config_ ? *pending_config_ : mc_flow::Config();
@@ -116,8 +121,8 @@ void MCFlowNodelet::onInit() {
 void MCFlowNodelet::createSynchroniser() {
   approximate_sync_.reset();
   exact_sync_.reset();
-  const auto callback =
-      boost::bind(&MCFlowNodelet::syncCb, this, boost::placeholders::_1, boost::placeholders::_2, boost::placeholders::_3);
+  const auto callback = boost::bind(&MCFlowNodelet::syncCb, this, boost::placeholders::_1, boost::placeholders::_2,
+                                    boost::placeholders::_3);
   if (params_.approximate_sync) {
     ApproximatePolicy policy(params_.queue_size);
     policy.setReset(true);  // a bag restarting under /clock clears the queues instead of stalling them
@@ -131,7 +136,7 @@ void MCFlowNodelet::createSynchroniser() {
     ExactPolicy policy(params_.queue_size);
     policy.setReset(true);
     exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(std::as_const(policy), rgb_pass_,
-                                                                              depth_pass_, info_pass_);
+                                                                               depth_pass_, info_pass_);
     exact_sync_->registerCallback(callback);
   }
 }
@@ -156,9 +161,10 @@ void MCFlowNodelet::connectCb() {
     if (std::find(loadable.begin(), loadable.end(), "image_transport/" + hints.getTransport()) == loadable.end()) {
       std::string available;
       for (const std::string& name : loadable) available += " " + name.substr(name.find('/') + 1);
-      NODELET_ERROR("image_transport '%s' is not installed (installed:%s): install its plug-in package or set "
-                    "~image_transport to one of those; subscribing with 'raw' instead",
-                    hints.getTransport().c_str(), available.c_str());
+      NODELET_ERROR(
+          "image_transport '%s' is not installed (installed:%s): install its plug-in package or set "
+          "~image_transport to one of those; subscribing with 'raw' instead",
+          hints.getTransport().c_str(), available.c_str());
       hints = transportHintsFor("raw", pnh_);
     }
     // One queue length for the subscribers and the synchroniser: a burst the synchroniser could hold must not be
@@ -248,7 +254,8 @@ void MCFlowNodelet::workerLoop() {
           if (pipeline_)
             pipeline_->setConfig(config);
           else
-            pipeline_ = std::make_unique<mc_flow::SequencePipeline>(config, 1, params_.max_pair_interval, make_backend_);
+            pipeline_ =
+                std::make_unique<mc_flow::SequencePipeline>(config, 1, params_.max_pair_interval, make_backend_);
           solver_config_ = config;
           backend_reported_ = false;
         } catch (const std::exception& e) {
@@ -276,8 +283,9 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   } catch (const FrameInputError& e) {
     // Throttled per distinct problem (digits removed: the same fault in every frame is one key).
     std::string key = std::string(inputProblemName(e.problem)) + ":" + e.what();
-    key.erase(std::remove_if(key.begin(), key.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); }),
-              key.end());
+    key.erase(
+        std::remove_if(key.begin(), key.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); }),
+        key.end());
     warn(key, std::string("frame ") + stampText(input.rgb->header.stamp) + " skipped: " + e.what());
     status_.frameSkipped();
     return;

@@ -186,15 +186,17 @@ void deserialise(const ros::SerializedMessage& arrived, M& message) {
 }
 
 int run(int argc, char** argv) {
-  mc_flow::CommandLine cli("mcflow_bench_nodelet",
-                           {{"repetitions", true, "pairs timed per downsample factor (50)"},
-                            {"downsample", true, "comma-separated factors, 0 = automatic as the nodelet (0,1)"},
-                            {"size", true, "input WxH (640x480)"},
-                            {"variant", true, "synthetic scene variant (0)"},
-                            {"depth-noise", true, "synthetic depth noise [m] at 1 m, growing with depth^2 (0)"},
-                            {"real", true, "a real pair's folder (shared/data/real_pairs/NAME) instead of the synthetic scene"},
-                            {"dump", true, "write the first repetition's messages (serialised) and converted frame to DIR "
-                                           "(to compare two builds byte for byte)"}});
+  mc_flow::CommandLine cli(
+      "mcflow_bench_nodelet",
+      {{"repetitions", true, "pairs timed per downsample factor (50)"},
+       {"downsample", true, "comma-separated factors, 0 = automatic as the nodelet (0,1)"},
+       {"size", true, "input WxH (640x480)"},
+       {"variant", true, "synthetic scene variant (0)"},
+       {"depth-noise", true, "synthetic depth noise [m] at 1 m, growing with depth^2 (0)"},
+       {"real", true, "a real pair's folder (shared/data/real_pairs/NAME) instead of the synthetic scene"},
+       {"dump", true,
+        "write the first repetition's messages (serialised) and converted frame to DIR "
+        "(to compare two builds byte for byte)"}});
   cli.parse(argc, argv);
   if (cli.helpRequested()) {
     std::cout << cli.usage();
@@ -215,9 +217,10 @@ int run(int argc, char** argv) {
   const ros::Time t0(100, 0), t1(100, 33000000);
   const InputMessages m0 = real.empty() ? renderMessages(scene, 0, t0) : realMessages(real, 0, t0);
   const InputMessages m1 = real.empty() ? renderMessages(scene, 1, t1) : realMessages(real, 1, t1);
-  const std::string input_name = real.empty() ? "synthetic variant " + std::to_string(scene.variant) +
-                                                    (scene.depth_noise > 0 ? ", depth noise " + cli.text("depth-noise", "") + " m" : "")
-                                              : real;
+  const std::string input_name =
+      real.empty() ? "synthetic variant " + std::to_string(scene.variant) +
+                         (scene.depth_noise > 0 ? ", depth noise " + cli.text("depth-noise", "") + " m" : "")
+                   : real;
 
   for (const std::string& factor_text : cli.list("downsample", "0,1")) {
     const int downsample = std::stoi(factor_text);
@@ -225,9 +228,8 @@ int run(int argc, char** argv) {
     // processing resolution), the FrameInput carried as the frame's extra.
     mc_flow::SequencePipeline pipeline(config, 1, defaults.max_pair_interval);
     auto push = [&](const InputMessages& m) {
-      mc_flow_ros::FrameInput input = mc_flow_ros::toFrameInput(m.rgb, m.depth, m.info, downsample,
-                                                                std::uint64_t(defaults.max_input_pixels),
-                                                                config.depth_downsample_range);
+      mc_flow_ros::FrameInput input = mc_flow_ros::toFrameInput(
+          m.rgb, m.depth, m.info, downsample, std::uint64_t(defaults.max_input_pixels), config.depth_downsample_range);
       mc_flow::StreamFrame frame;
       frame.frame = input.frame;
       frame.K = input.K;
@@ -265,8 +267,8 @@ int run(int argc, char** argv) {
       // ---- input: one new frame per pair (process(): toFrameInput, then the StreamFrame for the pipeline)
       mc_flow_ros::FrameInput input;
       own.time("toFrameInput (validation + conversion)", [&] {
-        input = mc_flow_ros::toFrameInput(m1.rgb, m1.depth, m1.info, downsample, std::uint64_t(defaults.max_input_pixels),
-                                          config.depth_downsample_range);
+        input = mc_flow_ros::toFrameInput(m1.rgb, m1.depth, m1.info, downsample,
+                                          std::uint64_t(defaults.max_input_pixels), config.depth_downsample_range);
       });
       mc_flow::StreamFrame frame;
       own.time("StreamFrame (frame copy, FrameInput moved)", [&] {
@@ -293,9 +295,8 @@ int run(int argc, char** argv) {
         segmentation = mc_flow_ros::makeSegmentationImage(picture, pair);
       });
       own.time("~scene_flow cloud", [&] { cloud = mc_flow_ros::makeSceneFlowCloud(result, pair); });
-      own.time("~motion_markers", [&] {
-        markers = mc_flow_ros::makeMotionMarkers(result, pair, defaults.marker_seconds_ahead);
-      });
+      own.time("~motion_markers",
+               [&] { markers = mc_flow_ros::makeMotionMarkers(result, pair, defaults.marker_seconds_ahead); });
       own.time("~camera_info", [&] { info = mc_flow_ros::processingCameraInfo(*pair.current); });
       own.time("TF transforms", [&] {
         transforms = mc_flow_ros::makeSegmentTransforms(result, pipeline.tracks(), pair, defaults.segment_frame_prefix);
@@ -313,7 +314,8 @@ int run(int argc, char** argv) {
       wire.time("~labels", [&] { bytes["~labels"] = serialise(*labels); });
       wire.time("~occlusion", [&] { bytes["~occlusion"] = serialise(*occlusion); });
       wire.time("~segments + ~motion_markers + ~camera_info", [&] {
-        bytes["~segments + ~motion_markers + ~camera_info"] = serialise(segments) + serialise(markers) + serialise(info);
+        bytes["~segments + ~motion_markers + ~camera_info"] =
+            serialise(segments) + serialise(markers) + serialise(info);
       });
       wire.add("total (outputs)", std::chrono::duration<double, std::milli>(Clock::now() - wire_start).count(),
                minorFaults() - wire_faults);
@@ -340,17 +342,18 @@ int run(int argc, char** argv) {
         dumpMessage(prefix + "scene_flow.msg", *cloud);
         dumpMessage(prefix + "markers.msg", markers);
         dumpMessage(prefix + "camera_info.msg", info);
-        for (std::size_t i = 0; i < transforms.size(); ++i) dumpMessage(prefix + "tf" + std::to_string(i) + ".msg", transforms[i]);
+        for (std::size_t i = 0; i < transforms.size(); ++i)
+          dumpMessage(prefix + "tf" + std::to_string(i) + ".msg", transforms[i]);
       }
       sink += segments.segments.size() + soft->data.size() + labels->data.size() + occlusion->data.size() +
-              segmentation->data.size() + cloud->data.size() + markers.markers.size() + info.D.size() + transforms.size();
+              segmentation->data.size() + cloud->data.size() + markers.markers.size() + info.D.size() +
+              transforms.size();
     }
 
     std::cout << "mcflow_bench_nodelet: " << input_name << ", input " << m1.rgb.width << "x" << m1.rgb.height
-              << " rgb8 + 16UC1, downsample "
-              << downsample << " -> factor " << first.downsample << ", outputs " << result.width << "x" << result.height
-              << "; " << result.segments.size() << " segments, one solve " << std::lround(solve_ms) << " ms ("
-              << result.backend << "); " << repetitions << " repetitions\n";
+              << " rgb8 + 16UC1, downsample " << downsample << " -> factor " << first.downsample << ", outputs "
+              << result.width << "x" << result.height << "; " << result.segments.size() << " segments, one solve "
+              << std::lround(solve_ms) << " ms (" << result.backend << "); " << repetitions << " repetitions\n";
     std::cout << "  the nodelet's own work per pair (every output subscribed, publish_tf on)\n"
               << "                                               median [ms]  p90 [ms]  faults\n";
     for (const std::string& name : own.order()) printRow(name, own.of(name), own.faultsOf(name), 0);

@@ -35,8 +35,8 @@ EncodingLayout encodingLayout(const std::string& encoding, ImageRole role) {
   }
   if (encoding == enc::TYPE_16UC1) return {2, 1};
   if (encoding == enc::TYPE_32FC1) return {4, 1};
-  throw FrameInputError(InputProblem::Encoding, "unsupported depth encoding '" + encoding +
-                                                    "' (accepted: 16UC1 in mm, 32FC1 in m)");
+  throw FrameInputError(InputProblem::Encoding,
+                        "unsupported depth encoding '" + encoding + "' (accepted: 16UC1 in mm, 32FC1 in m)");
 }
 
 EncodingLayout validateImage(const sensor_msgs::Image& image, ImageRole role, std::uint64_t max_pixels) {
@@ -57,11 +57,12 @@ EncodingLayout validateImage(const sensor_msgs::Image& image, ImageRole role, st
   const std::string problem = mc_flow::bufferLayoutProblem(buffer, max_pixels);
   if (!problem.empty()) {
     std::uint64_t pixels = 0;
-    const bool too_large = image.width > 0 && image.height > 0 &&
-                           (!mc_flow::multiplyWithoutOverflow(image.width, image.height, pixels) || pixels > max_pixels);
-    throw FrameInputError(too_large ? InputProblem::Size : InputProblem::Layout,
-                          std::string(what) + " (" + image.encoding + ", step " + std::to_string(image.step) + "): " +
-                              problem);
+    const bool too_large =
+        image.width > 0 && image.height > 0 &&
+        (!mc_flow::multiplyWithoutOverflow(image.width, image.height, pixels) || pixels > max_pixels);
+    throw FrameInputError(
+        too_large ? InputProblem::Size : InputProblem::Layout,
+        std::string(what) + " (" + image.encoding + ", step " + std::to_string(image.step) + "): " + problem);
   }
   return layout;
 }
@@ -105,7 +106,8 @@ sensor_msgs::Image toHostByteOrder(const sensor_msgs::Image& image, const Encodi
   if (!needsByteSwap(image, layout)) return out;
   const std::size_t n = std::size_t(layout.value_bytes);
   // Rows may be padded; swapping the padding too is harmless (step is a multiple of the value size).
-  for (std::size_t i = 0; i + n <= out.data.size(); i += n) std::reverse(out.data.begin() + i, out.data.begin() + i + n);
+  for (std::size_t i = 0; i + n <= out.data.size(); i += n)
+    std::reverse(out.data.begin() + i, out.data.begin() + i + n);
   return out;
 }
 

@@ -70,9 +70,10 @@ std::vector<std::string> NodeParameters::sanitise() {
     cloud_colour = "segment";
   }
   if (publish_odom_tf && base_frame.empty())
-    warnings.push_back("publish_odom_tf without base_frame broadcasts " + odom_frame +
-                       " -> the camera's optical frame, which usually has a parent in the camera's TF tree already: set "
-                       "base_frame to the robot's base frame");
+    warnings.push_back(
+        "publish_odom_tf without base_frame broadcasts " + odom_frame +
+        " -> the camera's optical frame, which usually has a parent in the camera's TF tree already: set "
+        "base_frame to the robot's base frame");
   if (!prior_frame.empty() && prior_frame == odom_frame && publish_odom_tf)
     warnings.push_back("prior_frame '" + prior_frame +
                        "' is the odom_frame this node broadcasts: its own odometry would be its prior; set prior_frame "
@@ -84,7 +85,7 @@ std::string NodeParameters::describe() const {
   std::ostringstream s;
   const char* separator = "";
 #define MCFLOW_NODE_NUMBER(type, name, default_value, lowest, highest, unit, description) \
-  s << separator << #name "=" << text(name) << (*unit ? " " unit : "");                 \
+  s << separator << #name "=" << text(name) << (*unit ? " " unit : "");                   \
   separator = " ";
 #define MCFLOW_NODE_FLAG(name, default_value, description) \
   s << separator << #name "=" << text(name);               \

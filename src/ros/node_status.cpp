@@ -65,13 +65,13 @@ std::vector<StepWarning> NodeStatus::recordStep(const mc_flow::SequenceStep& ste
                                                 double solve_ms) {
   std::vector<StepWarning> warnings;
   if (!step.reset_key.empty()) {
-    warnings.push_back({"reset:" + step.reset_key, "frame " + stamp + ": " + step.reset_reason + ": starting a new sequence"});
+    warnings.push_back(
+        {"reset:" + step.reset_key, "frame " + stamp + ": " + step.reset_reason + ": starting a new sequence"});
     sequenceReset();
   }
   using Outcome = mc_flow::SequenceStep::Outcome;
   switch (step.outcome) {
-    case Outcome::Started:
-      break;
+    case Outcome::Started: break;
     case Outcome::RepeatedStamp:
       warnings.push_back({"stamp", "frame skipped: stamp " + stamp +
                                        " repeats the previous frame's (is a driver or bag publishing duplicates?)"});
@@ -81,7 +81,8 @@ std::vector<StepWarning> NodeStatus::recordStep(const mc_flow::SequenceStep& ste
       if (!step.backend_fallback.empty()) {
         // The pipeline has switched to the CPU: this happens once per backend, so the warning is never held back
         // (period 0; a GPU restored by new parameters may fail again and is reported again).
-        warnings.push_back({"backend", "pair ending at " + stamp + " skipped: " + step.problem + "; continuing on the CPU", 0.0});
+        warnings.push_back(
+            {"backend", "pair ending at " + stamp + " skipped: " + step.problem + "; continuing on the CPU", 0.0});
         backendFailed(step.problem);
       } else {
         // Bad input or parameters that do not fit this input: the sequence goes on with the newer frame.
@@ -89,9 +90,7 @@ std::vector<StepWarning> NodeStatus::recordStep(const mc_flow::SequenceStep& ste
         frameSkipped();
       }
       break;
-    case Outcome::Solved:
-      pairSolved(*step.result, solve_ms);
-      break;
+    case Outcome::Solved: pairSolved(*step.result, solve_ms); break;
   }
   return warnings;
 }

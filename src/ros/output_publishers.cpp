@@ -80,7 +80,8 @@ void OutputPublishers::publish(const mc_flow::Result& result, const PairContext&
     moving_mask_.publish(makeMovingMaskImage(result, *pair.world, pair));
   }
   if (params_.publish_tf) {
-    tf_broadcaster_->sendTransform(makeSegmentTransforms(result, pipeline.tracks(), pair, params_.segment_frame_prefix));
+    tf_broadcaster_->sendTransform(
+        makeSegmentTransforms(result, pipeline.tracks(), pair, params_.segment_frame_prefix));
   }
   if (odom_.getNumSubscribers() > 0 || params_.publish_odom_tf) publishOdometry(pair, pipeline.odometry(), warn);
   camera_poses_.push_back(pipeline.odometry().pose);
@@ -97,8 +98,8 @@ void OutputPublishers::publishOdometry(const PairContext& pair, const mc_flow::O
   std::string child = pair.header.frame_id;
   if (!params_.base_frame.empty()) {
     try {
-      base_from_camera = tf2::transformToEigen(
-          tf_buffer_->lookupTransform(params_.base_frame, pair.header.frame_id, pair.header.stamp, ros::Duration(0.05)));
+      base_from_camera = tf2::transformToEigen(tf_buffer_->lookupTransform(params_.base_frame, pair.header.frame_id,
+                                                                           pair.header.stamp, ros::Duration(0.05)));
       child = params_.base_frame;
     } catch (const tf2::TransformException& e) {
       warn("odom_mount", "~odom not published: no transform from base_frame '" + params_.base_frame +
@@ -106,7 +107,8 @@ void OutputPublishers::publishOdometry(const PairContext& pair, const mc_flow::O
       return;
     }
   }
-  const nav_msgs::Odometry odom = makeOdometry(odometry, pair.header.stamp, params_.odom_frame, child, base_from_camera);
+  const nav_msgs::Odometry odom =
+      makeOdometry(odometry, pair.header.stamp, params_.odom_frame, child, base_from_camera);
   if (odom_.getNumSubscribers() > 0) odom_.publish(odom);
   if (params_.publish_odom_tf) {
     geometry_msgs::TransformStamped t;
@@ -127,8 +129,8 @@ void OutputPublishers::saveAndSummarise(const mc_flow::Result& result, const Pai
     std::ostringstream s;
     s.setf(std::ios::fixed);
     s.precision(3);
-    s << "pair " << pair_index << " [" << stampText(pair.header.stamp) << ", dt " << dt << " s]: "
-      << result.segments.size() << " segments";
+    s << "pair " << pair_index << " [" << stampText(pair.header.stamp) << ", dt " << dt
+      << " s]: " << result.segments.size() << " segments";
     for (const mc_flow::Segment& seg : result.segments) {
       const double speed = centroidVelocity(seg, dt).norm();
       const double turn = seg.twist.tail<3>().norm() / dt * 180.0 / M_PI;

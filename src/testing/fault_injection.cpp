@@ -122,10 +122,23 @@ class FaultInjectingBackend final : public SolveBackend {
 }  // namespace
 
 const std::vector<std::string>& backendFaultStages() {
-  static const std::vector<std::string> stages{
-      "buildPyramids", "framePoints", "initialiseLabels", "initialiseLabelsFromCentres", "holdCarriedLabels", "moveLabels",
-      "motionAccumulator", "updateOcclusion", "labelStep", "downloadLabels", "outputs", "supports", "remap",
-      "ownedMoments", "trialCuts", "applyCuts", "costModel"};
+  static const std::vector<std::string> stages{"buildPyramids",
+                                               "framePoints",
+                                               "initialiseLabels",
+                                               "initialiseLabelsFromCentres",
+                                               "holdCarriedLabels",
+                                               "moveLabels",
+                                               "motionAccumulator",
+                                               "updateOcclusion",
+                                               "labelStep",
+                                               "downloadLabels",
+                                               "outputs",
+                                               "supports",
+                                               "remap",
+                                               "ownedMoments",
+                                               "trialCuts",
+                                               "applyCuts",
+                                               "costModel"};
   return stages;
 }
 
@@ -180,9 +193,7 @@ BackendFault parseBackendFault(const std::string& text) {
       const std::string ms = action.rfind(prefix, 0) == 0 ? action.substr(prefix.size()) : "";
       if (!allDigits(ms)) throw ConfigError(bad + ": '" + action + "' is not hold=MS");
       const long hold_ms = std::stol(ms);
-      fault.action = [hold_ms](const std::string&) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(hold_ms));
-      };
+      fault.action = [hold_ms](const std::string&) { std::this_thread::sleep_for(std::chrono::milliseconds(hold_ms)); };
     }
   }
   const std::string problem = faultProblem(fault);

@@ -37,7 +37,7 @@ std::vector<PartMotionError> partMotionErrors(const Result& result, const Synthe
     e.name = part.name;
     e.true_rotation_deg = rotationAngleDeg(se3Exp(part.twist));
     std::map<int, int> votes;
-    LabelMoments moments;  // the part's frame-1 points, for its longest axis
+    LabelMoments moments;                   // the part's frame-1 points, for its longest axis
     std::vector<Eigen::Vector3d> from, to;  // the part's points and where its true scene flow takes them
     double epe_sum = 0;
     int epe_pixels = 0;
@@ -47,7 +47,8 @@ std::vector<PartMotionError> partMotionErrors(const Result& result, const Synthe
         if (std::isfinite(points(x, y, 2))) {
           const Eigen::Vector3d P(points(x, y, 0), points(x, y, 1), points(x, y, 2));
           moments.add(P);
-          const Eigen::Vector3d flow(pair.gt_scene_flow(x, y, 0), pair.gt_scene_flow(x, y, 1), pair.gt_scene_flow(x, y, 2));
+          const Eigen::Vector3d flow(pair.gt_scene_flow(x, y, 0), pair.gt_scene_flow(x, y, 1),
+                                     pair.gt_scene_flow(x, y, 2));
           if (flow.allFinite()) {
             from.push_back(P);
             to.push_back(P + flow);

@@ -78,12 +78,13 @@ const std::vector<Option> kInputOptions = {
 
 std::vector<Command> commands() {
   std::vector<Command> list;
-  Command run{"run",
-              "mcflow run --rgb1 F --depth1 F --rgb2 F --depth2 F (--intrinsics FX,FY,CX,CY | --camera-info F) --out DIR",
-              "Estimates piece-wise rigid scene flow between two RGB-D frames and writes optical_flow.flo, "
-              "scene_flow.pfm, labels.png, soft_labels.npy, occlusion.png, segments.json, report.json, "
-              "segmentation.png, flow.png and overview.png into DIR.",
-              kInputOptions};
+  Command run{
+      "run",
+      "mcflow run --rgb1 F --depth1 F --rgb2 F --depth2 F (--intrinsics FX,FY,CX,CY | --camera-info F) --out DIR",
+      "Estimates piece-wise rigid scene flow between two RGB-D frames and writes optical_flow.flo, "
+      "scene_flow.pfm, labels.png, soft_labels.npy, occlusion.png, segments.json, report.json, "
+      "segmentation.png, flow.png and overview.png into DIR.",
+      kInputOptions};
   for (const Option& o : std::vector<Option>{
            {"max-depth", true, "[m] depth beyond this is invalid (Config::max_depth)"},
            {"regularizer", true, "quad | tv"},
@@ -98,37 +99,41 @@ std::vector<Command> commands() {
     run.options.push_back(o);
   list.push_back(run);
 
-  Command run_seq{"run-seq",
-                  "mcflow run-seq (--tum DIR | --frames DIR | --bag FILE [--rgb-topic T --depth-topic T --info-topic T]) "
-                  "[--intrinsics FX,FY,CX,CY | --camera-info F] [--cold] --out DIR",
-                  "Solves every consecutive pair of an RGB-D sequence as a stream: each pair warm-starts from the "
-                  "previous one (unless --cold) and segments keep their ids. Writes DIR/pair_NNNN/ (the files of "
-                  "`mcflow run`; labels.png and segments.json hold the persistent ids; moving.png: 255 on pixels of "
-                  "segments that move relative to the static world), DIR/trajectories.csv (pair, stamp, id, vx, vy, "
-                  "vz, wx, wy, wz, support per segment and pair, then world, moving and the velocity relative to the "
-                  "static world), DIR/trajectory.txt (the camera's path in the TUM RGB-D format, the first frame at "
-                  "the identity: `mcflow eval-traj` scores it), DIR/ids_over_time.png and "
-                  "DIR/sequence.json (per pair: start kind, timings, ids, merges, resets). A rosbag (--bag, ROS build "
-                  "only) is read as the nodelet reads its topics: colour and depth paired by the nearest header stamp, "
-                  "intrinsics from the first camera_info, frames with no valid depth skipped.",
-                  {{"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000/m)"},
-                   {"frames", true, "directory with rgb/ and depth/ images paired in name order (depth 1000/m)"},
-                   {"bag", true, "rosbag with sensor_msgs/Image colour and depth (16UC1 mm or 32FC1 m) and CameraInfo"},
-                   {"rgb-topic", true, "colour topic of --bag (default /camera/rgb/image_rect_color)"},
-                   {"depth-topic", true, "registered depth topic of --bag (default /camera/depth_registered/image_rect)"},
-                   {"info-topic", true, "camera_info topic of --bag (default /camera/rgb/camera_info)"},
-                   {"max-stamp-difference", true, "[s] --bag: colour and depth stamps further apart are not paired "
-                                                  "(default 0.02)"},
-                   {"fps", true, "frame rate of --frames [Hz] (default 30)"},
-                   {"intrinsics", true, "FX,FY,CX,CY in pixels (default: DIR/camera_info.yaml when present; --bag: "
-                                        "its first camera_info)"},
-                   {"camera-info", true, "ROS camera_info YAML file instead of --intrinsics"},
-                   {"depth-scale", true, "16-bit depth units per metre (default 5000 with --tum, 1000 with --frames; "
-                                         "not with --bag: 16UC1 is mm)"},
-                   {"downsample", true, "input pixels per processing pixel: 0 = towards 320 px wide (default), or 1, 2, 4..."},
-                   {"max-pair-interval", true, "[s] a longer gap between frames starts a new sequence (default 1)"},
-                   {"cold", false, "solve every pair from scratch (ids are still matched by overlap)"},
-                   {"max-frames", true, "stop after this many frames"}}};
+  Command run_seq{
+      "run-seq",
+      "mcflow run-seq (--tum DIR | --frames DIR | --bag FILE [--rgb-topic T --depth-topic T --info-topic T]) "
+      "[--intrinsics FX,FY,CX,CY | --camera-info F] [--cold] --out DIR",
+      "Solves every consecutive pair of an RGB-D sequence as a stream: each pair warm-starts from the "
+      "previous one (unless --cold) and segments keep their ids. Writes DIR/pair_NNNN/ (the files of "
+      "`mcflow run`; labels.png and segments.json hold the persistent ids; moving.png: 255 on pixels of "
+      "segments that move relative to the static world), DIR/trajectories.csv (pair, stamp, id, vx, vy, "
+      "vz, wx, wy, wz, support per segment and pair, then world, moving and the velocity relative to the "
+      "static world), DIR/trajectory.txt (the camera's path in the TUM RGB-D format, the first frame at "
+      "the identity: `mcflow eval-traj` scores it), DIR/ids_over_time.png and "
+      "DIR/sequence.json (per pair: start kind, timings, ids, merges, resets). A rosbag (--bag, ROS build "
+      "only) is read as the nodelet reads its topics: colour and depth paired by the nearest header stamp, "
+      "intrinsics from the first camera_info, frames with no valid depth skipped.",
+      {{"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000/m)"},
+       {"frames", true, "directory with rgb/ and depth/ images paired in name order (depth 1000/m)"},
+       {"bag", true, "rosbag with sensor_msgs/Image colour and depth (16UC1 mm or 32FC1 m) and CameraInfo"},
+       {"rgb-topic", true, "colour topic of --bag (default /camera/rgb/image_rect_color)"},
+       {"depth-topic", true, "registered depth topic of --bag (default /camera/depth_registered/image_rect)"},
+       {"info-topic", true, "camera_info topic of --bag (default /camera/rgb/camera_info)"},
+       {"max-stamp-difference", true,
+        "[s] --bag: colour and depth stamps further apart are not paired "
+        "(default 0.02)"},
+       {"fps", true, "frame rate of --frames [Hz] (default 30)"},
+       {"intrinsics", true,
+        "FX,FY,CX,CY in pixels (default: DIR/camera_info.yaml when present; --bag: "
+        "its first camera_info)"},
+       {"camera-info", true, "ROS camera_info YAML file instead of --intrinsics"},
+       {"depth-scale", true,
+        "16-bit depth units per metre (default 5000 with --tum, 1000 with --frames; "
+        "not with --bag: 16UC1 is mm)"},
+       {"downsample", true, "input pixels per processing pixel: 0 = towards 320 px wide (default), or 1, 2, 4..."},
+       {"max-pair-interval", true, "[s] a longer gap between frames starts a new sequence (default 1)"},
+       {"cold", false, "solve every pair from scratch (ids are still matched by overlap)"},
+       {"max-frames", true, "stop after this many frames"}}};
   // The solver options of `run` (not its pair inputs).
   for (const Option& o : run.options) {
     bool input = false;
@@ -148,25 +153,30 @@ std::vector<Command> commands() {
                    {"height", true, "image height in pixels (default 240)"},
                    {"noise", false, "add Kinect-like intensity and depth noise"},
                    {"seed", true, "noise seed"},
-                   {"frames", true, "N >= 2: a sequence of N frames in the TUM RGB-D layout (rgb/, depth/ at 5000 units "
-                                    "per metre, rgb.txt, depth.txt, camera_info.yaml) with ground truth per pair in "
-                                    "gt/pair_NNNN/; parts move smoothly, one starts moving at frame 10, one leaves the view"},
-                   {"no-events", false, "with --frames: without the box that starts late and the one that leaves the "
-                                        "view: the scene of the demo bag (make_synthetic_bag), for its ground truth"},
+                   {"frames", true,
+                    "N >= 2: a sequence of N frames in the TUM RGB-D layout (rgb/, depth/ at 5000 units "
+                    "per metre, rgb.txt, depth.txt, camera_info.yaml) with ground truth per pair in "
+                    "gt/pair_NNNN/; parts move smoothly, one starts moving at frame 10, one leaves the view"},
+                   {"no-events", false,
+                    "with --frames: without the box that starts late and the one that leaves the "
+                    "view: the scene of the demo bag (make_synthetic_bag), for its ground truth"},
                    {"help", false, "this help"}}});
 
-  Command eval{"eval", "mcflow eval --result DIR [--gt DIR] [input options]",
-               "Evaluates a result: optical-flow EPE/AAE on non-occluded pixels, 3D EPE, segmentation and "
-               "occlusion agreement (with --gt), and the RMSE of photometric and geometric residuals after "
-               "warping frame 2 back (with the inputs; estimated occlusions excluded). With --gt pointing at "
-               "a `mcflow synth` directory the inputs default to its files. Prints a table and writes "
-               "DIR/eval.json.",
-               {{"result", true, "directory written by `mcflow run`"}, {"gt", true, "directory written by `mcflow synth`"}}};
+  Command eval{
+      "eval",
+      "mcflow eval --result DIR [--gt DIR] [input options]",
+      "Evaluates a result: optical-flow EPE/AAE on non-occluded pixels, 3D EPE, segmentation and "
+      "occlusion agreement (with --gt), and the RMSE of photometric and geometric residuals after "
+      "warping frame 2 back (with the inputs; estimated occlusions excluded). With --gt pointing at "
+      "a `mcflow synth` directory the inputs default to its files. Prints a table and writes "
+      "DIR/eval.json.",
+      {{"result", true, "directory written by `mcflow run`"}, {"gt", true, "directory written by `mcflow synth`"}}};
   for (const Option& o : kInputOptions) eval.options.push_back(o);
   eval.options.push_back({"help", false, "this help"});
   list.push_back(eval);
 
-  list.push_back({"demo", "mcflow demo --out DIR",
+  list.push_back({"demo",
+                  "mcflow demo --out DIR",
                   "Renders the synthetic pair (variant 0), runs the solver on it, writes the inputs, the ground "
                   "truth, every output and eval.json into DIR, and prints a summary.",
                   {{"out", true, "output directory (created)"},
@@ -176,28 +186,30 @@ std::vector<Command> commands() {
                    {"verbose", false, "progress of the solver on stderr"},
                    {"help", false, "this help"}}});
 
-  list.push_back({"bench-real",
-                  "mcflow bench-real --data DIR [--pairs A,B] [--set name=value ...] [--processing-level L] [--repeat N]",
-                  "Table 1 of the paper on the real RGB-D pairs in DIR (folders with color0/1.png and 16-bit "
-                  "depth0/1.png, 5000 units per metre): for zero flow, one rigid motion (initial_labels = 1, dense "
-                  "robust visual odometry), MC-TV and MC-Quad, the RMSE of the photometric (intensity 0..1) and "
-                  "geometric (mm) residuals after warping frame 2 back, all on one pixel set (valid, not occluded "
-                  "in any solve, every warp inside frame 2), the number of segments and the median time per stage "
-                  "[ms]; then the average over pairs. Inputs are halved to 320x240 (the paper's resolution) with "
-                  "the solver's depth-aware downsampling unless --full-resolution is given.",
-                  {{"data", true, "directory of the real pairs (e.g. $MCFLOW_SHARED_DATA/real_pairs)"},
-                   {"pairs", true, "comma-separated folder names (default: the four pairs of the shared set)"},
-                   {"config", true, "JSON or YAML file of Config fields"},
-                   {"set", true, "name=value: sets one Config field; may be repeated"},
-                   {"processing-level", true, "pyramid level the solver finishes at (Config::processing_level)"},
-                   {"backend", true, "auto | cpu | cuda"},
-                   {"full-resolution", false, "keep the 640x480 input (default: halve to 320x240)"},
-                   {"mask", true, "union (default: occlusions of all three solves excluded) | mcflow (MC-Flow's only)"},
-                   {"repeat", true, "solves per method and pair; times are the median (default 1)"},
-                   {"verbose", false, "progress of the solver on stderr"},
-                   {"help", false, "this help"}}});
+  list.push_back(
+      {"bench-real",
+       "mcflow bench-real --data DIR [--pairs A,B] [--set name=value ...] [--processing-level L] [--repeat N]",
+       "Table 1 of the paper on the real RGB-D pairs in DIR (folders with color0/1.png and 16-bit "
+       "depth0/1.png, 5000 units per metre): for zero flow, one rigid motion (initial_labels = 1, dense "
+       "robust visual odometry), MC-TV and MC-Quad, the RMSE of the photometric (intensity 0..1) and "
+       "geometric (mm) residuals after warping frame 2 back, all on one pixel set (valid, not occluded "
+       "in any solve, every warp inside frame 2), the number of segments and the median time per stage "
+       "[ms]; then the average over pairs. Inputs are halved to 320x240 (the paper's resolution) with "
+       "the solver's depth-aware downsampling unless --full-resolution is given.",
+       {{"data", true, "directory of the real pairs (e.g. $MCFLOW_SHARED_DATA/real_pairs)"},
+        {"pairs", true, "comma-separated folder names (default: the four pairs of the shared set)"},
+        {"config", true, "JSON or YAML file of Config fields"},
+        {"set", true, "name=value: sets one Config field; may be repeated"},
+        {"processing-level", true, "pyramid level the solver finishes at (Config::processing_level)"},
+        {"backend", true, "auto | cpu | cuda"},
+        {"full-resolution", false, "keep the 640x480 input (default: halve to 320x240)"},
+        {"mask", true, "union (default: occlusions of all three solves excluded) | mcflow (MC-Flow's only)"},
+        {"repeat", true, "solves per method and pair; times are the median (default 1)"},
+        {"verbose", false, "progress of the solver on stderr"},
+        {"help", false, "this help"}}});
 
-  list.push_back({"eval-traj", "mcflow eval-traj --gt FILE --est FILE [--max-difference S] [--offset S] [--plot PNG]",
+  list.push_back({"eval-traj",
+                  "mcflow eval-traj --gt FILE --est FILE [--max-difference S] [--offset S] [--plot PNG]",
                   "Scores a camera trajectory (TUM RGB-D format: 'stamp tx ty tz qx qy qz qw' per line, e.g. run-seq's "
                   "trajectory.txt) against ground truth (e.g. a TUM groundtruth.txt) as the TUM RGB-D benchmark does: "
                   "ATE (RMSE of the positions after the rigid alignment that minimises it) and RPE (translation and "
@@ -210,7 +222,8 @@ std::vector<Command> commands() {
                    {"plot", true, "PNG of both paths seen from above (x, z), the estimate aligned"},
                    {"help", false, "this help"}}});
 
-  list.push_back({"export-real", "mcflow export-real --data DIR --out DIR",
+  list.push_back({"export-real",
+                  "mcflow export-real --data DIR --out DIR",
                   "Writes the real pairs as the solver sees them (grey intensity in [0, 1] and depth in metres, "
                   "after the loader's depth cleaning) at 640x480 and halved to 320x240, as PFM files with their "
                   "intrinsics, for `mcflow_bench --real DIR` on a machine without OpenCV (the GPU machine): "
@@ -278,9 +291,12 @@ Arguments parseArguments(const Command& command, int argc, char** argv, int firs
       if (i + 1 >= argc) throw UsageError("option --" + name + " needs a value");
       value = argv[++i];
     }
-    if (name == "set") args.assignments.push_back(value);
-    else if (args.values.count(name)) throw UsageError("option --" + name + " given twice");
-    else args.values[name] = value;
+    if (name == "set")
+      args.assignments.push_back(value);
+    else if (args.values.count(name))
+      throw UsageError("option --" + name + " given twice");
+    else
+      args.values[name] = value;
   }
   return args;
 }
@@ -336,7 +352,8 @@ Config buildConfig(const Arguments& args) {
   if (args.has("config")) io::applyConfigFile(args.get("config"), config);
   if (args.has("max-depth")) config.max_depth = parseNumber("max-depth", args.get("max-depth"));
   if (args.has("labels")) config.initial_labels = parseInteger("labels", args.get("labels"));
-  if (args.has("processing-level")) config.processing_level = parseInteger("processing-level", args.get("processing-level"));
+  if (args.has("processing-level"))
+    config.processing_level = parseInteger("processing-level", args.get("processing-level"));
   try {
     if (args.has("regularizer")) config.regularizer = parseRegularizer(args.get("regularizer"));
   } catch (const ConfigError& e) {
@@ -371,8 +388,8 @@ Result solveAndWrite(const io::PairPaths& paths, const Arguments& args, const Co
   progress("loading " + paths.rgb1 + ", " + paths.depth1 + ", " + paths.rgb2 + ", " + paths.depth2 + "...");
   const auto load_start = std::chrono::steady_clock::now();
   io::LoadedPair pair = io::loadPair(paths);
-  const io::SizeCheck size = io::checkRunSize(pair.frame1.width(), pair.frame1.height(), config,
-                                              solver.backendName() == "cpu", available);
+  const io::SizeCheck size =
+      io::checkRunSize(pair.frame1.width(), pair.frame1.height(), config, solver.backendName() == "cpu", available);
   if (!size.error.empty()) throw InputError(size.error);
   if (!size.warning.empty()) std::cerr << "mcflow: warning: " << size.warning << std::endl;
   const Intrinsics K = inputIntrinsics(args, pair.frame1.width(), pair.frame1.height());
@@ -431,7 +448,7 @@ struct SkippedFrame : std::runtime_error {
 
 /// Where run-seq's frames come from: a folder of files or a bag.
 struct SequenceSource {
-  std::string name;   // the sequence's stream source (a change would start a new sequence)
+  std::string name;  // the sequence's stream source (a change would start a new sequence)
   std::size_t count = 0;
   std::function<SequenceInput(std::size_t)> load;  // throws SkippedFrame, or an error that ends the run
   int pipeline_downsample = 0;  // the pipeline's request: a bag's frames come already downsampled (1)
@@ -453,7 +470,8 @@ SequenceSource fileSequence(const Arguments& args, int downsample) {
       args.has("tum") ? io::listTumSequence(dir) : io::listNumberedFrames(dir, fps));
   const int max_frames = maxFrames(args);
   if (max_frames > 0 && int(frames->size()) > max_frames) frames->resize(std::size_t(max_frames));
-  if (frames->size() < 2) throw InputError("sequence '" + dir + "' has " + std::to_string(frames->size()) + " frame(s)");
+  if (frames->size() < 2)
+    throw InputError("sequence '" + dir + "' has " + std::to_string(frames->size()) + " frame(s)");
   double depth_scale = args.has("tum") ? 5000.0 : 1000.0;
   if (args.has("depth-scale")) {
     depth_scale = parseNumber("depth-scale", args.get("depth-scale"));
@@ -485,8 +503,8 @@ SequenceSource fileSequence(const Arguments& args, int downsample) {
     const int factor = chooseDownsample(downsample, in.stream.frame.width());
     if (factor > 1) {
       cv::Mat small;
-      cv::resize(io::toMat(colour), small, cv::Size(in.stream.frame.width() / factor, in.stream.frame.height() / factor),
-                 0, 0, cv::INTER_AREA);
+      cv::resize(io::toMat(colour), small,
+                 cv::Size(in.stream.frame.width() / factor, in.stream.frame.height() / factor), 0, 0, cv::INTER_AREA);
       colour.width = small.cols;
       colour.height = small.rows;
       colour.data.assign(small.data, small.data + small.total() * 3);
@@ -503,8 +521,9 @@ SequenceSource fileSequence(const Arguments& args, int downsample) {
 SequenceSource bagSequence(const Arguments& args, const Config& config, int downsample) {
 #ifdef MCFLOW_WITH_ROSBAG
   if (args.has("depth-scale"))
-    throw UsageError("--depth-scale is for --tum/--frames: a bag's depth is 16UC1 in millimetres or 32FC1 in metres "
-                     "(REP 118), read as the nodelet reads it");
+    throw UsageError(
+        "--depth-scale is for --tum/--frames: a bag's depth is 16UC1 in millimetres or 32FC1 in metres "
+        "(REP 118), read as the nodelet reads it");
   if (args.has("fps")) throw UsageError("--fps is for --frames: a bag's frames carry their stamps");
   mc_flow_ros::BagReadOptions options;
   if (args.has("rgb-topic")) options.topics.rgb = args.get("rgb-topic");
@@ -552,9 +571,10 @@ SequenceSource bagSequence(const Arguments& args, const Config& config, int down
   (void)args;
   (void)config;
   (void)downsample;
-  throw UsageError("--bag needs the ROS build: this mcflow was built without ROS (MCFLOW_WITH_ROS=OFF or catkin not "
-                   "found), so it cannot read rosbags; rebuild with ROS (scripts/build.sh) or export the bag's frames "
-                   "to a folder and use --tum/--frames");
+  throw UsageError(
+      "--bag needs the ROS build: this mcflow was built without ROS (MCFLOW_WITH_ROS=OFF or catkin not "
+      "found), so it cannot read rosbags; rebuild with ROS (scripts/build.sh) or export the bag's frames "
+      "to a folder and use --tum/--frames");
 #endif
 }
 
@@ -568,8 +588,10 @@ int cmdRunSeq(const Arguments& args) {
   Config config = buildConfig(args);
   if (args.has("cold")) config.warm_start = false;
   const int downsample = args.has("downsample") ? parseInteger("downsample", args.get("downsample")) : 0;
-  const double max_interval = args.has("max-pair-interval") ? parseNumber("max-pair-interval", args.get("max-pair-interval")) : 1.0;
-  const SequenceSource source = args.has("bag") ? bagSequence(args, config, downsample) : fileSequence(args, downsample);
+  const double max_interval =
+      args.has("max-pair-interval") ? parseNumber("max-pair-interval", args.get("max-pair-interval")) : 1.0;
+  const SequenceSource source =
+      args.has("bag") ? bagSequence(args, config, downsample) : fileSequence(args, downsample);
   io::createOutputDirectory(out);
   SequencePipeline pipeline(config, source.pipeline_downsample, max_interval);
   if (!pipeline.backendUnavailable().empty())  // the pipeline solves on the CPU rather than not at all
@@ -642,9 +664,9 @@ int cmdRunSeq(const Arguments& args) {
     log << "], \"rmse_intensity\": " << residual.photometric << ", \"rmse_depth_m\": " << residual.geometric << "}";
     // Progress bar: pairs done of the frames' pairs, mean time per pair.
     const int width = 30, done = int((i * width) / (source.count - 1));
-    std::fprintf(stderr, "\rmcflow: [%s%s] %d/%zu pairs, %.0f ms/pair (%s)   ", std::string(std::size_t(done), '#').c_str(),
-                 std::string(std::size_t(width - done), ' ').c_str(), solved, source.count - 1, total_ms / solved,
-                 toString(r.start).c_str());
+    std::fprintf(stderr, "\rmcflow: [%s%s] %d/%zu pairs, %.0f ms/pair (%s)   ",
+                 std::string(std::size_t(done), '#').c_str(), std::string(std::size_t(width - done), ' ').c_str(),
+                 solved, source.count - 1, total_ms / solved, toString(r.start).c_str());
   }
   std::fprintf(stderr, "\n");
   log << "\n]\n";
@@ -657,10 +679,11 @@ int cmdRunSeq(const Arguments& args) {
   if (!ids_per_pair.empty())
     io::writeImage((std::filesystem::path(out) / "ids_over_time.png").string(), io::idsOverTimeImage(ids_per_pair));
   const std::string skipped_text = skipped ? ", " + std::to_string(skipped) + " frame(s) skipped" : "";
-  std::printf("%d pair(s) solved (%d warm, %d cold fallbacks, %d failed, %ld new sequence(s)%s), %.1f ms/pair solving, "
-              "%.1f s in all; wrote %s\n",
-              solved, warm, fallbacks, failed, pipeline.resets(), skipped_text.c_str(), solved ? total_ms / solved : 0.0,
-              elapsedMs(start) / 1000.0, out.c_str());
+  std::printf(
+      "%d pair(s) solved (%d warm, %d cold fallbacks, %d failed, %ld new sequence(s)%s), %.1f ms/pair solving, "
+      "%.1f s in all; wrote %s\n",
+      solved, warm, fallbacks, failed, pipeline.resets(), skipped_text.c_str(), solved ? total_ms / solved : 0.0,
+      elapsedMs(start) / 1000.0, out.c_str());
   return solved > 0 ? 0 : 1;
 }
 
@@ -697,8 +720,10 @@ int cmdSynthSequence(const Arguments& args, SyntheticSceneOptions options, int f
   io::writeTextFile((std::filesystem::path(out) / "rgb.txt").string(), rgb_list);
   io::writeTextFile((std::filesystem::path(out) / "depth.txt").string(), depth_list);
   io::saveCameraInfo((std::filesystem::path(out) / "camera_info.yaml").string(), {K, options.width, options.height});
-  std::printf("wrote %s: %d frames in the TUM RGB-D layout (depth 5000 units/m), ground truth per pair in gt/; "
-              "run `mcflow run-seq --tum %s --out DIR`\n", out.c_str(), frame_count, out.c_str());
+  std::printf(
+      "wrote %s: %d frames in the TUM RGB-D layout (depth 5000 units/m), ground truth per pair in gt/; "
+      "run `mcflow run-seq --tum %s --out DIR`\n",
+      out.c_str(), frame_count, out.c_str());
   return 0;
 }
 
@@ -758,8 +783,8 @@ int cmdEval(const Arguments& args) {
   }
   if (!with_truth && !with_inputs)
     throw UsageError("nothing to evaluate against: give --gt DIR and/or the inputs (--rgb1 ... --intrinsics)");
-  const io::EvalMetrics metrics =
-      evaluateAndWrite(result_dir, with_truth ? &truth : nullptr, with_inputs ? &inputs : nullptr, with_inputs ? &K : nullptr);
+  const io::EvalMetrics metrics = evaluateAndWrite(result_dir, with_truth ? &truth : nullptr,
+                                                   with_inputs ? &inputs : nullptr, with_inputs ? &K : nullptr);
   std::cout << io::evalTable(metrics);
   std::printf("wrote %s\n", (std::filesystem::path(result_dir) / "eval.json").string().c_str());
   return 0;
@@ -789,11 +814,12 @@ int cmdDemo(const Arguments& args) {
     std::printf("  part %2d %-16s |v| = %7.1f mm, |w| = %6.2f deg\n", p.id, p.name.c_str(),
                 1000.0 * p.twist.head<3>().norm(), p.twist.tail<3>().norm() * 180.0 / M_PI);
   printSegments(result);
-  std::printf("optical flow EPE %.3f px (zero flow %.3f px; moving pixels %.3f px, zero flow %.3f px), AAE %.2f deg,\n"
-              "3D EPE %.1f mm, segmentation agreement %.3f, occlusion agreement %.3f\n",
-              metrics.flow_epe, metrics.flow_epe_zero_flow, metrics.flow_epe_moving, metrics.flow_epe_moving_zero_flow,
-              metrics.flow_aae_deg, 1000.0 * metrics.scene_flow_epe, metrics.segmentation_agreement,
-              metrics.occlusion_agreement);
+  std::printf(
+      "optical flow EPE %.3f px (zero flow %.3f px; moving pixels %.3f px, zero flow %.3f px), AAE %.2f deg,\n"
+      "3D EPE %.1f mm, segmentation agreement %.3f, occlusion agreement %.3f\n",
+      metrics.flow_epe, metrics.flow_epe_zero_flow, metrics.flow_epe_moving, metrics.flow_epe_moving_zero_flow,
+      metrics.flow_aae_deg, 1000.0 * metrics.scene_flow_epe, metrics.segmentation_agreement,
+      metrics.occlusion_agreement);
   printTimings(result);
   std::printf("wrote %s (see overview.png)\n", out.c_str());
   return 0;
@@ -844,8 +870,10 @@ int cmdBenchReal(const Arguments& args) {
   if (repeat < 1) throw InputError("--repeat " + std::to_string(repeat) + ": must be >= 1");
   io::ExclusionMask mask = io::ExclusionMask::UnionOfAll;
   if (args.has("mask")) {
-    if (args.get("mask") == "mcflow") mask = io::ExclusionMask::McFlowOnly;
-    else if (args.get("mask") != "union") throw InputError("--mask '" + args.get("mask") + "': expected union or mcflow");
+    if (args.get("mask") == "mcflow")
+      mask = io::ExclusionMask::McFlowOnly;
+    else if (args.get("mask") != "union")
+      throw InputError("--mask '" + args.get("mask") + "': expected union or mcflow");
   }
   const int halvings = args.has("full-resolution") ? 0 : 1;
 
@@ -859,10 +887,11 @@ int cmdBenchReal(const Arguments& args) {
     backend = solves.quad.backend;
     scores.push_back(io::scoreRealPair(pair, solves, mask));
   }
-  std::printf("# mcflow bench-real: %s, %s input, processing level %d, backend %s, %d run(s) per solve (median "
-              "times), excluded: %s\n",
-              data.c_str(), halvings ? "320x240 (halved)" : "640x480", config.processing_level, backend.c_str(), repeat,
-              mask == io::ExclusionMask::UnionOfAll ? "occlusions of all solves" : "occlusions of MC-Flow");
+  std::printf(
+      "# mcflow bench-real: %s, %s input, processing level %d, backend %s, %d run(s) per solve (median "
+      "times), excluded: %s\n",
+      data.c_str(), halvings ? "320x240 (halved)" : "640x480", config.processing_level, backend.c_str(), repeat,
+      mask == io::ExclusionMask::UnionOfAll ? "occlusions of all solves" : "occlusions of MC-Flow");
   std::fputs(io::realBenchTable(scores).c_str(), stdout);
   return 0;
 }
@@ -871,16 +900,18 @@ int cmdBenchReal(const Arguments& args) {
 
 int cmdEvalTraj(const Arguments& args) {
   if (!args.has("gt") || !args.has("est")) throw UsageError("eval-traj needs --gt FILE and --est FILE");
-  const double max_difference = args.has("max-difference") ? parseNumber("max-difference", args.get("max-difference")) : 0.02;
+  const double max_difference =
+      args.has("max-difference") ? parseNumber("max-difference", args.get("max-difference")) : 0.02;
   const double offset = args.has("offset") ? parseNumber("offset", args.get("offset")) : 0.0;
   const io::StampedPoses gt = io::readTumTrajectory(args.get("gt"));
   const io::StampedPoses est = io::readTumTrajectory(args.get("est"));
   const io::TrajectoryErrors e = io::evaluateTrajectory(gt, est, max_difference, offset);
   std::printf("# mcflow eval-traj: %s against %s (%d of %zu poses matched within %.3f s, offset %.3f s)\n",
               args.get("est").c_str(), args.get("gt").c_str(), e.matched, est.size(), max_difference, offset);
-  std::printf("ate_rmse_m %.4f\nrpe_frame_trans_m %.4f\nrpe_frame_rot_deg %.3f\nrpe_second_trans_m %.4f\n"
-              "rpe_second_rot_deg %.3f\n",
-              e.ate_rmse_m, e.rpe_frame_trans_m, e.rpe_frame_rot_deg, e.rpe_second_trans_m, e.rpe_second_rot_deg);
+  std::printf(
+      "ate_rmse_m %.4f\nrpe_frame_trans_m %.4f\nrpe_frame_rot_deg %.3f\nrpe_second_trans_m %.4f\n"
+      "rpe_second_rot_deg %.3f\n",
+      e.ate_rmse_m, e.rpe_frame_trans_m, e.rpe_frame_rot_deg, e.rpe_second_trans_m, e.rpe_second_rot_deg);
   if (e.rpe_second_pairs == 0) std::printf("# the trajectory spans less than 1 s: no per-second RPE\n");
   if (args.has("plot")) io::writeImage(args.get("plot"), io::trajectoryPlot(e));
   return 0;

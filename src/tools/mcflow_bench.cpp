@@ -4,7 +4,8 @@
 // kernel launches per solve (a CUB call counts as one); at the end the device memory in use.
 //
 //   mcflow_bench [--width 320] [--height 240] [--backend auto|cpu|cuda] [--repeat 3] [--noise]
-//                [--regularizer both|quad|tv] [--set name=value ...] [--camera-only] [--parts [--truth-start]] [--real DIR]
+//                [--regularizer both|quad|tv] [--set name=value ...] [--camera-only] [--parts [--truth-start]] [--real
+//                DIR]
 //
 // --real DIR: the real pairs as `mcflow export-real` writes them (PFM, no OpenCV needed), one row per pair and size.
 // --concurrent N [--devices 0,1]: N solvers (N cameras) in N threads, each solving synth-0 `repeat` times, solver i on
@@ -63,12 +64,14 @@ int cameraOnlyBench(const Config& base, int width, int height) {
       {"5cm_3deg", {-0.03, 0.02, 0.035}, {-1.5, 2.4, 0.8}},
       {"10cm_8deg", {0.06, -0.03, 0.07}, {4.0, -6.5, 2.0}},
   };
-  std::printf("# mcflow_bench --camera-only: static scenes %dx%d, intensity noise 0.01, depth noise 1.5 mm at 1 m "
-              "(x depth^2), regularizer %s\n",
-              width, height, base.regularizer == Regularizer::Quadratic ? "quad" : "tv");
-  std::printf("# world_mm / world_deg: the static world's motion (Result::world) against the camera's true one; nees: "
-              "its error's squared Mahalanobis length under the world's covariance (6 dof: 95 %% of single values in "
-              "[1.24, 14.4]; the mean of 9 in [3.96, 8.47])\n");
+  std::printf(
+      "# mcflow_bench --camera-only: static scenes %dx%d, intensity noise 0.01, depth noise 1.5 mm at 1 m "
+      "(x depth^2), regularizer %s\n",
+      width, height, base.regularizer == Regularizer::Quadratic ? "quad" : "tv");
+  std::printf(
+      "# world_mm / world_deg: the static world's motion (Result::world) against the camera's true one; nees: "
+      "its error's squared Mahalanobis length under the world's covariance (6 dof: 95 %% of single values in "
+      "[1.24, 14.4]; the mean of 9 in [3.96, 8.47])\n");
   std::printf("%-8s %-10s %6s %8s %8s %8s %6s %10s %10s %9s %9s %8s  %s\n", "scene", "motion", "segs", "EPE", "EPE_1",
               "ratio", "segs_1", "total_ms", "total_ms_1", "world_mm", "world_deg", "nees",
               "motion labels over the outer iterations (K-means > after each)");
@@ -108,17 +111,19 @@ int cameraOnlyBench(const Config& base, int width, int height) {
 // arm's two links (which move differently: an elbow rotation on top of the upper arm's motion) got a segment each.
 // `truth_start`: each solve starts from the true parts instead of K-means: a warm start from truthSegmentation with a
 // cold solve's outer iterations, pyramid levels and label iterations, and no splits (these warm_* settings override any
-// --set). It stays a warm solve otherwise: every motion starts from zero (no dominant-motion start), each level's motion
-// step runs motion_iterations_refine iterations, and warm_switch_cost holds the pixels in their true parts. How well the
-// motions come out when the segments are right, i.e. what the label count alone cannot improve.
+// --set). It stays a warm solve otherwise: every motion starts from zero (no dominant-motion start), each level's
+// motion step runs motion_iterations_refine iterations, and warm_switch_cost holds the pixels in their true parts. How
+// well the motions come out when the segments are right, i.e. what the label count alone cannot improve.
 int partsBench(const Config& base, const std::vector<Regularizer>& regs, int width, int height, bool noise,
                bool truth_start) {
-  std::printf("# mcflow_bench --parts%s: synthetic scenes %dx%d, noise %s; per rigid part the segment covering most of "
-              "its pixels and that segment's errors%s\n",
-              truth_start ? " --truth-start" : "", width, height, noise ? "on" : "off",
-              truth_start ? " (solves start from the true parts, motions unknown)" : "");
-  std::printf("# rot_err: rotation error [deg]; along / across: its parts about the part's longest axis and across it; "
-              "fit_err: that of the best rigid motion for the part's true scene flow\n");
+  std::printf(
+      "# mcflow_bench --parts%s: synthetic scenes %dx%d, noise %s; per rigid part the segment covering most of "
+      "its pixels and that segment's errors%s\n",
+      truth_start ? " --truth-start" : "", width, height, noise ? "on" : "off",
+      truth_start ? " (solves start from the true parts, motions unknown)" : "");
+  std::printf(
+      "# rot_err: rotation error [deg]; along / across: its parts about the part's longest axis and across it; "
+      "fit_err: that of the best rigid motion for the part's true scene flow\n");
   std::printf("%-8s %-5s %-11s %7s %4s %6s %8s %8s %8s %8s %8s %8s\n", "scene", "reg", "part", "pixels", "seg", "cover",
               "rot_deg", "rot_err", "along", "across", "fit_err", "EPE");
   for (int variant = 0; variant < syntheticVariantCount(); ++variant) {
@@ -194,9 +199,8 @@ StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const Rgbd
     solve.push_back(sol);
     irls.push_back(its);
   }
-  return {median(total),  median(cpu),    median(pyr),      median(init),       median(motion),
-          median(labels), median(occl),   median(output),   median(launches),   median(accumulate),
-          median(solve),  median(irls)};
+  return {median(total), median(cpu),    median(pyr),      median(init),       median(motion), median(labels),
+          median(occl),  median(output), median(launches), median(accumulate), median(solve),  median(irls)};
 }
 
 // The real pairs on any machine: folders <pair>_<W>x<H> of PFM frames and intrinsics.txt (mcflow export-real).
@@ -209,12 +213,13 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
   if (folders.empty())
     throw InputError("--real " + dir + ": no folder with intrinsics.txt (write them with mcflow export-real)");
   std::sort(folders.begin(), folders.end());
-  std::printf("# mcflow_bench --real %s: regularizer %s, repeat %d (median times); residuals: RMSE after warping frame 2 "
-              "back, occluded pixels excluded\n",
-              dir.c_str(), base.regularizer == Regularizer::Quadratic ? "quad" : "tv", repeat);
+  std::printf(
+      "# mcflow_bench --real %s: regularizer %s, repeat %d (median times); residuals: RMSE after warping frame 2 "
+      "back, occluded pixels excluded\n",
+      dir.c_str(), base.regularizer == Regularizer::Quadratic ? "quad" : "tv", repeat);
   std::printf("%-28s %6s %7s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %7s %7s %5s\n", "pair", "segs", "rmseI",
-              "rmseZ_mm", "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "occl", "output", "launches", "m_acc",
-              "m_lm", "irls");
+              "rmseZ_mm", "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "occl", "output", "launches",
+              "m_acc", "m_lm", "irls");
   std::printf("# last column: motion labels over the outer iterations, K-means > after each (merged, split)\n");
   std::map<std::string, std::vector<double>> totals_by_size;
   for (const std::filesystem::path& folder : folders) {
@@ -234,10 +239,11 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
     const StageMedians m = solveRepeatedly(solver, frame1, frame2, K, repeat, r);
     const ResidualRmse rr = warpResidualRmse(frame1, frame2, K, &r.scene_flow, &r.occlusion);
     const std::string counts = labelCountTrace(r, true);
-    std::printf("%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f %7.2f %7.2f %5.0f  %s\n",
-                folder.filename().string().c_str(), r.segments.size(), rr.photometric, 1000.0 * rr.geometric, m.total,
-                m.cpu, m.pyr, m.init, m.motion, m.labels, m.occl, m.output, m.launches, m.motion_accumulate,
-                m.motion_solve, m.irls, counts.c_str());
+    std::printf(
+        "%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f %7.2f %7.2f %5.0f  %s\n",
+        folder.filename().string().c_str(), r.segments.size(), rr.photometric, 1000.0 * rr.geometric, m.total, m.cpu,
+        m.pyr, m.init, m.motion, m.labels, m.occl, m.output, m.launches, m.motion_accumulate, m.motion_solve, m.irls,
+        counts.c_str());
     std::fflush(stdout);
     totals_by_size[std::to_string(frame1.width()) + "x" + std::to_string(frame1.height())].push_back(m.total);
   }
@@ -267,7 +273,8 @@ std::string firstDifference(const Result& a, const Result& b) {
   if (!sameBytes(a.moved_depth.data, b.moved_depth.data)) return "moved depth";
   if (!sameBytes(a.occlusion.data, b.occlusion.data)) return "occlusion";
   if (a.segments.size() != b.segments.size())
-    return "segment count (" + std::to_string(a.segments.size()) + " against " + std::to_string(b.segments.size()) + ")";
+    return "segment count (" + std::to_string(a.segments.size()) + " against " + std::to_string(b.segments.size()) +
+           ")";
   for (std::size_t k = 0; k < a.segments.size(); ++k) {
     const Segment &sa = a.segments[k], &sb = b.segments[k];
     const std::string which = "segment " + std::to_string(k) + "'s ";
@@ -360,10 +367,11 @@ int concurrentBench(const Config& base, int width, int height, int solvers, int 
     std::printf("# solver i on CUDA device devices[i %% %zu]: %s\n", devices.size(), joined(placement, " ").c_str());
   const std::string where_one = on_gpu ? " on device " + std::to_string(devices.front()) : "";
   const std::string where_all = on_gpu ? " on devices " + joined(devices, ",") : "";
-  std::printf("one solver%s: %.1f pairs/s (%.1f ms per pair); %d solvers in %d threads%s: %.1f pairs/s in all, %.1f per "
-              "solver (%.2fx the throughput of one)\n",
-              where_one.c_str(), alone, 1000.0 / alone, solvers, solvers, where_all.c_str(), together, together / solvers,
-              together / alone);
+  std::printf(
+      "one solver%s: %.1f pairs/s (%.1f ms per pair); %d solvers in %d threads%s: %.1f pairs/s in all, %.1f per "
+      "solver (%.2fx the throughput of one)\n",
+      where_one.c_str(), alone, 1000.0 / alone, solvers, solvers, where_all.c_str(), together, together / solvers,
+      together / alone);
   bool identical = true;
   for (int i = 0; i < solvers; ++i) {
     const std::string difference = firstDifference(last[std::size_t(i)], reference);
@@ -372,9 +380,10 @@ int concurrentBench(const Config& base, int width, int height, int solvers, int 
     std::printf("# solver %d (device %d): its %s differ from the solve alone%s\n", i, placement[std::size_t(i)],
                 difference.c_str(), where_one.c_str());
   }
-  std::printf("results identical: %s (each solver's last result against the same pair solved by one solver alone%s: "
-              "labels, soft labels, flows, moved depth, occlusion, segments, world twist, byte for byte)\n",
-              identical ? "yes" : "no", where_one.c_str());
+  std::printf(
+      "results identical: %s (each solver's last result against the same pair solved by one solver alone%s: "
+      "labels, soft labels, flows, moved depth, occlusion, segments, world twist, byte for byte)\n",
+      identical ? "yes" : "no", where_one.c_str());
   return identical ? 0 : 1;
 }
 
@@ -448,9 +457,9 @@ int main(int argc, char** argv) {
 
     std::printf("# mcflow_bench: synthetic scenes %dx%d, noise %s, repeat %d (median times)\n", width, height,
                 noise ? "on" : "off", repeat);
-    std::printf("%-8s %-5s %7s %7s %8s %7s %7s %7s %7s %6s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %7s %7s %5s\n", "scene",
-                "reg", "EPE", "AAE", "EPE3D_mm", "seg", "occ", "rmseI", "rmseZ", "labels", "total_ms", "cpu_ms", "pyr",
-                "init", "motion", "labels", "occl", "output", "launches", "m_acc", "m_lm", "irls");
+    std::printf("%-8s %-5s %7s %7s %8s %7s %7s %7s %7s %6s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %7s %7s %5s\n",
+                "scene", "reg", "EPE", "AAE", "EPE3D_mm", "seg", "occ", "rmseI", "rmseZ", "labels", "total_ms",
+                "cpu_ms", "pyr", "init", "motion", "labels", "occl", "output", "launches", "m_acc", "m_lm", "irls");
     for (int variant = 0; variant < syntheticVariantCount(); ++variant) {
       const SyntheticPair pair = renderSyntheticPair(sceneOptions(variant, width, height, noise));
       for (Regularizer reg : regs) {
@@ -463,21 +472,25 @@ int main(int argc, char** argv) {
         const double epe3d = sceneFlowEpe(r.scene_flow, pair.gt_scene_flow, &pair.gt_occlusion);
         const double seg = segmentationAgreement(r.labels, pair.gt_parts);
         const double occ = maskAgreement(r.occlusion, pair.gt_occlusion, nullptr);
-        const ResidualRmse rr = warpResidualRmse(pair.frame1, pair.frame2, pair.intrinsics, &r.scene_flow, &r.occlusion);
-        std::printf("synth-%-2d %-5s %7.3f %7.3f %8.2f %7.3f %7.3f %7.4f %7.4f %6d | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f %7.2f %7.2f %5.0f\n",
-                    variant, reg == Regularizer::Quadratic ? "quad" : "tv", fe.epe, fe.aae_deg, epe3d * 1000.0, seg, occ,
-                    rr.photometric, rr.geometric, int(r.segments.size()), m.total, m.cpu, m.pyr, m.init, m.motion, m.labels,
-                    m.occl, m.output, m.launches, m.motion_accumulate, m.motion_solve, m.irls);
+        const ResidualRmse rr =
+            warpResidualRmse(pair.frame1, pair.frame2, pair.intrinsics, &r.scene_flow, &r.occlusion);
+        std::printf(
+            "synth-%-2d %-5s %7.3f %7.3f %8.2f %7.3f %7.3f %7.4f %7.4f %6d | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f "
+            "%8.1f %8.0f %7.2f %7.2f %5.0f\n",
+            variant, reg == Regularizer::Quadratic ? "quad" : "tv", fe.epe, fe.aae_deg, epe3d * 1000.0, seg, occ,
+            rr.photometric, rr.geometric, int(r.segments.size()), m.total, m.cpu, m.pyr, m.init, m.motion, m.labels,
+            m.occl, m.output, m.launches, m.motion_accumulate, m.motion_solve, m.irls);
         std::fflush(stdout);
       }
     }
     std::size_t used = 0, device_total = 0;
     if (cudaDeviceMemory(&used, &device_total))
-      std::printf("# device memory in use (all processes): %.1f MiB of %.1f MiB; allocations so far: %llu device, %llu "
-                  "page-locked\n",
-                  double(used) / (1024.0 * 1024.0), double(device_total) / (1024.0 * 1024.0),
-                  static_cast<unsigned long long>(cudaCounters().device_allocations),
-                  static_cast<unsigned long long>(cudaCounters().pinned_allocations));
+      std::printf(
+          "# device memory in use (all processes): %.1f MiB of %.1f MiB; allocations so far: %llu device, %llu "
+          "page-locked\n",
+          double(used) / (1024.0 * 1024.0), double(device_total) / (1024.0 * 1024.0),
+          static_cast<unsigned long long>(cudaCounters().device_allocations),
+          static_cast<unsigned long long>(cudaCounters().pinned_allocations));
     return 0;
   } catch (const CommandLineError& e) {
     std::fprintf(stderr, "mcflow_bench: %s\n", e.what());

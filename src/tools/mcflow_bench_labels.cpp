@@ -85,15 +85,14 @@ Timing timeOptimizer(LabelOptimizer& optimizer, const LabelProblem& problem, int
 }  // namespace
 
 int main(int argc, char** argv) {
-  CommandLine cli("mcflow_bench_labels",
-                  {{"sizes", true, "WxH,... (default 320x240,640x480)"},
-                   {"labels", true, "label counts N,... in [2, 128] (default 20,4)"},
-                   {"iterations", true, "primal-dual iterations per call (default 150)"},
-                   {"repeat", true, "timed calls; times are the median (default 7)"},
-                   {"warmup", true, "untimed calls first (default 2)"},
-                   {"backend", true, "both | cpu | cuda (default both)"},
-                   {"regularizer", true, "both | quad | tv (default both)"},
-                   {"variant", true, "synthetic scene variant (default 0)"}});
+  CommandLine cli("mcflow_bench_labels", {{"sizes", true, "WxH,... (default 320x240,640x480)"},
+                                          {"labels", true, "label counts N,... in [2, 128] (default 20,4)"},
+                                          {"iterations", true, "primal-dual iterations per call (default 150)"},
+                                          {"repeat", true, "timed calls; times are the median (default 7)"},
+                                          {"warmup", true, "untimed calls first (default 2)"},
+                                          {"backend", true, "both | cpu | cuda (default both)"},
+                                          {"regularizer", true, "both | quad | tv (default both)"},
+                                          {"variant", true, "synthetic scene variant (default 0)"}});
   try {
     cli.parse(argc, argv);
   } catch (const CommandLineError& e) {

@@ -8,8 +8,8 @@
 //     that frame's ground-truth camera pose (groundtruth.txt at the colour stamp + offset) and z-tested against the
 //     real depth. Box i is placed in front of the camera at frame (i + 1/2) N / boxes, not all at the first frame:
 //     fr1/rpy pans ~100 deg in 1.3 s, and boxes placed at frame 0 had left the view by frame 20. The real images
-//     are motion-blurred in the fast turns; the boxes are not. OUT/box_N.txt hold the boxes' world-from-box poses per frame (TUM format); OUT/composite.txt
-//     says how they were made.
+//     are motion-blurred in the fast turns; the boxes are not. OUT/box_N.txt hold the boxes' world-from-box poses per
+//     frame (TUM format); OUT/composite.txt says how they were made.
 //   mcflow_bench_odometry opencv --tum DIR --intrinsics FX,FY,CX,CY --out TRAJ [--method rgbd|icp|rgbdicp]
 //     Frame-to-frame cv::rgbd::RgbdOdometry / ICPOdometry / RgbdICPOdometry with OpenCV's defaults, chained into a
 //     TUM trajectory (colour stamps; the camera's optical frame in the first frame's). A pair that fails holds
@@ -52,7 +52,6 @@ namespace {
 
 constexpr double kTumDepthScale = 5000.0;  // units per metre in TUM depth PNGs
 
-
 double parseNumber(const std::string& name, const std::string& text) {
   std::size_t used = 0;
   double value = 0;
@@ -70,8 +69,8 @@ double parseNumber(const std::string& name, const std::string& text) {
 /// World-from-camera at `stamp`: translation linear, rotation slerped between the two bracketing mocap poses.
 Eigen::Matrix4d interpolatePose(const std::vector<std::pair<double, Eigen::Matrix4d>>& poses, double stamp,
                                 const std::string& path) {
-  const auto after = std::lower_bound(poses.begin(), poses.end(), stamp,
-                                      [](const auto& p, double s) { return p.first < s; });
+  const auto after =
+      std::lower_bound(poses.begin(), poses.end(), stamp, [](const auto& p, double s) { return p.first < s; });
   if (after == poses.end() || (after == poses.begin() && after->first > stamp)) {
     char text[160];
     std::snprintf(text, sizeof(text), "'%s' has no pose around %.6f (its poses span %.6f..%.6f)", path.c_str(), stamp,
@@ -120,19 +119,19 @@ std::uint32_t hash3(std::uint32_t a, std::uint32_t b, std::uint32_t c) {
 double boxTexture(const Box& box, int face, double a, double b) {
   constexpr double kCell = 0.04;
   const int i = int(std::floor(a / kCell)), j = int(std::floor(b / kCell));
-  const std::uint32_t h = hash3(std::uint32_t(i + 1000), std::uint32_t(j + 1000), box.texture_seed + std::uint32_t(face));
+  const std::uint32_t h =
+      hash3(std::uint32_t(i + 1000), std::uint32_t(j + 1000), box.texture_seed + std::uint32_t(face));
   double level = 30.0 + 210.0 * double(h & 0xffu) / 255.0;
   const double fa = a / kCell - i, fb = b / kCell - j;
   if ((h >> 8) % 3 == 0 && std::abs(fa - fb) < 0.12) level = 15.0;
   return level;
 }
 
-
 /// Where a box is placed: in front of the camera at one frame of the sequence (its anchor).
 struct Anchor {
-  double t = 0;                    // [s] since the first frame
+  double t = 0;  // [s] since the first frame
   Eigen::Matrix4d world_from_camera;
-  double scene_depth = 0;          // [m] median real depth of the central third of the image
+  double scene_depth = 0;  // [m] median real depth of the central third of the image
 };
 
 /// Box i is centred on the view of anchor i, nearer than most of the real scene there (so that the z-test keeps
@@ -160,7 +159,8 @@ std::vector<Box> makeBoxes(const std::vector<Anchor>& anchors, std::uint32_t see
     box.v = R * velocity_c;
     box.c0 = R * centre_c + t - box.v * anchor.t;
     box.w = Eigen::Vector3d(uniform(-1, 1), uniform(-1, 1), uniform(-1, 1)).normalized() * uniform(0.5, 1.0);
-    box.R0 = Eigen::Quaterniond(uniform(-1, 1), uniform(-1, 1), uniform(-1, 1), uniform(-1, 1)).normalized()
+    box.R0 = Eigen::Quaterniond(uniform(-1, 1), uniform(-1, 1), uniform(-1, 1), uniform(-1, 1))
+                 .normalized()
                  .toRotationMatrix();
     box.tint = Eigen::Vector3d(uniform(0.5, 1.0), uniform(0.5, 1.0), uniform(0.5, 1.0));
     box.texture_seed = std::uint32_t(rng());
@@ -217,10 +217,12 @@ int cmdComposite(const CommandLine& line) {
     anchors.push_back({frame.stamp - t0, interpolatePose(gt, frame.stamp + offset, gt_path), centralDepth(depth)});
   }
   const std::vector<Box> boxes = makeBoxes(anchors, std::uint32_t(seed));
-  std::vector<std::string> box_poses(boxes.size(), "# world-from-box at the colour stamps (the box's centre; "
-                                                   "axes along its edges)\n# timestamp tx ty tz qx qy qz qw\n");
-  std::string rgb_list = "# colour images with moving boxes composited in (mcflow_bench_odometry composite)\n"
-                         "# timestamp filename\n";
+  std::vector<std::string> box_poses(boxes.size(),
+                                     "# world-from-box at the colour stamps (the box's centre; "
+                                     "axes along its edges)\n# timestamp tx ty tz qx qy qz qw\n");
+  std::string rgb_list =
+      "# colour images with moving boxes composited in (mcflow_bench_odometry composite)\n"
+      "# timestamp filename\n";
   std::string depth_list = "# depth maps with moving boxes composited in\n# timestamp filename\n", associations;
   std::vector<double> coverage, in_view_fraction;  // per frame: box pixels after and before the z-test
   for (std::size_t f = 0; f < frames.size(); ++f) {
@@ -298,8 +300,8 @@ int cmdComposite(const CommandLine& line) {
   io::writeTextFile((fs::path(out) / "associations.txt").string(), associations);
 
   std::ostringstream about;
-  about << "Composited by mcflow_bench_odometry composite from " << dir << " (" << frames.size()
-        << " frames), seed " << seed << ", " << boxes.size() << " box(es).\n"
+  about << "Composited by mcflow_bench_odometry composite from " << dir << " (" << frames.size() << " frames), seed "
+        << seed << ", " << boxes.size() << " box(es).\n"
         << "Camera: world-from-camera from groundtruth.txt at the colour stamp " << (offset < 0 ? "- " : "+ ")
         << std::abs(offset) << " s (interpolated); intrinsics " << K.fx << "," << K.fy << "," << K.cx << "," << K.cy
         << ".\nBoxes move in the world frame (groundtruth.txt's), t = colour stamp - " << std::fixed << t0
@@ -308,9 +310,9 @@ int cmdComposite(const CommandLine& line) {
   for (std::size_t b = 0; b < boxes.size(); ++b) {
     const Box& box = boxes[b];
     about << "box " << b << ": anchored at t=" << anchors[b].t << " s (scene depth " << anchors[b].scene_depth
-          << " m), size " << 2 * box.half.transpose() << " m, centre at t=0 " << box.c0.transpose()
-          << " m, velocity " << box.v.transpose() << " m/s (" << box.v.norm() << "), angular velocity "
-          << box.w.transpose() << " rad/s (" << box.w.norm() << ")\n";
+          << " m), size " << 2 * box.half.transpose() << " m, centre at t=0 " << box.c0.transpose() << " m, velocity "
+          << box.v.transpose() << " m/s (" << box.v.norm() << "), angular velocity " << box.w.transpose() << " rad/s ("
+          << box.w.norm() << ")\n";
     io::writeTextFile((fs::path(out) / ("box_" + std::to_string(b) + ".txt")).string(), box_poses[b]);
   }
   const double mean_coverage = std::accumulate(coverage.begin(), coverage.end(), 0.0) / double(coverage.size());

@@ -70,10 +70,11 @@ void printVerdict(const char* what, const FlatnessVerdict& v, double tolerance_m
     std::printf("%-14s no verdict: fewer than two samples after the warm-up\n", what);
     return;
   }
-  std::printf("%-14s %s: solves %ld-%ld: baseline %.1f MiB, end %.1f MiB, growth %+.2f MiB (tolerance %.1f MiB); "
-              "peak %.1f MiB, trend %+.1f KiB per 1000 solves\n",
-              what, v.flat ? "flat" : "NOT FLAT", v.first_solves, v.last_solves, v.baseline / kMiB, v.end / kMiB,
-              v.growth / kMiB, tolerance_mb, v.peak / kMiB, v.slope_per_1000 / 1024.0);
+  std::printf(
+      "%-14s %s: solves %ld-%ld: baseline %.1f MiB, end %.1f MiB, growth %+.2f MiB (tolerance %.1f MiB); "
+      "peak %.1f MiB, trend %+.1f KiB per 1000 solves\n",
+      what, v.flat ? "flat" : "NOT FLAT", v.first_solves, v.last_solves, v.baseline / kMiB, v.end / kMiB,
+      v.growth / kMiB, tolerance_mb, v.peak / kMiB, v.slope_per_1000 / 1024.0);
 }
 
 }  // namespace
@@ -103,7 +104,8 @@ int main(int argc, char** argv) {
     opt.warmup = line.integer("warmup", opt.solves / 10, 0, opt.solves);
     if (opt.warmup + opt.every > opt.solves)
       throw CommandLineError("--warmup " + std::to_string(opt.warmup) + " + --every " + std::to_string(opt.every) +
-                             " exceeds --solves " + std::to_string(opt.solves) + ": no sample after the warm-up to judge");
+                             " exceeds --solves " + std::to_string(opt.solves) +
+                             ": no sample after the warm-up to judge");
     opt.width = line.integer("width", 320, 16, 8192);
     opt.height = line.integer("height", 240, 16, 8192);
     opt.frames = line.integer("frames", 30, 2, 10000);
@@ -111,7 +113,8 @@ int main(int argc, char** argv) {
     opt.rss_tolerance_mb = line.integer("rss-tolerance-mb", 8, 0, 1 << 20);
     opt.device_tolerance_mb = line.integer("device-tolerance-mb", 4, 0, 1 << 20);
     if (line.has("backend")) opt.config.backend = parseBackend(line.text("backend", "auto"));
-    if (line.has("fault")) opt.make_backend = faultOnFirstBackend(parseBackendFault(line.text("fault", "")), opt.config.cuda_device);
+    if (line.has("fault"))
+      opt.make_backend = faultOnFirstBackend(parseBackendFault(line.text("fault", "")), opt.config.cuda_device);
     line.applySettings(opt.config);
     opt.config.validate();
   } catch (const std::exception& e) {
@@ -133,10 +136,11 @@ int main(int argc, char** argv) {
     }
     SequencePipeline pipeline(opt.config, 1, 1.0, opt.make_backend);
     const bool on_cuda = pipeline.solver().backendKind() == Backend::Cuda;
-    std::printf("soak: %d solves of %dx%d variant %d over %d looping frames, backend %s, sample every %d, "
-                "warm-up %d solves\n",
-                opt.solves, opt.width, opt.height, opt.variant, opt.frames, pipeline.solver().backendName().c_str(),
-                opt.every, opt.warmup);
+    std::printf(
+        "soak: %d solves of %dx%d variant %d over %d looping frames, backend %s, sample every %d, "
+        "warm-up %d solves\n",
+        opt.solves, opt.width, opt.height, opt.variant, opt.frames, pipeline.solver().backendName().c_str(), opt.every,
+        opt.warmup);
     std::printf("%8s %9s %10s %8s %9s %8s %8s %5s %5s %8s %7s %9s\n", "solves", "rss_mb", "device_mb", "mean_ms",
                 "median_ms", "max_ms", "segments", "warm", "cold", "cold_fb", "failed", "fallbacks");
     std::fflush(stdout);
@@ -197,17 +201,18 @@ int main(int argc, char** argv) {
     const auto percentile = [&](double q) {
       return all_ms[std::min(all_ms.size() - 1, std::size_t(q * double(all_ms.size())))];
     };
-    std::printf("\nsolves %ld: solved %ld (warm %ld, cold %ld, cold fallback %ld), failed %ld, backend fallbacks %ld, "
-                "resets %ld\n",
-                solves, solves - failed, warm, cold, cold_fallback, failed, pipeline.backendFallbacks(),
-                pipeline.resets());
+    std::printf(
+        "\nsolves %ld: solved %ld (warm %ld, cold %ld, cold fallback %ld), failed %ld, backend fallbacks %ld, "
+        "resets %ld\n",
+        solves, solves - failed, warm, cold, cold_fallback, failed, pipeline.backendFallbacks(), pipeline.resets());
     std::printf("time per solve [ms]: median %.1f, p99 %.1f, max %.1f\n", percentile(0.5), percentile(0.99),
                 all_ms.back());
     // Another backend holds other buffers: memory before a fallback says nothing about the solves after it.
     const long warmup = last_fallback < 0 ? opt.warmup : last_fallback + opt.warmup;
-    std::printf("rule: over the samples from solve %ld on (%s), the median of the last third exceeds the median of "
-                "the first third by no more than the tolerance\n",
-                warmup, last_fallback < 0 ? "after the warm-up" : "a warm-up after the last backend fallback");
+    std::printf(
+        "rule: over the samples from solve %ld on (%s), the median of the last third exceeds the median of "
+        "the first third by no more than the tolerance\n",
+        warmup, last_fallback < 0 ? "after the warm-up" : "a warm-up after the last backend fallback");
     const FlatnessVerdict rss_verdict = judgeFlatness(rss, warmup, opt.rss_tolerance_mb * kMiB);
     printVerdict("RSS", rss_verdict, opt.rss_tolerance_mb);
     std::printf("%-14s peak RSS of the process (VmHWM) %.1f MiB\n", "", processStatusBytes("VmHWM") / kMiB);

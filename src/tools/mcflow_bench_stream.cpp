@@ -58,15 +58,15 @@ struct Options {
   Config config;
 };
 
-constexpr int kLatePart = 10;       // synthetic_scene.h: the box that starts moving at frame 10
-constexpr int kLateStartPair = 10;  // the first pair in which it moves
-constexpr int kMinPartPixels = 200; // parts smaller than this in a pair are not judged
-constexpr double kFrameRate = 30.0; // [Hz] the --world runs' stamps: the moving thresholds are per second
+constexpr int kLatePart = 10;           // synthetic_scene.h: the box that starts moving at frame 10
+constexpr int kLateStartPair = 10;      // the first pair in which it moves
+constexpr int kMinPartPixels = 200;     // parts smaller than this in a pair are not judged
+constexpr double kFrameRate = 30.0;     // [Hz] the --world runs' stamps: the moving thresholds are per second
 constexpr double kMinStaticAte = 1e-5;  // [m] a static run's ATE below this (a camera at rest) gives no ATE ratio
 
 struct ModeStats {
   std::vector<double> ms, epe;
-  StageTimings stages;  // summed over the pairs after the first
+  StageTimings stages;        // summed over the pairs after the first
   long kept = 0, judged = 0;  // id consistency
   int late_delay = -1;        // pairs after kLateStartPair until the late box has its own segment (-1: never)
   int fallbacks = 0, warm = 0;
@@ -96,7 +96,8 @@ std::map<int, int> majorityIds(const ImageI32& labels, const ImageI32& parts) {
   std::map<int, int> out;
   for (const auto& [part, v] : votes) {
     if (size[part] < kMinPartPixels) continue;
-    const auto best = std::max_element(v.begin(), v.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
+    const auto best =
+        std::max_element(v.begin(), v.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
     out[part] = best->first;
   }
   return out;
@@ -132,8 +133,8 @@ void scoreWorld(const SyntheticPair& p, const SequenceStep& step, const Odometry
   const Eigen::Matrix4d previous = ws.truth.back().second;
   ws.truth.emplace_back(odometry.stamp, previous * se3Exp(room).inverse());
   ws.estimate.emplace_back(odometry.stamp, odometry.pose);
-  ws.nees_pose.push_back(nees(se3Log(Eigen::Matrix4d(ws.truth.back().second.inverse() * odometry.pose)),
-                              odometry.pose_covariance));
+  ws.nees_pose.push_back(
+      nees(se3Log(Eigen::Matrix4d(ws.truth.back().second.inverse() * odometry.pose)), odometry.pose_covariance));
   ++ws.pairs;
   const RegionOverlap world = regionOverlap(r.labels, r.world.ids, p.gt_parts, 0, &valid);
   ws.world_right += r.world.found && world.matches();
@@ -170,8 +171,9 @@ void scoreWorld(const SyntheticPair& p, const SequenceStep& step, const Odometry
     const WorldVelocity v = velocityAt(true_segment, Matrix6d::Zero(), true_world, centroid, config);
     moving[truth.id] = v.moving;
     if (!v.moving || part.pixels < std::size_t(kMinPartPixels) || part.votes.empty()) continue;
-    const int id = std::max_element(part.votes.begin(), part.votes.end(),
-                                    [](const auto& a, const auto& b) { return a.second < b.second; })->first;
+    const int id = std::max_element(part.votes.begin(), part.votes.end(), [](const auto& a, const auto& b) {
+                     return a.second < b.second;
+                   })->first;
     const auto segment =
         std::find_if(r.segments.begin(), r.segments.end(), [id](const Segment& s) { return s.id == id; });
     if (segment == r.segments.end()) throw std::logic_error("label " + std::to_string(id) + " has no segment");
@@ -295,9 +297,10 @@ struct WorldRow {
 double maxOf(const std::vector<double>& v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); }
 
 void printWorldTable(const std::vector<WorldRow>& rows, const Config& config) {
-  std::printf("\nstatic world (--world): frames at %.0f Hz; moving = faster than %.3f m/s or %.1f deg/s relative to "
-              "the room; lin [m/s], ang [deg/s]\n",
-              kFrameRate, config.moving_min_speed, config.moving_min_rate);
+  std::printf(
+      "\nstatic world (--world): frames at %.0f Hz; moving = faster than %.3f m/s or %.1f deg/s relative to "
+      "the room; lin [m/s], ang [deg/s]\n",
+      kFrameRate, config.moving_min_speed, config.moving_min_rate);
   std::printf("%-8s %-5s %-6s %5s %8s %9s %7s %8s %8s %7s %8s %6s %8s %8s %8s %8s %8s %9s %7s %8s %8s %9s\n", "variant",
               "mode", "scene", "pairs", "ate_mm", "ate_ratio", "rpe_mm", "rpe_deg", "world_ok", "pur_min", "mask_iou",
               "parts", "lin_med", "lin_max", "ang_med", "ang_max", "nees_med", "nees_mean", "in95", "mean_lo",
@@ -314,14 +317,14 @@ void printWorldTable(const std::vector<WorldRow>& rows, const Config& config) {
     const double mean_hi = w.nees_pair.empty() ? 0.0 : chiSquareQuantile(6.0 * n, 0.975) / n;
     char ratio[16] = "-";
     if (row.ate_ratio >= 0) std::snprintf(ratio, sizeof ratio, "%.2f", row.ate_ratio);
-    std::printf("%-8d %-5s %-6s %5d %8.2f %9s %7.2f %8.3f %8.3f %7.3f %8.3f %6zu %8.4f %8.4f %8.2f %8.2f %8.1f %9.1f "
-                "%7.2f %8.2f %8.2f %9.1f\n",
-                row.variant, row.warm ? "warm" : "cold", row.scene, w.pairs, 1e3 * e.ate_rmse_m, ratio,
-                1e3 * e.rpe_frame_trans_m, e.rpe_frame_rot_deg, double(w.world_right) / std::max(1, w.pairs),
-                w.purity_min,
-                mean(w.iou), w.linear_error.size(), median(w.linear_error), maxOf(w.linear_error),
-                median(w.angular_error_deg), maxOf(w.angular_error_deg), median(w.nees_pair), mean(w.nees_pair),
-                double(inside) / n, mean_lo, mean_hi, mean(w.nees_pose));
+    std::printf(
+        "%-8d %-5s %-6s %5d %8.2f %9s %7.2f %8.3f %8.3f %7.3f %8.3f %6zu %8.4f %8.4f %8.2f %8.2f %8.1f %9.1f "
+        "%7.2f %8.2f %8.2f %9.1f\n",
+        row.variant, row.warm ? "warm" : "cold", row.scene, w.pairs, 1e3 * e.ate_rmse_m, ratio,
+        1e3 * e.rpe_frame_trans_m, e.rpe_frame_rot_deg, double(w.world_right) / std::max(1, w.pairs), w.purity_min,
+        mean(w.iou), w.linear_error.size(), median(w.linear_error), maxOf(w.linear_error), median(w.angular_error_deg),
+        maxOf(w.angular_error_deg), median(w.nees_pair), mean(w.nees_pair), double(inside) / n, mean_lo, mean_hi,
+        mean(w.nees_pose));
   }
 }
 
@@ -329,17 +332,17 @@ void printWorldTable(const std::vector<WorldRow>& rows, const Config& config) {
 
 int main(int argc, char** argv) {
   Options opt;
-  CommandLine line("mcflow_bench_stream",
-                   {{"frames", true, "frames per sequence (>= 3, default 30)"},
-                    {"variants", true, "comma-separated synthetic variants (default 0,1,2)"},
-                    {"width", true, "image width (default 320)"},
-                    {"height", true, "image height (default 240)"},
-                    {"backend", true, "auto | cpu | cuda"},
-                    {"modes", true, "comma-separated: cold, warm (default both)"},
-                    {"noise", false, "Kinect-like intensity and depth noise"},
-                    {"ids", false, "print each pair's majority id per true part on stderr"},
-                    {"world", false, "the static world: odometry ATE/RPE (with and without moving parts), world "
-                                     "choice, moving mask, world velocities, NEES (a second table)"}});
+  CommandLine line("mcflow_bench_stream", {{"frames", true, "frames per sequence (>= 3, default 30)"},
+                                           {"variants", true, "comma-separated synthetic variants (default 0,1,2)"},
+                                           {"width", true, "image width (default 320)"},
+                                           {"height", true, "image height (default 240)"},
+                                           {"backend", true, "auto | cpu | cuda"},
+                                           {"modes", true, "comma-separated: cold, warm (default both)"},
+                                           {"noise", false, "Kinect-like intensity and depth noise"},
+                                           {"ids", false, "print each pair's majority id per true part on stderr"},
+                                           {"world", false,
+                                            "the static world: odometry ATE/RPE (with and without moving parts), world "
+                                            "choice, moving mask, world velocities, NEES (a second table)"}});
   try {
     line.parse(argc, argv);
     if (line.helpRequested()) {

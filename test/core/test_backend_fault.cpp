@@ -24,7 +24,6 @@ using test::StreamRun;
 
 constexpr int kWidth = 96, kHeight = 72;
 
-
 TEST(BackendFault, AFaultMidStreamMovesTheStreamToTheCpuOnceAndItGoesOn) {
   Config config;
   config.backend = Backend::Cuda;  // what the GPU machine runs; the factory stands in for the CUDA backend

@@ -30,14 +30,15 @@ constexpr std::uint64_t kMax = std::numeric_limits<std::uint64_t>::max();
 TEST(BufferLayout, ExactAndPaddedLayoutsPass) {
   EXPECT_EQ(mc_flow::bufferLayoutProblem(layout(10, 3, 40, 120)), "");
   EXPECT_EQ(mc_flow::bufferLayoutProblem(layout(10, 3, 48, 144)), "");
-  EXPECT_EQ(mc_flow::bufferLayoutProblem(layout(10, 3, 40, 500, false)), "");   // a file with more after it
+  EXPECT_EQ(mc_flow::bufferLayoutProblem(layout(10, 3, 40, 500, false)), "");  // a file with more after it
 }
 
 TEST(BufferLayout, ProductsThatWrapAroundTwoToThe64AreRefused) {
   // height * step = 2^64 + 16 wraps to 16 in 64 bits.
   const std::uint64_t step = (std::uint64_t(1) << 62) + 4;  // x 4 = 2^64 + 16
   EXPECT_NE(mc_flow::bufferLayoutProblem(layout(1, 4, step, 16), kMax), "");
-  EXPECT_NE(mc_flow::bufferLayoutProblem(layout(1, 4, step, 16), kMax).find("does not fit in 64 bits"), std::string::npos);
+  EXPECT_NE(mc_flow::bufferLayoutProblem(layout(1, 4, step, 16), kMax).find("does not fit in 64 bits"),
+            std::string::npos);
   // width * value bytes wraps.
   EXPECT_NE(mc_flow::bufferLayoutProblem(layout(std::uint64_t(1) << 62, 1, 0, 0), kMax).find("does not fit"),
             std::string::npos);

@@ -216,7 +216,8 @@ TEST(Config, SetRejectsUnknownNamesAndBadText) {
 }
 
 TEST(Config, EnumTextRoundTrips) {
-  for (Regularizer r : {Regularizer::Quadratic, Regularizer::TotalVariation}) EXPECT_EQ(parseRegularizer(toString(r)), r);
+  for (Regularizer r : {Regularizer::Quadratic, Regularizer::TotalVariation})
+    EXPECT_EQ(parseRegularizer(toString(r)), r);
   for (Backend b : {Backend::Auto, Backend::Cpu, Backend::Cuda}) EXPECT_EQ(parseBackend(toString(b)), b);
   EXPECT_EQ(parseRegularizer("quad"), Regularizer::Quadratic);
   EXPECT_THROW(parseBackend("tpu"), ConfigError);

@@ -55,7 +55,7 @@ inline TwoPlaneScene renderTwoPlaneScene(int width, int height, const Eigen::Mat
           if (t > 0.1 && t < best) best = t;
         }
         if (best > 100) continue;
-        const Eigen::Vector3d P1 = o + best * dir;           // frame-1 coordinates
+        const Eigen::Vector3d P1 = o + best * dir;  // frame-1 coordinates
         frame.intensity(x, y) = textureAt(P1);
         frame.depth(x, y) = float(best);  // ray has z = 1 in camera coordinates: t is the depth
       }

@@ -39,8 +39,8 @@ LabelCostModel uniformModel(int labels, const Matrix6d& H) {
 }  // namespace
 
 // Merging and removal read only the labels: no pyramid level is needed.
-static AdaptationStats adaptOnHost(SoftLabels& u, std::vector<Vector6d>& twists, LabelCostModel& model, int valid_pixels,
-                            const Config& config) {
+static AdaptationStats adaptOnHost(SoftLabels& u, std::vector<Vector6d>& twists, LabelCostModel& model,
+                                   int valid_pixels, const Config& config) {
   const PyramidLevel unused;
   HostLabelStore store(u, unused, unused, nullptr);
   return adaptLabelCount(store, twists, model, valid_pixels, config);
@@ -111,7 +111,8 @@ TEST(LabelAdaptation, MergesWhenSharingAMotionCostsLessThanALabel) {
   EXPECT_NEAR(twists[0](0), 0.0205, 1e-6);  // the union's best motion (equal curvatures: the mean)
   EXPECT_NEAR(u.support(0), 200.0, 1e-3);
   EXPECT_NEAR(twists[1](0), -0.03, 1e-9);
-  EXPECT_NEAR(st.smallest_refused_merge, 2e5 * 1e5 / 3e5 * 0.0505 * 0.0505, 1e-2);  // parallel sum x d^2 (the 1e-6 ridge shifts it by 3e-4)
+  EXPECT_NEAR(st.smallest_refused_merge, 2e5 * 1e5 / 3e5 * 0.0505 * 0.0505,
+              1e-2);  // parallel sum x d^2 (the 1e-6 ridge shifts it by 3e-4)
   // A higher label cost merges that one too.
   config.label_cost = 1.0;
   model = uniformModel(2, 1e5 * Matrix6d::Identity());
@@ -131,7 +132,7 @@ TEST(LabelAdaptation, MergingTwoCarriedLabelsPaysTheSwitchingCostOfTheSmallerOne
   b(0) = 0.020;  // the same motion as a: no data-cost increase
   c(0) = -0.03;  // far from both
   Config config;
-  config.label_cost = 0.02;  // x 300 valid pixels = 6
+  config.label_cost = 0.02;       // x 300 valid pixels = 6
   config.warm_switch_cost = 0.1;  // x 100 pixels of the smaller label = 10 > 6
   struct Outcome {
     AdaptationStats stats;
@@ -472,7 +473,7 @@ TEST(OneMotionMerge, EachSideIsJudgedByItsOwnCostAndByTheNoiseLevel) {
   EXPECT_TRUE(oneMotionExplains(e, 1.0, 2.0));
   EXPECT_FALSE(oneMotionExplains(e, 0.4, 2.0));  // the small side rose by 50 % of its own cost
   EXPECT_FALSE(oneMotionExplains(e, 1.0, 0.3));  // ... by 0.2 per pixel, above 0.3 x 0.5
-  e.increase_a = 0;  // a large side's zero increase hides nothing
+  e.increase_a = 0;                              // a large side's zero increase hides nothing
   e.increase_b = 50;
   EXPECT_FALSE(oneMotionExplains(e, 1.0, 2.0));
   e.increase_a = -5;  // the union explains both better

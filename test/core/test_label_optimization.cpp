@@ -66,7 +66,9 @@ SoftLabels projectedGradientReference(const LabelProblem& p, int iterations) {
     }
     std::vector<float> v(static_cast<std::size_t>(n));
     for (std::size_t k = 0; k < u.planeSize(); ++k) {
-      for (int i = 0; i < n; ++i) v[std::size_t(i)] = u.data[std::size_t(i) * u.planeSize() + k] - float(step) * grad[std::size_t(i) * u.planeSize() + k];
+      for (int i = 0; i < n; ++i)
+        v[std::size_t(i)] =
+            u.data[std::size_t(i) * u.planeSize() + k] - float(step) * grad[std::size_t(i) * u.planeSize() + k];
       projectOntoSimplex(v.data(), n);
       for (int i = 0; i < n; ++i) u.data[std::size_t(i) * u.planeSize() + k] = v[std::size_t(i)];
     }
@@ -94,7 +96,8 @@ TEST(SimplexProjection, MatchesBruteForceOnRandomVectors) {
     // Optimality: no random simplex point is closer to v.
     auto dist2 = [&](const std::vector<float>& q) {
       double d = 0;
-      for (int i = 0; i < n; ++i) d += double(q[std::size_t(i)] - v[std::size_t(i)]) * (q[std::size_t(i)] - v[std::size_t(i)]);
+      for (int i = 0; i < n; ++i)
+        d += double(q[std::size_t(i)] - v[std::size_t(i)]) * (q[std::size_t(i)] - v[std::size_t(i)]);
       return d;
     };
     std::uniform_real_distribution<float> uni(0.f, 1.f);
@@ -234,7 +237,8 @@ TEST(LabelOptimization, SwitchingCostRaisesEveryLabelButTheCarriedOne) {
         const std::size_t k = std::size_t(y) * 4 + std::size_t(x), at = std::size_t(i) * plane + k;
         const int own = carried(x, y);
         const bool raised = own >= 0 && i != own && !p.outlier_only.data[k];
-        EXPECT_EQ(p.data_cost[at], raised ? before[at] + 0.25f : before[at]) << "pixel " << x << "," << y << " label " << i;
+        EXPECT_EQ(p.data_cost[at], raised ? before[at] + 0.25f : before[at])
+            << "pixel " << x << "," << y << " label " << i;
       }
   EXPECT_THROW(addSwitchingCost(ImageI32(3, 2, 1, -1), 0.25f, p), InputError);
 }

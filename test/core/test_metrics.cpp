@@ -16,10 +16,10 @@ constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
 
 TEST(Metrics, EndPointAndAngularErrors) {
   ImageF estimate(4, 1, 2, 0.f), truth(4, 1, 2, 0.f);
-  estimate(0, 0, 0) = 1.f;                             // EPE 1, angle between (1,0,1) and (0,0,1) = 45 deg
-  estimate(1, 0, 0) = 3.f, estimate(1, 0, 1) = 4.f;    // EPE 5 (excluded below in the second check)
-  truth(2, 0, 0) = 2.f, estimate(2, 0, 0) = 2.f;       // exact: 0
-  estimate(3, 0, 0) = kNan;                            // skipped
+  estimate(0, 0, 0) = 1.f;                           // EPE 1, angle between (1,0,1) and (0,0,1) = 45 deg
+  estimate(1, 0, 0) = 3.f, estimate(1, 0, 1) = 4.f;  // EPE 5 (excluded below in the second check)
+  truth(2, 0, 0) = 2.f, estimate(2, 0, 0) = 2.f;     // exact: 0
+  estimate(3, 0, 0) = kNan;                          // skipped
   ImageU8 none(4, 1, 1, 0);
   const FlowErrors all = opticalFlowErrors(estimate, truth, nullptr);
   EXPECT_EQ(all.pixels, 3u);

@@ -219,7 +219,8 @@ TEST(MotionNormalEquations, GradientMatchesFiniteDifferencesOfTheCost) {
   double worst = 0;
   for (int k = 0; k < 12; ++k) {
     const double numeric = (level.accumulate(perturbed(twists, k, h), config).cost -
-                            level.accumulate(perturbed(twists, k, -h), config).cost) / (2 * h);
+                            level.accumulate(perturbed(twists, k, -h), config).cost) /
+                           (2 * h);
     worst = std::max(worst, std::abs(numeric - 2 * eq.g(k)) / eq.g.cwiseAbs().maxCoeff());
     EXPECT_NEAR(numeric, 2 * eq.g(k), 2e-3 * 2 * eq.g.cwiseAbs().maxCoeff()) << "twist component " << k;
   }
@@ -240,8 +241,9 @@ TEST(MotionNormalEquations, GaussNewtonHessianMatchesFiniteDifferencesOfTheGradi
   const double h = 1e-4, scale = eq.H.cwiseAbs().maxCoeff();
   double worst = 0;
   for (int k = 0; k < 12; ++k) {
-    const Eigen::VectorXd column = (level.accumulate(perturbed(zero, k, h), config).g -
-                                    level.accumulate(perturbed(zero, k, -h), config).g) / (2 * h);
+    const Eigen::VectorXd column =
+        (level.accumulate(perturbed(zero, k, h), config).g - level.accumulate(perturbed(zero, k, -h), config).g) /
+        (2 * h);
     for (int j = 0; j < 12; ++j) {
       worst = std::max(worst, std::abs(column(j) - eq.H(j, k)) / scale);
       EXPECT_NEAR(column(j), eq.H(j, k), 5e-4 * scale) << "H(" << j << ", " << k << ")";
@@ -263,8 +265,7 @@ TEST(MotionNormalEquations, SolvingCoupledGroupsApartGivesTheWholeSolution) {
     const Eigen::MatrixXd block = J * J.transpose();
     const int idx[2] = {a, b};
     for (int r = 0; r < 2; ++r)
-      for (int c = 0; c < 2; ++c)
-        H.block<6, 6>(6 * idx[r], 6 * idx[c]) += block.block<6, 6>(6 * r, 6 * c);
+      for (int c = 0; c < 2; ++c) H.block<6, 6>(6 * idx[r], 6 * idx[c]) += block.block<6, 6>(6 * r, 6 * c);
   };
   // Groups {0, 3, 5} (a chain), {1}, {2, 6}, {4}.
   couple(0, 3);

@@ -74,7 +74,8 @@ TEST(PartMotion, ArmLinksInOneSegmentAreNotApartAndTheForearmGetsTheUpperArmsErr
   EXPECT_GT(elbow_deg, 0.5);
   EXPECT_NEAR(fore->rotation_error_deg, elbow_deg, 1e-6);
   // Split about the forearm's longest axis and across it, the two parts make up the whole.
-  EXPECT_NEAR(std::hypot(fore->rotation_error_along_deg, fore->rotation_error_across_deg), fore->rotation_error_deg, 1e-6);
+  EXPECT_NEAR(std::hypot(fore->rotation_error_along_deg, fore->rotation_error_across_deg), fore->rotation_error_deg,
+              1e-6);
 }
 
 TEST(PartMotion, ARotationAboutABarsLengthIsCountedAlongIt) {

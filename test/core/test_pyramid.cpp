@@ -125,10 +125,16 @@ TEST(Pyramid, DepthDownsampleIsThePerPixelRuleBitForBit) {
   std::mt19937 rng(7);
   std::normal_distribution<float> noise(0.f, 0.03f);
   std::uniform_int_distribution<int> pick(0, 99);
-  const float specials[] = {0.f, -0.f, -1.f, std::numeric_limits<float>::quiet_NaN(),
-                            std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
-                            std::numeric_limits<float>::max(), std::numeric_limits<float>::denorm_min()};
-  for (const auto& [w, h] : std::vector<std::pair<int, int>>{{64, 48}, {63, 47}, {37, 5}, {5, 4}, {4, 3}, {2, 2}, {1, 1}}) {
+  const float specials[] = {0.f,
+                            -0.f,
+                            -1.f,
+                            std::numeric_limits<float>::quiet_NaN(),
+                            std::numeric_limits<float>::infinity(),
+                            -std::numeric_limits<float>::infinity(),
+                            std::numeric_limits<float>::max(),
+                            std::numeric_limits<float>::denorm_min()};
+  for (const auto& [w, h] :
+       std::vector<std::pair<int, int>>{{64, 48}, {63, 47}, {37, 5}, {5, 4}, {4, 3}, {2, 2}, {1, 1}}) {
     ImageF depth(w, h, 1, 0.f);
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
@@ -156,7 +162,8 @@ TEST(Pyramid, IntensityDownsampleIsThePerPixelRuleBitForBit) {
   // pyramid_pixel::downsampledIntensity (the rule the CUDA pyramid shares), on odd and tiny sizes.
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> value(-0.5f, 1.5f);
-  for (const auto& [w, h] : std::vector<std::pair<int, int>>{{64, 48}, {63, 47}, {37, 5}, {5, 4}, {4, 3}, {2, 2}, {1, 1}}) {
+  for (const auto& [w, h] :
+       std::vector<std::pair<int, int>>{{64, 48}, {63, 47}, {37, 5}, {5, 4}, {4, 3}, {2, 2}, {1, 1}}) {
     for (const int channels : {1, 2}) {
       ImageF image(w, h, channels, 0.f);
       for (float& v : image.data) v = value(rng);
@@ -167,7 +174,8 @@ TEST(Pyramid, IntensityDownsampleIsThePerPixelRuleBitForBit) {
           for (int x = 0; x < out.width; ++x) {
             const float expected = pyramid_pixel::downsampledIntensity(at, w, h, x, y);
             ASSERT_EQ(std::memcmp(&out(x, y, c), &expected, 4), 0)
-                << w << "x" << h << "x" << channels << " at (" << x << ", " << y << "): " << out(x, y, c) << " vs " << expected;
+                << w << "x" << h << "x" << channels << " at (" << x << ", " << y << "): " << out(x, y, c) << " vs "
+                << expected;
           }
       }
     }

@@ -92,8 +92,8 @@ TEST(SceneFlow, OutlierPixelsMoveWithTheirLargestMotionLabel) {
   SoftLabels u(kW, kH, 3, 0.f);
   for (int y = 0; y < kH; ++y)
     for (int x = 0; x < kW; ++x) u.at(2, x, y) = 1.f;  // all outlier: ties, label 0
-  u.at(1, 5, 1) = 0.0005f, u.at(2, 5, 1) = 0.9995f;   // below the motion-mass threshold: label 1
-  u.at(1, 6, 1) = 0.5f, u.at(2, 6, 1) = 0.5f;         // enough mass: label 1's motion, renormalised
+  u.at(1, 5, 1) = 0.0005f, u.at(2, 5, 1) = 0.9995f;    // below the motion-mass threshold: label 1
+  u.at(1, 6, 1) = 0.5f, u.at(2, 6, 1) = 0.5f;          // enough mass: label 1's motion, renormalised
   const ImageF warped = warpPoints(points, u, kTwists);
   auto expectMovedBy = [&](int x, int y, const Vector6d& xi) {
     const Eigen::Vector3d expected = transformed(se3Exp(xi), pointAt(points, x, y));

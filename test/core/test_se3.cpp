@@ -14,9 +14,7 @@ Vector6d twist(double vx, double vy, double vz, double wx, double wy, double wz)
   return xi;
 }
 
-TEST(Se3, ExpOfZeroIsIdentity) {
-  EXPECT_TRUE(se3Exp(Vector6d::Zero()).isApprox(Eigen::Matrix4d::Identity(), 1e-15));
-}
+TEST(Se3, ExpOfZeroIsIdentity) { EXPECT_TRUE(se3Exp(Vector6d::Zero()).isApprox(Eigen::Matrix4d::Identity(), 1e-15)); }
 
 TEST(Se3, ExpOfPureTranslationTranslates) {
   const Eigen::Matrix4d T = se3Exp(twist(0.3, -0.2, 1.5, 0, 0, 0));

@@ -293,9 +293,10 @@ TEST(SequencePipeline, AFactorysBackendErrorGivesACpuSolverAndABadConfigStillThr
   // The CPU requested and not to be had: nothing to fall back to.
   Config cpu = config;
   cpu.backend = Backend::Cpu;
-  EXPECT_THROW(SequencePipeline(cpu, 0, 0.5, [](Backend, std::string*) -> std::unique_ptr<SolveBackend> {
-                 throw BackendError("no CPU backend");
-               }),
+  EXPECT_THROW(SequencePipeline(cpu, 0, 0.5,
+                                [](Backend, std::string*) -> std::unique_ptr<SolveBackend> {
+                                  throw BackendError("no CPU backend");
+                                }),
                BackendError);
 }
 

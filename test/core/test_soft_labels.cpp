@@ -75,7 +75,7 @@ TEST(SoftLabels, UpsamplingIsPixelCentreAligned) {
     }
   const SoftLabels up = upsampleLabels(u, 16, 4);
   for (int x = 1; x < 15; ++x) EXPECT_NEAR(up.at(0, x, 1), 0.1f * ((x + 0.5f) / 2.f - 0.5f), 1e-6f) << x;
-  EXPECT_NEAR(up.at(0, 0, 0), 0.f, 1e-6f);     // clamped at the border
+  EXPECT_NEAR(up.at(0, 0, 0), 0.f, 1e-6f);  // clamped at the border
   EXPECT_NEAR(up.at(0, 15, 0), 0.7f, 1e-6f);
 }
 
@@ -106,8 +106,8 @@ TEST(SoftLabels, SupportAndMergeInto) {
   u.mergeInto(0, 2);
   ASSERT_EQ(u.count, 3);
   EXPECT_EQ(u.data.size(), std::size_t(4 * 3 * 3));
-  EXPECT_NEAR(u.support(0), 3.0, 1e-6);   // former label 1
-  EXPECT_NEAR(u.support(1), 6.75, 1e-6);  // former label 2 with label 0 added
+  EXPECT_NEAR(u.support(0), 3.0, 1e-6);              // former label 1
+  EXPECT_NEAR(u.support(1), 6.75, 1e-6);             // former label 2 with label 0 added
   EXPECT_NEAR(u.support(2), outlier_support, 1e-6);  // outlier untouched and still last
   expectSimplex(u);
 

@@ -105,10 +105,11 @@ TEST_P(SolverOnSyntheticScenes, RecoversFlowSegmentsAndOcclusions) {
   const ResidualRmse zero = warpResidualRmse(pair.frame1, pair.frame2, pair.intrinsics, nullptr, &r.occlusion);
   const ResidualRmse est = warpResidualRmse(pair.frame1, pair.frame2, pair.intrinsics, &r.scene_flow, &r.occlusion);
   const double photometric_ratio = est.photometric / zero.photometric;
-  std::printf("[ measured ] variant %d %s: EPE %.4f, 3D EPE %.5f, worst part %.3f, rmseI ratio %.3f, rotation %.2f deg, "
-              "seg %.4f, occ %.4f, %zu segments\n",
-              variant, toString(config.regularizer).c_str(), fe.epe, epe3d, worst_part, photometric_ratio,
-              worst_rotation, seg, occ, r.segments.size());
+  std::printf(
+      "[ measured ] variant %d %s: EPE %.4f, 3D EPE %.5f, worst part %.3f, rmseI ratio %.3f, rotation %.2f deg, "
+      "seg %.4f, occ %.4f, %zu segments\n",
+      variant, toString(config.regularizer).c_str(), fe.epe, epe3d, worst_part, photometric_ratio, worst_rotation, seg,
+      occ, r.segments.size());
 
   EXPECT_LE(fe.epe, kErrorMargin * m->epe_px);
   EXPECT_LE(epe3d, kErrorMargin * m->epe3d_m);
@@ -184,7 +185,8 @@ TEST(Solver, StaticSceneGivesZeroMotion) {
   double max_flow = 0;
   for (int i = 0; i < r.width * r.height; ++i)
     if (std::isfinite(r.optical_flow.data[std::size_t(i) * 2]))
-      max_flow = std::max(max_flow, double(std::hypot(r.optical_flow.data[std::size_t(i) * 2], r.optical_flow.data[std::size_t(i) * 2 + 1])));
+      max_flow = std::max(max_flow, double(std::hypot(r.optical_flow.data[std::size_t(i) * 2],
+                                                      r.optical_flow.data[std::size_t(i) * 2 + 1])));
   // Measured at 7e11a2f: max flow 7.9e-6 px, twists exactly 0; the bounds leave room for rounding only.
   EXPECT_LT(max_flow, 1e-4);
   EXPECT_EQ(r.segments.size(), 1u) << "identical frames: every label has the same (zero) motion and merges";
@@ -315,8 +317,9 @@ TEST(SolveBackend, InitialLabelsFromCentresAreTheNearestCentres) {
   auto backend = makeCpuSolveBackend();
   backend->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics,
                          pyramidLevelCount(160, 120, config.coarsest_min_width), config);
-  const std::vector<Eigen::Vector3f> centres = kmeansPoints(backend->framePoints(2), 6, config.kmeans_max_iterations,
-                                                            config.kmeans_tolerance, config.seed).centres;
+  const std::vector<Eigen::Vector3f> centres =
+      kmeansPoints(backend->framePoints(2), 6, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed)
+          .centres;
   ASSERT_GE(centres.size(), 3u);
   backend->initialiseLabelsFromCentres(1, centres);
   const int count = int(centres.size()) + 1;

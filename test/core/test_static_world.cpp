@@ -1,5 +1,5 @@
-// The static world of a pair (static_world.h): which segments it is (prior, the stream's memory, the widest), its motion
-// fitted on their union, its covariance, each segment's motion relative to it, and the pipeline's odometry.
+// The static world of a pair (static_world.h): which segments it is (prior, the stream's memory, the widest), its
+// motion fitted on their union, its covariance, each segment's motion relative to it, and the pipeline's odometry.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -135,7 +135,7 @@ TEST(StaticWorld, ThePipelinePassesTheCameraMotionBetweenTwoFramesPosesAsThePrio
   step = pipeline.push(frame(2, false));
   ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
   EXPECT_EQ(step.result->world.chosen_by, "previous");
-  pipeline.push(frame(3, true));  // the pair (2, 3): frame 2 has no pose
+  pipeline.push(frame(3, true));               // the pair (2, 3): frame 2 has no pose
   step = pipeline.push(frame(4, true, 0.10));  // the camera "moved" 10 cm by the other source
   ASSERT_EQ(step.outcome, SequenceStep::Outcome::Solved) << step.problem;
   EXPECT_NE(step.result->world.chosen_by, "prior");
@@ -154,7 +154,7 @@ TEST(StaticWorld, WorldVelocityIsTheMotionRelativeToTheWorldAtTheCentroid) {
   EXPECT_NEAR(v.linear.x(), 0.0, 1e-9);
   EXPECT_NEAR(v.linear.z(), 0.2, 1e-9);  // 2 cm in 0.1 s
   EXPECT_NEAR(v.angular.norm(), 0.0, 1e-12);
-  EXPECT_TRUE(v.moving);  // 0.2 m/s > moving_min_speed
+  EXPECT_TRUE(v.moving);                                                              // 0.2 m/s > moving_min_speed
   EXPECT_FALSE(worldVelocity(s, Matrix6d::Zero(), world, true, 0.1, config).moving);  // a world segment never moves
   // Turning about its centroid: no centroid velocity, but the rate flags it.
   Segment turning;

@@ -59,7 +59,7 @@ TEST(WarmStart, CarriesIdsAlongTheFlowWhereTheDepthAgrees) {
   const Result previous = shiftedPrevious(W, H, 3);
   ImageF points = planePoints(W, H, 2.f);
   for (int x = 0; x < W; ++x) points(x, 5, 2) = 2.5f;  // row 5: another surface than the one that arrives
-  points(30, 10, 2) = kNaN;                              // no depth
+  points(30, 10, 2) = kNaN;                            // no depth
   const ImageI32 carried = carrySegmentIds(previous, points, 0.05);
   // Columns 0..2 receive nothing (everything moved right); the boundary moves from 20 to 23.
   EXPECT_EQ(carried(1, 10), 0);
@@ -274,8 +274,8 @@ TEST(SolverStream, WarmStartKeepsIdsAndAccuracy) {
 // Synthetic variant 0 at 320x240: around frame 6 the parts' velocities pass through zero together, so for a pair or two
 // they move like the background. The switching cost (warm_switch_cost) keeps the segments the previous pairs found
 // against the label price; but where one motion explains a part and the background within the noise
-// (merge_refit_tolerance), they merge, switching cost or not: one rigid motion, one segment, as a static scene must stay
-// one segment in a stream (the decision of the issue that introduced the merge test; docs/decisions). Measured at
+// (merge_refit_tolerance), they merge, switching cost or not: one rigid motion, one segment, as a static scene must
+// stay one segment in a stream (the decision of the issue that introduced the merge test; docs/decisions). Measured at
 // 320x240: with the merge test off every part keeps its id in pairs 4-7; with it the resting parts merge; without the
 // switching cost either way they merge.
 TEST(SolverStream, PartsThatMoveAlikeForAMomentKeepTheirSegments) {
@@ -334,7 +334,8 @@ TEST(SolverStream, FallsBackToColdWhenThePreviousSegmentsDoNotFit) {
   // surface at its depth.
   Config config;
   Solver solver(config);
-  const test::TwoPlaneScene planes = test::renderTwoPlaneScene(160, 120, se3Exp((Vector6d() << 0.01, 0, 0, 0, 0.01, 0).finished()));
+  const test::TwoPlaneScene planes =
+      test::renderTwoPlaneScene(160, 120, se3Exp((Vector6d() << 0.01, 0, 0, 0, 0.01, 0).finished()));
   const Result previous = solver.solve(planes.frame1, planes.frame2, planes.K);
   const SyntheticPair p1 = sequencePair(0, 1);
   const Result r = solver.solve(p1.frame1, p1.frame2, p1.intrinsics, previous);
@@ -372,7 +373,8 @@ TEST(SolverStream, DetectsAJumpInTheSequence) {
   // Without the check the stale prior would have been kept.
   config.warm_max_energy_ratio = 100;
   Solver trusting(config);
-  const Result kept = trusting.solve(p1.frame1, jump.frame2, p1.intrinsics, trusting.solve(p0.frame1, p0.frame2, p0.intrinsics));
+  const Result kept =
+      trusting.solve(p1.frame1, jump.frame2, p1.intrinsics, trusting.solve(p0.frame1, p0.frame2, p0.intrinsics));
   EXPECT_EQ(kept.start, StartKind::Warm);
   EXPECT_GT(kept.energy, 1.5 * cold.energy);
 }

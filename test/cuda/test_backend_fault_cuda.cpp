@@ -40,7 +40,8 @@ SequencePipeline faultingPipeline(const BackendFault& fault, std::vector<Backend
 
 // What a stream with a fault must show, as text (empty when it all holds): solved on CUDA before the fault,
 // exactly one fallback whose report contains `expected`, one CPU backend made, every later pair solved there.
-std::string checkFallback(const test::StreamRun& run, const std::vector<Backend>& requested, const std::string& expected) {
+std::string checkFallback(const test::StreamRun& run, const std::vector<Backend>& requested,
+                          const std::string& expected) {
   std::ostringstream problems;
   const int fault_frame = run.fallbackFrame();
   if (fault_frame < 2) {
@@ -69,7 +70,8 @@ TEST(BackendFaultCuda, AFaultThrownByACudaStageMovesTheStreamToTheCpuAndLeavesTh
   std::vector<Backend> requested;
   SequencePipeline pipeline = faultingPipeline(fault, requested);
   const test::StreamRun run = test::runStream(pipeline, kFrames, kWidth, kHeight);
-  EXPECT_EQ(checkFallback(run, requested, "injected fault in stage motionAccumulator of solve 3 of the cuda backend"), "");
+  EXPECT_EQ(checkFallback(run, requested, "injected fault in stage motionAccumulator of solve 3 of the cuda backend"),
+            "");
   EXPECT_EQ(pipeline.backendFallbacks(), 1);
 
   // The CUDA backend was dropped in the middle of a solve: a new one must work.

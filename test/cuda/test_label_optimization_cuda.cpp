@@ -25,13 +25,13 @@ namespace {
 constexpr double kLabelTolerance = 1e-4;
 constexpr double kEnergyRelativeTolerance = 1e-4;
 constexpr double kSimplexTolerance = 1e-5;  // sum over <= 21 float values of ~1/n each: a few ulps of 1
-constexpr int kIterations = 150;             // Config::label_iterations
+constexpr int kIterations = 150;            // Config::label_iterations
 
 bool gpuUsable(std::string* why) { return cudaBackendAvailable(why); }
 
-#define SKIP_WITHOUT_GPU()                                                           \
-  do {                                                                               \
-    std::string why_no_gpu;                                                          \
+#define SKIP_WITHOUT_GPU()                                                                   \
+  do {                                                                                       \
+    std::string why_no_gpu;                                                                  \
     if (!gpuUsable(&why_no_gpu)) GTEST_SKIP() << "CUDA backend unavailable: " << why_no_gpu; \
   } while (0)
 
@@ -106,7 +106,8 @@ void makeWarmStart(const LabelProblem& problem, unsigned seed, SoftLabels& u, La
 double maxAbsDifference(const std::vector<float>& a, const std::vector<float>& b) {
   EXPECT_EQ(a.size(), b.size());
   double worst = 0;
-  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i) worst = std::max(worst, double(std::fabs(a[i] - b[i])));
+  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i)
+    worst = std::max(worst, double(std::fabs(a[i] - b[i])));
   return worst;
 }
 

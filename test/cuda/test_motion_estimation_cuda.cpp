@@ -352,12 +352,15 @@ TEST(CudaMotionAccumulator, CoarseToFineTwistsMatchCpu) {
   for (int level = levels - 1; level >= 0; --level) {
     SoftLabels u = full;
     for (int l = 1; l <= level; ++l) u = downsampleLabels(u, s.p1[l].points.width, s.p1[l].points.height);
-    const MotionLevelStats a = estimateMotionsAtLevel(s.p1[level], s.p2[level], u, nullptr, twists_cpu, config, cpu.get());
-    const MotionLevelStats b = estimateMotionsAtLevel(s.p1[level], s.p2[level], u, nullptr, twists_gpu, config, gpu.get());
+    const MotionLevelStats a =
+        estimateMotionsAtLevel(s.p1[level], s.p2[level], u, nullptr, twists_cpu, config, cpu.get());
+    const MotionLevelStats b =
+        estimateMotionsAtLevel(s.p1[level], s.p2[level], u, nullptr, twists_gpu, config, gpu.get());
     EXPECT_EQ(a.iterations, b.iterations) << "level " << level;
     EXPECT_EQ(a.pixels_used, b.pixels_used) << "level " << level;
     for (int i = 0; i < motion_labels; ++i) {
-      largest_difference = std::max(largest_difference, (twists_cpu[std::size_t(i)] - twists_gpu[std::size_t(i)]).cwiseAbs().maxCoeff());
+      largest_difference =
+          std::max(largest_difference, (twists_cpu[std::size_t(i)] - twists_gpu[std::size_t(i)]).cwiseAbs().maxCoeff());
       largest_motion = std::max(largest_motion, twists_cpu[std::size_t(i)].cwiseAbs().maxCoeff());
     }
   }
@@ -377,34 +380,36 @@ TEST(CudaMotionAccumulator, DeviceLoopMatchesTheHostLoopForCoupledLabels) {
   // Every coupling kept (motion_min_coupling 0: the whole groups' factorization), the default (weak ones dropped)
   // and a threshold that keeps only the strongest couplings.
   for (const double min_coupling : {0.0, Config().motion_min_coupling, 0.6})
-  for (const int motion_labels : {10, 8, 30}) {  // 10 first: 33 KB of matrix beside 27 KB of static shared memory
-    config.motion_min_coupling = min_coupling;
-    const SoftLabels u = makeLabels(s.pair, motion_labels, LabelKind::Blended, 5u);
-    std::vector<Vector6d> twists_cpu = makeTwists(s.pair, motion_labels, TwistKind::Truth, 3u);
-    for (Vector6d& xi : twists_cpu) xi(0) += 0.01;  // 1 cm off: something to estimate
-    std::vector<Vector6d> twists_gpu = twists_cpu;
-    auto cpu = makeCpuMotionAccumulator();
-    auto gpu = makeCudaMotionAccumulator();
-    const MotionLevelStats a = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_cpu, config, cpu.get());
-    const MotionLevelStats b = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_gpu, config, gpu.get());
-    EXPECT_EQ(a.iterations, b.iterations) << motion_labels << " labels";
-    EXPECT_EQ(a.stop, b.stop) << motion_labels << " labels: " << toString(a.stop) << " / " << toString(b.stop);
-    EXPECT_EQ(a.pixels_used, b.pixels_used) << motion_labels << " labels";
-    EXPECT_EQ(a.largest_block, b.largest_block) << motion_labels << " labels, min_coupling " << min_coupling;
-    if (min_coupling == 0.0) EXPECT_GE(b.largest_block, motion_labels / 2) << "the labels should be coupled";
-    EXPECT_NEAR(a.cost_after, b.cost_after, 1e-6 * a.cost_after);
-    double largest_difference = 0, largest_step = 0;
-    for (int i = 0; i < motion_labels; ++i) {
-      largest_difference = std::max(largest_difference,
-                                    (twists_cpu[std::size_t(i)] - twists_gpu[std::size_t(i)]).cwiseAbs().maxCoeff());
-      largest_step = std::max(largest_step, std::abs(twists_cpu[std::size_t(i)](0) -
-                                                     makeTwists(s.pair, motion_labels, TwistKind::Truth, 3u)[std::size_t(i)](0) - 0.01));
+    for (const int motion_labels : {10, 8, 30}) {  // 10 first: 33 KB of matrix beside 27 KB of static shared memory
+      config.motion_min_coupling = min_coupling;
+      const SoftLabels u = makeLabels(s.pair, motion_labels, LabelKind::Blended, 5u);
+      std::vector<Vector6d> twists_cpu = makeTwists(s.pair, motion_labels, TwistKind::Truth, 3u);
+      for (Vector6d& xi : twists_cpu) xi(0) += 0.01;  // 1 cm off: something to estimate
+      std::vector<Vector6d> twists_gpu = twists_cpu;
+      auto cpu = makeCpuMotionAccumulator();
+      auto gpu = makeCudaMotionAccumulator();
+      const MotionLevelStats a = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_cpu, config, cpu.get());
+      const MotionLevelStats b = estimateMotionsAtLevel(s.p1[0], s.p2[0], u, nullptr, twists_gpu, config, gpu.get());
+      EXPECT_EQ(a.iterations, b.iterations) << motion_labels << " labels";
+      EXPECT_EQ(a.stop, b.stop) << motion_labels << " labels: " << toString(a.stop) << " / " << toString(b.stop);
+      EXPECT_EQ(a.pixels_used, b.pixels_used) << motion_labels << " labels";
+      EXPECT_EQ(a.largest_block, b.largest_block) << motion_labels << " labels, min_coupling " << min_coupling;
+      if (min_coupling == 0.0) EXPECT_GE(b.largest_block, motion_labels / 2) << "the labels should be coupled";
+      EXPECT_NEAR(a.cost_after, b.cost_after, 1e-6 * a.cost_after);
+      double largest_difference = 0, largest_step = 0;
+      for (int i = 0; i < motion_labels; ++i) {
+        largest_difference = std::max(largest_difference,
+                                      (twists_cpu[std::size_t(i)] - twists_gpu[std::size_t(i)]).cwiseAbs().maxCoeff());
+        largest_step = std::max(
+            largest_step, std::abs(twists_cpu[std::size_t(i)](0) -
+                                   makeTwists(s.pair, motion_labels, TwistKind::Truth, 3u)[std::size_t(i)](0) - 0.01));
+      }
+      std::printf(
+          "%d labels, min_coupling %.2f: largest twist difference %.3g, largest x step %.3g, largest group %d\n",
+          motion_labels, min_coupling, largest_difference, largest_step, b.largest_block);
+      EXPECT_GT(largest_step, 1e-4) << "the labels did move";
+      EXPECT_LE(largest_difference, kTwistTolerance) << motion_labels << " labels";
     }
-    std::printf("%d labels, min_coupling %.2f: largest twist difference %.3g, largest x step %.3g, largest group %d\n",
-                motion_labels, min_coupling, largest_difference, largest_step, b.largest_block);
-    EXPECT_GT(largest_step, 1e-4) << "the labels did move";
-    EXPECT_LE(largest_difference, kTwistTolerance) << motion_labels << " labels";
-  }
 }
 
 // One level's IRLS loop on the host and on the device from the same labels and twists: the same largest group
@@ -481,8 +486,8 @@ TEST(CudaMotionAccumulator, DeviceLoopSplitsGroupsAtWeakCouplingsAsTheHostLoopDo
     EXPECT_EQ(a.iterations, b.iterations);
     double largest_difference = 0;
     for (int i = 0; i < motion_labels; ++i)
-      largest_difference = std::max(largest_difference,
-                                    (twists_cpu[std::size_t(i)] - twists_gpu[std::size_t(i)]).cwiseAbs().maxCoeff());
+      largest_difference =
+          std::max(largest_difference, (twists_cpu[std::size_t(i)] - twists_gpu[std::size_t(i)]).cwiseAbs().maxCoeff());
     EXPECT_LE(largest_difference, kTwistTolerance) << "min_coupling " << min_coupling;
     if (min_coupling == 0.0) {
       kept_all = twists_gpu;

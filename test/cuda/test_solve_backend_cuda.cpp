@@ -2,10 +2,10 @@
 // stage, driven through the same sequence of SolveBackend calls on the same frames, at awkward sizes.
 //
 // Tolerances. The pyramids (frame 1's points, the valid counts) must agree bit for bit: both backends run the
-// per-pixel rules of pyramid_pixel.h with every float operation rounded on its own. Discrete results (initial hard labels, which pixels a cut moves, label counts) must agree
-// exactly. Sums over pixels run in another order (supports, moments, normal equations: relative 1e-6 of the
-// largest entry). The label step's data costs use the device's log1pf (a few float ulps from the CPU's
-// log1p), so u after a label step agrees to 1e-3 and the energy to a relative 1e-5.
+// per-pixel rules of pyramid_pixel.h with every float operation rounded on its own. Discrete results (initial hard
+// labels, which pixels a cut moves, label counts) must agree exactly. Sums over pixels run in another order (supports,
+// moments, normal equations: relative 1e-6 of the largest entry). The label step's data costs use the device's log1pf
+// (a few float ulps from the CPU's log1p), so u after a label step agrees to 1e-3 and the energy to a relative 1e-5.
 #include <gtest/gtest.h>
 
 #include "same_outputs.h"
@@ -195,7 +195,8 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
                             int(s.centres.size()));
     plain->updateOcclusion(twists, config);
     plain->labelStep(twists, true, 60, 0.0, config);
-    EXPECT_GT(maxAbsDifference(plain->downloadLabels(), cpu->downloadLabels()), 0.05) << "the switching cost changed nothing";
+    EXPECT_GT(maxAbsDifference(plain->downloadLabels(), cpu->downloadLabels()), 0.05)
+        << "the switching cost changed nothing";
   }
 
   // Label store: supports, moments, cost model.
@@ -451,15 +452,16 @@ TEST(CudaSolveBackend, KMeansCentresMatchTheHost) {
       ++compared;
     }
   };
-  for (const auto& [width, height, variant] : {std::tuple{320, 240, 0}, std::tuple{320, 240, 1}, std::tuple{317, 239, 2},
-                                               std::tuple{640, 480, 0}}) {
+  for (const auto& [width, height, variant] :
+       {std::tuple{320, 240, 0}, std::tuple{320, 240, 1}, std::tuple{317, 239, 2}, std::tuple{640, 480, 0}}) {
     SyntheticSceneOptions options;
     options.width = width;
     options.height = height;
     options.variant = variant;
     const SyntheticPair pair = renderSyntheticPair(options);
     const int levels = pyramidLevelCount(width, height, config.coarsest_min_width);
-    for (SolveBackend* b : {cpu.get(), gpu.get()}) b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
+    for (SolveBackend* b : {cpu.get(), gpu.get()})
+      b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
     for (int level = 0; level < levels; ++level) {
       const std::string what = std::to_string(width) + "x" + std::to_string(height) + " variant " +
                                std::to_string(variant) + " level " + std::to_string(level);
@@ -482,14 +484,16 @@ TEST(CudaSolveBackend, KMeansCentresOfFewOrNoValidPoints) {
     const std::vector<Eigen::Vector3f> a = cpu->kmeansCentres(level, k, iterations, tolerance, seed);
     const std::vector<Eigen::Vector3f> b = gpu->kmeansCentres(level, k, iterations, tolerance, seed);
     ASSERT_EQ(a.size(), b.size()) << what;
-    for (std::size_t c = 0; c < a.size(); ++c) EXPECT_LE((a[c] - b[c]).cwiseAbs().maxCoeff(), 1e-5f) << what << ", centre " << c;
+    for (std::size_t c = 0; c < a.size(); ++c)
+      EXPECT_LE((a[c] - b[c]).cwiseAbs().maxCoeff(), 1e-5f) << what << ", centre " << c;
   };
   SyntheticSceneOptions options;
   options.width = 64;
   options.height = 48;
   SyntheticPair pair = renderSyntheticPair(options);
   const int levels = pyramidLevelCount(64, 48, config.coarsest_min_width);
-  for (SolveBackend* b : {cpu.get(), gpu.get()}) b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
+  for (SolveBackend* b : {cpu.get(), gpu.get()})
+    b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
   for (int level = 0; level < levels; ++level) compare(level, 20, 10, 0.01, 7u, "64x48 level " + std::to_string(level));
 
   // Three valid pixels (depth elsewhere outside [min_depth, max_depth]): three centres out of 20; then none valid.
@@ -584,7 +588,9 @@ TEST(CudaSolveBackend, TheStaticWorldMatchesTheCpus) {
     ASSERT_TRUE(b.world.found);
     EXPECT_EQ(b.world.chosen_by, a.world.chosen_by);
     EXPECT_EQ(b.world.ids, a.world.ids);
-    EXPECT_LT((b.world.twist - a.world.twist).norm(), 1e-4) << a.world.twist.transpose() << "\n" << b.world.twist.transpose();
-    EXPECT_TRUE(b.world.covariance.isApprox(a.world.covariance, 0.05)) << a.world.covariance << "\n" << b.world.covariance;
+    EXPECT_LT((b.world.twist - a.world.twist).norm(), 1e-4) << a.world.twist.transpose() << "\n"
+                                                            << b.world.twist.transpose();
+    EXPECT_TRUE(b.world.covariance.isApprox(a.world.covariance, 0.05)) << a.world.covariance << "\n"
+                                                                       << b.world.covariance;
   }
 }

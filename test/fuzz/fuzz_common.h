@@ -27,7 +27,8 @@ namespace fuzz {
 class InputFile {
  public:
   InputFile(const std::uint8_t* data, std::size_t size, const std::string& suffix)
-      : path_((std::filesystem::temp_directory_path() / ("mcflow_fuzz_" + std::to_string(::getpid()) + suffix)).string()) {
+      : path_((std::filesystem::temp_directory_path() / ("mcflow_fuzz_" + std::to_string(::getpid()) + suffix))
+                  .string()) {
     std::ofstream out(path_, std::ios::binary | std::ios::trunc);
     out.write(reinterpret_cast<const char*>(data), std::streamsize(size));
     if (!out) {

@@ -11,7 +11,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   fuzz::loadOrRefuse([&] { fuzz::checkShape(io::loadDepth(file.path(), 1000.0), 1, "depth"); });
   fuzz::loadOrRefuse([&] {
     const ImageF image = io::readPfm(file.path());
-    if (image.channels != 1 && image.channels != 3) fuzz::finding("PFM with " + std::to_string(image.channels) + " channels");
+    if (image.channels != 1 && image.channels != 3)
+      fuzz::finding("PFM with " + std::to_string(image.channels) + " channels");
     fuzz::checkShape(image, image.channels, "pfm");
   });
   return 0;

@@ -61,7 +61,8 @@ int main(int argc, char** argv) {
   io::writePfm((out / "depth_pfm" / "depth.pfm").string(), depth_m);
   io::writePfm((out / "depth_pfm" / "scene_flow.pfm").string(), io::readPfm((synth / "gt_scene_flow.pfm").string()));
   io::writeFlo((out / "flo" / "flow.flo").string(), io::readFlo((synth / "gt_optical_flow.flo").string()));
-  fs::copy_file(synth / "camera_info.yaml", out / "camera_info" / "camera_info.yaml", fs::copy_options::overwrite_existing);
+  fs::copy_file(synth / "camera_info.yaml", out / "camera_info" / "camera_info.yaml",
+                fs::copy_options::overwrite_existing);
 
   std::string yaml, json = "{";
   for (const auto& [name, value] : Config().fields()) {

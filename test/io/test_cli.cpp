@@ -181,7 +181,8 @@ TEST(Cli, SynthWritesInputsAndGroundTruth) {
 
 TEST(Cli, RunWritesEveryOutputAtInputResolution) {
   const fs::path out = workDir() / "run_png";
-  const CliRun run = runCli("run " + inputArgs() + " --intrinsics " + intrinsicsText() + " --out " + quote(out.string()));
+  const CliRun run =
+      runCli("run " + inputArgs() + " --intrinsics " + intrinsicsText() + " --out " + quote(out.string()));
   ASSERT_EQ(run.code, 0) << run.err;
   EXPECT_NE(run.err.find("loading"), std::string::npos);
   EXPECT_NE(run.err.find("solving"), std::string::npos);
@@ -207,7 +208,8 @@ TEST(Cli, RunWritesEveryOutputAtInputResolution) {
   ASSERT_GE(u.count, 2);
   const std::string segments = io::readTextFile((out / "segments.json").string());
   std::size_t listed = 0;
-  for (std::size_t at = segments.find("\"id\":"); at != std::string::npos; at = segments.find("\"id\":", at + 1)) ++listed;
+  for (std::size_t at = segments.find("\"id\":"); at != std::string::npos; at = segments.find("\"id\":", at + 1))
+    ++listed;
   EXPECT_EQ(listed, std::size_t(u.count - 1));
   std::size_t checked = 0;
   for (int y = 0; y < kHeight; ++y)
@@ -278,14 +280,14 @@ TEST(Cli, ConfigFileAndFlagsReachTheReport) {
   const fs::path out = workDir() / "run_config";
   const fs::path config = workDir() / "solver.yaml";
   std::ofstream(config) << "alpha: 1.5\nouter_iterations: 1\ninitial_labels: 6\n";
-  const CliRun run = runCli("run " + inputArgs() + " --intrinsics " + intrinsicsText() + " --config " +
-                            quote(config.string()) + " --labels 8 --regularizer tv --set lambda_tv=0.5 --out " +
-                            quote(out.string()));
+  const CliRun run =
+      runCli("run " + inputArgs() + " --intrinsics " + intrinsicsText() + " --config " + quote(config.string()) +
+             " --labels 8 --regularizer tv --set lambda_tv=0.5 --out " + quote(out.string()));
   ASSERT_EQ(run.code, 0) << run.err;
   const std::string report = io::readTextFile((out / "report.json").string());
-  EXPECT_EQ(jsonNumber(report, "alpha"), 1.5);           // from the file
-  EXPECT_EQ(jsonNumber(report, "initial_labels"), 8);    // the flag overrides the file
-  EXPECT_EQ(jsonNumber(report, "lambda_tv"), 0.5);       // --set
+  EXPECT_EQ(jsonNumber(report, "alpha"), 1.5);         // from the file
+  EXPECT_EQ(jsonNumber(report, "initial_labels"), 8);  // the flag overrides the file
+  EXPECT_EQ(jsonNumber(report, "lambda_tv"), 0.5);     // --set
   EXPECT_EQ(jsonNumber(report, "outer_iterations"), 1);
   EXPECT_NE(report.find("\"regularizer\": \"tv\""), std::string::npos) << report;
 }
@@ -300,7 +302,8 @@ void expectRunFails(const std::string& arguments, const std::string& needle, boo
   EXPECT_NE(run.code, 0) << arguments;
   const std::string err = case_insensitive ? lower(run.err) : run.err;
   EXPECT_NE(err.find(case_insensitive ? lower(needle) : needle), std::string::npos)
-      << "stderr does not name '" << needle << "':\n" << run.err;
+      << "stderr does not name '" << needle << "':\n"
+      << run.err;
 }
 
 std::string outArg(const std::string& name) { return " --out " + quote((workDir() / name).string()); }
@@ -450,9 +453,9 @@ TEST(Cli, SynthSequenceThenRunSeqKeepsIdsAndWritesTheSequenceFiles) {
   const auto path = io::readTumTrajectory((out / "trajectory.txt").string());
   ASSERT_EQ(path.size(), 4u);
   EXPECT_TRUE(path[0].second.isIdentity());
-  const CliRun self = runCli("eval-traj --gt " + quote((out / "trajectory.txt").string()) + " --est " +
-                             quote((out / "trajectory.txt").string()) + " --plot " +
-                             quote((workDir() / "traj.png").string()));
+  const CliRun self =
+      runCli("eval-traj --gt " + quote((out / "trajectory.txt").string()) + " --est " +
+             quote((out / "trajectory.txt").string()) + " --plot " + quote((workDir() / "traj.png").string()));
   ASSERT_EQ(self.code, 0) << self.err;
   EXPECT_NE(self.out.find("ate_rmse_m 0.0000"), std::string::npos) << self.out;
   EXPECT_TRUE(fs::exists(workDir() / "traj.png"));
@@ -514,7 +517,8 @@ TEST(Cli, SynthSequenceWithoutEventsHasOnlyTheSceneParts) {
   };
   const fs::path with = workDir() / "events", without = workDir() / "no_events";
   ASSERT_EQ(runCli("synth --out " + quote(with.string()) + " --frames 2 --width 96 --height 72").code, 0);
-  const CliRun run = runCli("synth --out " + quote(without.string()) + " --frames 2 --width 96 --height 72 --no-events");
+  const CliRun run =
+      runCli("synth --out " + quote(without.string()) + " --frames 2 --width 96 --height 72 --no-events");
   ASSERT_EQ(run.code, 0) << run.err;
   EXPECT_TRUE(partsOf(with).count(10)) << "the late box is in view at frame 0";
   const std::set<int> parts = partsOf(without);

@@ -228,7 +228,8 @@ TEST(CameraInfo, ParsesCalibrationFileFormAndFallsBackToP) {
   EXPECT_EQ(info.intrinsics.cy, 120.5);
   EXPECT_EQ(info.width, 320);
 
-  const std::string only_p = "K: [0, 0, 0, 0, 0, 0, 0, 0, 0]\nP:\n- 500\n- 0\n- 310\n- 0\n- 0\n- 502\n- 230\n- 0\n- 0\n- 0\n- 1\n- 0\n";
+  const std::string only_p =
+      "K: [0, 0, 0, 0, 0, 0, 0, 0, 0]\nP:\n- 500\n- 0\n- 310\n- 0\n- 0\n- 502\n- 230\n- 0\n- 0\n- 0\n- 1\n- 0\n";
   info = io::parseCameraInfoYaml(only_p, "test");
   EXPECT_EQ(info.intrinsics.fx, 500.0);
   EXPECT_EQ(info.intrinsics.fy, 502.0);
@@ -292,7 +293,8 @@ TEST(CameraInfo, LoadsRosCalibrationFile) {
 
 TEST(CameraInfo, BadMatricesAndSyntaxNameTheFileAndEntry) {
   // camera_matrix with 8 numbers and no projection matrix.
-  std::string short_k = std::string(kRosCalibrationFile).substr(0, std::string(kRosCalibrationFile).find("projection_matrix"));
+  std::string short_k =
+      std::string(kRosCalibrationFile).substr(0, std::string(kRosCalibrationFile).find("projection_matrix"));
   short_k.replace(short_k.find(", 0., 0., 1.]"), 13, ", 0., 1.]");
   try {
     io::parseCameraInfoYaml(short_k, "short.yaml");
@@ -453,10 +455,10 @@ TEST(ImageIo, RejectsEightBitAndAllInvalidDepthNamingTheFile) {
 
 TEST(ImageIo, IntensityUsesRec601WeightsOnBgr) {
   cv::Mat bgr(1, 4, CV_8UC3);
-  bgr.at<cv::Vec3b>(0, 0) = {0, 0, 255};    // pure red
-  bgr.at<cv::Vec3b>(0, 1) = {0, 255, 0};    // pure green
-  bgr.at<cv::Vec3b>(0, 2) = {255, 0, 0};    // pure blue
-  bgr.at<cv::Vec3b>(0, 3) = {51, 102, 204}; // mixed
+  bgr.at<cv::Vec3b>(0, 0) = {0, 0, 255};     // pure red
+  bgr.at<cv::Vec3b>(0, 1) = {0, 255, 0};     // pure green
+  bgr.at<cv::Vec3b>(0, 2) = {255, 0, 0};     // pure blue
+  bgr.at<cv::Vec3b>(0, 3) = {51, 102, 204};  // mixed
   const ImageF i = io::intensityFromMat(bgr, "test");
   EXPECT_NEAR(i(0, 0), 0.299f, 1e-6);
   EXPECT_NEAR(i(1, 0), 0.587f, 1e-6);
@@ -762,10 +764,10 @@ TEST(Visualization, FlowColourWheelDirectionsAndInvalid) {
   // pixel 3: zero flow -> white
   const cv::Mat image = io::flowColorImage(flow);
   const cv::Vec3b right = image.at<cv::Vec3b>(0, 0), left = image.at<cv::Vec3b>(0, 1);
-  EXPECT_GT(right[2], 200);         // R
-  EXPECT_LT(right[1], 60);          // G
-  EXPECT_GT(left[0], 200);          // B
-  EXPECT_LT(left[2], 60);           // R
+  EXPECT_GT(right[2], 200);  // R
+  EXPECT_LT(right[1], 60);   // G
+  EXPECT_GT(left[0], 200);   // B
+  EXPECT_LT(left[2], 60);    // R
   EXPECT_EQ(image.at<cv::Vec3b>(0, 2), cv::Vec3b(0, 0, 0));
   EXPECT_EQ(image.at<cv::Vec3b>(0, 3), cv::Vec3b(255, 255, 255));
 }

@@ -158,7 +158,6 @@ TEST(RealPairLoader, MissingPairNamesThePath) {
   }
 }
 
-
 // `mcflow bench-real` on one pair: exit 0 and a table with the four methods' rows holding finite numbers.
 struct CliOutput {
   int code = -1;
@@ -171,8 +170,8 @@ CliOutput runBenchReal(const std::string& arguments) {
   const fs::path& dir = work.path();
   const std::string tag = std::to_string(counter++);
   const fs::path out = dir / ("stdout_" + tag), err = dir / ("stderr_" + tag);
-  const std::string command = "'" + std::string(MCFLOW_CLI_PATH) + "' bench-real " + arguments + " >'" +
-                              out.string() + "' 2>'" + err.string() + "'";
+  const std::string command = "'" + std::string(MCFLOW_CLI_PATH) + "' bench-real " + arguments + " >'" + out.string() +
+                              "' 2>'" + err.string() + "'";
   const int status = std::system(command.c_str());
   CliOutput result;
   result.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;

@@ -36,11 +36,12 @@ TEST(Resources, EstimateIsWithinTenPercentOfMeasuredPeaks) {
     int width, height, level, labels;
     double megabytes;
   };
-  for (const Measured& m : {Measured{640, 480, 0, 20, 181}, Measured{640, 480, 1, 20, 130},
-                            Measured{1280, 960, 0, 20, 538}, Measured{1280, 960, 1, 20, 351},
-                            Measured{1280, 960, 0, 5, 469}, Measured{1280, 960, 1, 5, 324},
-                            Measured{2560, 1920, 0, 20, 1982}}) {
-    const double estimate = double(io::estimateRunBytes(m.width, m.height, withLevelAndLabels(m.level, m.labels))) / 1e6;
+  for (const Measured& m :
+       {Measured{640, 480, 0, 20, 181}, Measured{640, 480, 1, 20, 130}, Measured{1280, 960, 0, 20, 538},
+        Measured{1280, 960, 1, 20, 351}, Measured{1280, 960, 0, 5, 469}, Measured{1280, 960, 1, 5, 324},
+        Measured{2560, 1920, 0, 20, 1982}}) {
+    const double estimate =
+        double(io::estimateRunBytes(m.width, m.height, withLevelAndLabels(m.level, m.labels))) / 1e6;
     EXPECT_NEAR(estimate, m.megabytes, 0.1 * m.megabytes)
         << m.width << "x" << m.height << " level " << m.level << ", " << m.labels << " labels";
   }

@@ -1,8 +1,8 @@
 // A GPU fault in the middle of a stream, at the node level: backend_fault.test starts the nodelet in a test host
-// with --fault 3 (nodelet_with_fault.cpp), so the pipeline's first backend throws a BackendError in its third solve (on this
-// machine the wrapped backend is the CPU one; on the GPU machine it is the CUDA one). The nodelet must skip that pair
-// with one warning that names the fault and says it continues on the CPU, count it in /diagnostics (warnings of kind
-// "backend", the fallback count, the failure, the backend, a WARN summary), and solve every later pair.
+// with --fault 3 (nodelet_with_fault.cpp), so the pipeline's first backend throws a BackendError in its third solve (on
+// this machine the wrapped backend is the CPU one; on the GPU machine it is the CUDA one). The nodelet must skip that
+// pair with one warning that names the fault and says it continues on the CPU, count it in /diagnostics (warnings of
+// kind "backend", the fallback count, the failure, the backend, a WARN summary), and solve every later pair.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -35,7 +35,8 @@ class BackendFault : public ::testing::Test {
     segments_ = std::make_unique<Collector<mc_flow::SegmentArray>>(nh_, "/mc_flow/segments");
     diagnostics_ = std::make_unique<Collector<diagnostic_msgs::DiagnosticArray>>(nh_, "/diagnostics");
     ASSERT_TRUE(waitFor([this] { return camera_->inputSubscribers() >= 3; }, 60.0)) << "the nodelet never subscribed";
-    ASSERT_TRUE(waitFor([this] { return diagnosticCount(*diagnostics_, "pairs solved") >= 0; }, 30.0)) << "no diagnostics";
+    ASSERT_TRUE(waitFor([this] { return diagnosticCount(*diagnostics_, "pairs solved") >= 0; }, 30.0))
+        << "no diagnostics";
     ros::WallDuration(1.0).sleep();  // let the /rosout subscription connect too
   }
 
@@ -110,7 +111,8 @@ TEST_F(BackendFault, AFaultMidStreamWarnsOnceAndTheStreamGoesOnOnTheCpu) {
       EXPECT_EQ(m, nullptr) << "the failed pair was published";
       continue;
     }
-    ASSERT_NE(m, nullptr) << "pair ending at frame " << t << " not solved (the fault struck at frame " << fault_frame << ")";
+    ASSERT_NE(m, nullptr) << "pair ending at frame " << t << " not solved (the fault struck at frame " << fault_frame
+                          << ")";
     EXPECT_FALSE(m->segments.empty()) << "frame " << t;
     if (t > fault_frame) EXPECT_EQ(m->backend, "cpu") << "frame " << t;
   }

@@ -103,7 +103,8 @@ TEST_F(BadInput, EveryCaseWarnsAndTheNodeKeepsSolving) {
                 "repeats the previous");
 
   // 8. Stamps going back (bag loop / driver restart): a new sequence starts.
-  expectWarning(camera_->rgb(0, stamp(0.5)), camera_->depth(0, stamp(0.5)), camera_->info(stamp(0.5)), "went back from 3001.000000000");
+  expectWarning(camera_->rgb(0, stamp(0.5)), camera_->depth(0, stamp(0.5)), camera_->info(stamp(0.5)),
+                "went back from 3001.000000000");
 
   // 9. RGB and depth 50 ms apart (max_stamp_difference 20 ms): warned, still solved as a pair. The
   // approximate synchroniser releases such a set only when a later frame shows that no better match comes.
@@ -149,8 +150,11 @@ TEST_F(BadInput, CraftedHeadersNeverKillTheManager) {
     std::uint32_t width, bytes_per_pixel;
   };
   // 4096 rows x 1048578 bytes = 2^32 + 8192 bytes, with 8192 bytes of data.
-  const std::vector<Craft> crafts = {{false, "16UC1", 5461, 2}, {false, "32FC1", 640, 4}, {true, "rgb8", 640, 3},
-                                     {true, "mono16", 640, 2},  {true, "bgra8", 640, 4}};
+  const std::vector<Craft> crafts = {{false, "16UC1", 5461, 2},
+                                     {false, "32FC1", 640, 4},
+                                     {true, "rgb8", 640, 3},
+                                     {true, "mono16", 640, 2},
+                                     {true, "bgra8", 640, 4}};
   double t = 0.1;
   for (const Craft& c : crafts) {
     SCOPED_TRACE(c.encoding);
@@ -163,7 +167,8 @@ TEST_F(BadInput, CraftedHeadersNeverKillTheManager) {
     target->step = 1048578;
     target->data.assign(8192, 0x11);
     // The partner keeps its aspect ratio out of the way: it is refused for the crafted image first.
-    expectWarning(rgb, depth, camera_->info(base + ros::Duration(t)), "4294975488 bytes, but 8192 bytes of data are present");
+    expectWarning(rgb, depth, camera_->info(base + ros::Duration(t)),
+                  "4294975488 bytes, but 8192 bytes of data are present");
     t += 0.1;
   }
   // An odd step for 16UC1 is a named layout problem, not OpenCV's "Step must be a multiple of esz1".

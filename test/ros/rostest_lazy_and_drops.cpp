@@ -38,7 +38,8 @@ TEST(LazyAndDrops, InputsAreSubscribedOnlyWhileSomeoneListens) {
     Collector<sensor_msgs::Image> occlusion(nh, "/mc_flow/occlusion");
     EXPECT_TRUE(waitFor([&] { return camera.inputSubscribers() >= 3; }, 10.0)) << "a listener did not start the inputs";
   }
-  EXPECT_TRUE(waitFor([&] { return camera.inputSubscribers() == 0; }, 10.0)) << "inputs kept after the last listener left";
+  EXPECT_TRUE(waitFor([&] { return camera.inputSubscribers() == 0; }, 10.0))
+      << "inputs kept after the last listener left";
 
   {
     Collector<mc_flow::SegmentArray> segments(nh, "/mc_flow/segments");

@@ -59,7 +59,8 @@ sensor_msgs::ImagePtr upscaled(const sensor_msgs::Image& in, int factor) {
   out->data.resize(std::size_t(out->step) * out->height);
   for (std::uint32_t y = 0; y < in.height; ++y) {
     std::uint8_t* row = &out->data[std::size_t(y) * factor * out->step];
-    for (std::uint32_t x = 0; x < out->width; ++x) std::memcpy(row + x * bytes, &in.data[y * in.step + (x / factor) * bytes], bytes);
+    for (std::uint32_t x = 0; x < out->width; ++x)
+      std::memcpy(row + x * bytes, &in.data[y * in.step + (x / factor) * bytes], bytes);
     for (int r = 1; r < factor; ++r) std::memcpy(row + std::size_t(r) * out->step, row, out->step);
   }
   return out;
@@ -127,7 +128,8 @@ class Storm : public ::testing::Test {
     outputs_info_ = std::make_unique<Collector<sensor_msgs::CameraInfo>>(nh_, "/mc_flow/camera_info");
     diagnostics_ = std::make_unique<Collector<diagnostic_msgs::DiagnosticArray>>(nh_, "/diagnostics");
     ASSERT_TRUE(waitFor([this] { return camera_->inputSubscribers() >= 3; }, 60.0)) << "the nodelet never subscribed";
-    ASSERT_TRUE(waitFor([this] { return diagnosticCount(*diagnostics_, "pairs solved") >= 0; }, 30.0)) << "no diagnostics";
+    ASSERT_TRUE(waitFor([this] { return diagnosticCount(*diagnostics_, "pairs solved") >= 0; }, 30.0))
+        << "no diagnostics";
   }
 
   /// The next valid frame of the synthetic scene, `step` seconds after the previous one.
@@ -274,16 +276,20 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
   // back at 160x120 another new sequence. (The warning names the processing sizes: the nodelet hands the
   // pipeline frames it has already downsampled.)
   {
-    expectWarned(upscaledTriple(valid(), 25), "reset", "the input changed from 'synthetic_rgb_optical_frame' 160x120 to");
+    expectWarned(upscaledTriple(valid(), 25), "reset",
+                 "the input changed from 'synthetic_rgb_optical_frame' 160x120 to");
     const ros::WallTime first_reset = ros::WallTime::now();
     const Triple big = upscaledTriple(valid(), 25);
     expectSolved(big, "4000x3000");
-    EXPECT_TRUE(waitFor([&] {
-      for (const auto& m : outputs_info_->messages()) {
-        if (m->header.stamp == big.stamp) return m->width == 250 && m->height == 187;
-      }
-      return false;
-    }, 10.0)) << "the 4000x3000 pair was not processed at 250x187";
+    EXPECT_TRUE(waitFor(
+        [&] {
+          for (const auto& m : outputs_info_->messages()) {
+            if (m->header.stamp == big.stamp) return m->width == 250 && m->height == 187;
+          }
+          return false;
+        },
+        10.0))
+        << "the 4000x3000 pair was not processed at 250x187";
     // The way back is a reset of the same kind: within the throttle's 5 s it would be counted but held back,
     // so that /rosout shows it only once the period has passed since the first one.
     const double since_first = (ros::WallTime::now() - first_reset).toSec();
@@ -324,8 +330,9 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
     expectSolved(f, "a valid pair after the skipped frames");
     const Triple repeat{camera_->rgb(0, f.stamp), camera_->depth(0, f.stamp), camera_->info(f.stamp), f.stamp, 0};
     const long held_before = warnings("input_stamp");
-    expectWarned(repeat, "input_stamp",
-                 "stamp " + stampText(f.stamp) + " repeats the previous message's: message held back from the synchroniser");
+    expectWarned(
+        repeat, "input_stamp",
+        "stamp " + stampText(f.stamp) + " repeats the previous message's: message held back from the synchroniser");
     EXPECT_TRUE(waitFor([&] { return warnings("input_stamp") >= held_before + 3; }, 10.0))
         << "not every topic's repeated stamp was counted" << dump(*watcher_);
     stamp_ = f.stamp - ros::Duration(5.0);
@@ -355,8 +362,10 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
     EXPECT_TRUE(waitFor(solvedInBurst, 60.0)) << "nothing solved during the burst" << dump(*watcher_);
     // Most of the burst reaches the synchroniser (a loaded machine may lose a few before the callbacks),
     // and what arrived during a solve is counted as dropped.
-    EXPECT_TRUE(waitFor([&] { return diagnosticCount(*diagnostics_, "frames synchronised") >= synced_before + 100; }, 20.0))
-        << "synchronised " << synced_before << " before the burst, " << diagnosticValue(*diagnostics_, "frames synchronised") << " after";
+    EXPECT_TRUE(
+        waitFor([&] { return diagnosticCount(*diagnostics_, "frames synchronised") >= synced_before + 100; }, 20.0))
+        << "synchronised " << synced_before << " before the burst, "
+        << diagnosticValue(*diagnostics_, "frames synchronised") << " after";
     EXPECT_TRUE(waitFor([&] { return diagnosticCount(*diagnostics_, dropped_key) > dropped_before; }, 20.0))
         << "drops not counted: " << diagnosticValue(*diagnostics_, dropped_key);
     // Settled: the last frame waiting for the worker has been solved.
@@ -373,12 +382,15 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
     Triple f = valid();
     f.info = upscaled(*f.info, 2);
     expectSolved(f, "camera_info of 320x240 with 160x120 images");
-    EXPECT_TRUE(waitFor([&] {
-      for (const auto& m : outputs_info_->messages()) {
-        if (m->header.stamp == f.stamp) return std::abs(m->K[0] - fx) < 1e-9 && m->width == 160;
-      }
-      return false;
-    }, 10.0)) << "intrinsics not rescaled to the images (fx " << fx << " before)";
+    EXPECT_TRUE(waitFor(
+        [&] {
+          for (const auto& m : outputs_info_->messages()) {
+            if (m->header.stamp == f.stamp) return std::abs(m->K[0] - fx) < 1e-9 && m->width == 160;
+          }
+          return false;
+        },
+        10.0))
+        << "intrinsics not rescaled to the images (fx " << fx << " before)";
   }
 
   // ---- The stream changes resolution (camera_info and images, e.g. a driver switched to 320x240): a new

@@ -51,7 +51,8 @@ class Stream : public ::testing::Test {
     segments_ = std::make_unique<Collector<mc_flow::SegmentArray>>(nh_, "/mc_flow/segments");
     diagnostics_ = std::make_unique<Collector<diagnostic_msgs::DiagnosticArray>>(nh_, "/diagnostics");
     ASSERT_TRUE(waitFor([this] { return camera_->inputSubscribers() >= 3; }, 60.0)) << "the nodelet never subscribed";
-    ASSERT_TRUE(waitFor([this] { return diagnosticCount(*diagnostics_, "pairs solved") >= 0; }, 30.0)) << "no diagnostics";
+    ASSERT_TRUE(waitFor([this] { return diagnosticCount(*diagnostics_, "pairs solved") >= 0; }, 30.0))
+        << "no diagnostics";
     ros::WallDuration(1.0).sleep();  // let the /rosout subscription connect too
   }
 
@@ -107,8 +108,8 @@ TEST_F(Stream, PairsAfterTheFirstStartWarmIdsPersistAndAResetStartsCold) {
     for (const auto& s : pairs[k - 1]->segments) before.insert(s.id);
     for (const auto& s : pairs[k]->segments)
       if (before.count(s.id)) kept.insert(s.id);
-    EXPECT_GE(2 * kept.size(), before.size()) << "pair " << k + 1 << " kept " << kept.size() << " of " << before.size()
-                                              << " ids";
+    EXPECT_GE(2 * kept.size(), before.size())
+        << "pair " << k + 1 << " kept " << kept.size() << " of " << before.size() << " ids";
   }
 
   // ---- The stamps go back 5 s (a bag looping): a warned reset; the next pair cold, the one after warm.

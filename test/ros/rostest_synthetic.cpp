@@ -76,10 +76,12 @@ class SyntheticSequence : public ::testing::Test {
       }
     }
     // The other outputs of the last pair may still be on their way.
-    waitFor([] {
-      return cloud_->count() >= kFrames - 1 && occlusion_->count() >= kFrames - 1 && odom_->count() >= kFrames - 1 &&
-             moving_mask_->count() >= kFrames - 1;
-    }, 10.0);
+    waitFor(
+        [] {
+          return cloud_->count() >= kFrames - 1 && occlusion_->count() >= kFrames - 1 &&
+                 odom_->count() >= kFrames - 1 && moving_mask_->count() >= kFrames - 1;
+        },
+        10.0);
   }
 
   static SyntheticCamera* camera_;
@@ -176,7 +178,8 @@ TEST_F(SyntheticSequence, ImagesHaveTheDocumentedSizesEncodingsAndHeaders) {
       EXPECT_EQ(image.height, std::uint32_t(kHeight)) << e.name;
       EXPECT_EQ(image.header.frame_id, SyntheticCamera::frameId()) << e.name;
       EXPECT_EQ(image.header.stamp, segs[i]->header.stamp) << e.name;
-      const std::string encoding = e.encoding.empty() ? "32FC" + std::to_string(segs[i]->segments.size() + 1) : e.encoding;
+      const std::string encoding =
+          e.encoding.empty() ? "32FC" + std::to_string(segs[i]->segments.size() + 1) : e.encoding;
       EXPECT_EQ(image.encoding, encoding) << e.name;
       EXPECT_EQ(image.data.size(), std::size_t(image.step) * image.height) << e.name;
     }
@@ -263,7 +266,7 @@ TEST_F(SyntheticSequence, TwistsMatchTheKnownMotions) {
     auto best = std::max_element(votes.begin(), votes.end(), [](auto& a, auto& b) { return a.second < b.second; });
     std::printf("segment %u: %d px, %.0f%% on part %d\n", segment.id, total, 100.0 * best->second / total, best->first);
     if (total < kWidth * kHeight / 50) continue;  // small segments: too few pixels for a fair comparison
-    if (best->second < 0.6 * total) continue;  // straddles parts (e.g. the arm's elbow)
+    if (best->second < 0.6 * total) continue;     // straddles parts (e.g. the arm's elbow)
     const int part = best->first;
     const auto gt = std::find_if(truth.parts.begin(), truth.parts.end(), [part](auto& p) { return p.id == part; });
     ASSERT_NE(gt, truth.parts.end());

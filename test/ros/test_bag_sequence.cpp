@@ -50,11 +50,11 @@ struct BagSpec {
   int frames = 4;
   std::string rgb_topic = kRgb, depth_topic = kDepth, info_topic = kInfo;
   bool with_info = true;
-  std::string rgb_encoding = "bgr8";        // a conversion the reader must do (the renderer gives RGB)
-  std::string depth_encoding = "16UC1";     // millimetres
-  double depth_offset = 0.004;              // [s] depth stamps after the colour ones (a real camera's skew)
-  int extra_rgb_without_depth_after = -1;   // a colour message with no depth near it, after this frame
-  int zero_depth_frame = -1;                // this frame's depth is all zero (a camera starting up)
+  std::string rgb_encoding = "bgr8";       // a conversion the reader must do (the renderer gives RGB)
+  std::string depth_encoding = "16UC1";    // millimetres
+  double depth_offset = 0.004;             // [s] depth stamps after the colour ones (a real camera's skew)
+  int extra_rgb_without_depth_after = -1;  // a colour message with no depth near it, after this frame
+  int zero_depth_frame = -1;               // this frame's depth is all zero (a camera starting up)
 };
 
 ros::Time stampOf(int t) { return kStart + ros::Duration(kInterval * t); }
@@ -180,7 +180,8 @@ CliRun runCli(const std::string& arguments) {
   static int counter = 0;
   const std::string tag = std::to_string(counter++);
   const fs::path out = workDir() / ("stdout_" + tag), err = workDir() / ("stderr_" + tag);
-  const std::string command = quote(MCFLOW_CLI_PATH) + " " + arguments + " >" + quote(out.string()) + " 2>" + quote(err.string());
+  const std::string command =
+      quote(MCFLOW_CLI_PATH) + " " + arguments + " >" + quote(out.string()) + " 2>" + quote(err.string());
   const int status = std::system(command.c_str());
   CliRun run;
   run.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -215,7 +216,8 @@ TEST(BagSequence, PairsColourAndDepthByTheNearestStampAndConvertsLikeTheNodelet)
   const BagSequence bag(path.string(), BagReadOptions());
   ASSERT_EQ(bag.size(), 4u) << bag.summary();
   EXPECT_NE(bag.summary().find("4 frame(s) from 5 message(s) on /camera/rgb/image_rect_color and 4 on"),
-            std::string::npos) << bag.summary();
+            std::string::npos)
+      << bag.summary();
   EXPECT_NE(bag.summary().find("intrinsics from the first camera_info on /camera/rgb/camera_info"), std::string::npos);
 
   mc_flow::Intrinsics K;
@@ -244,7 +246,9 @@ TEST(BagSequence, PairsColourAndDepthByTheNearestStampAndConvertsLikeTheNodelet)
   strict.max_stamp_difference = 0.001;
   const std::string error = inputError([&] { BagSequence(path.string(), strict); });
   EXPECT_NE(error.find("no message on '/camera/rgb/image_rect_color' has one on '/camera/depth_registered/image_rect' "
-                       "within 0.001 s"), std::string::npos) << error;
+                       "within 0.001 s"),
+            std::string::npos)
+      << error;
   EXPECT_NE(error.find("--max-stamp-difference"), std::string::npos) << error;
 }
 
@@ -262,7 +266,9 @@ TEST(BagSequence, GivenIntrinsicsReplaceTheCameraInfoAndOtherTopicNamesAreRead) 
   // No camera_info in this bag: named, with the ways out.
   const std::string error = inputError([&] { BagSequence(path.string(), options); });
   EXPECT_NE(error.find("no message on --info-topic '/camera/rgb/camera_info' (give --info-topic, --intrinsics or "
-                       "--camera-info)"), std::string::npos) << error;
+                       "--camera-info)"),
+            std::string::npos)
+      << error;
   options.intrinsics = mc_flow::Intrinsics{100, 101, 47.5, 35.5};
   const BagSequence bag(path.string(), options);
   ASSERT_EQ(bag.size(), 4u);
@@ -282,13 +288,17 @@ TEST(BagSequence, WrongTopicsAndFilesAreNamed) {
   // ... and lists what the bag holds, so the right name can be picked.
   EXPECT_NE(error.find("topics in the bag: /camera/depth_registered/image_rect (sensor_msgs/Image, 4), "
                        "/camera/rgb/camera_info (sensor_msgs/CameraInfo, 4), /camera/rgb/image_rect_color "
-                       "(sensor_msgs/Image, 4)"), std::string::npos) << error;
+                       "(sensor_msgs/Image, 4)"),
+            std::string::npos)
+      << error;
 
   options = BagReadOptions();
   options.topics.depth = kInfo;  // a topic of another type
   error = inputError([&] { BagSequence(path.string(), options); });
   EXPECT_NE(error.find("--depth-topic '/camera/rgb/camera_info' holds sensor_msgs/CameraInfo messages, not "
-                       "sensor_msgs/Image"), std::string::npos) << error;
+                       "sensor_msgs/Image"),
+            std::string::npos)
+      << error;
 
   // The right type of another definition (a bag recorded with other message versions).
   const fs::path old_definition = workDir() / "old_definition.bag";
@@ -306,7 +316,9 @@ TEST(BagSequence, WrongTopicsAndFilesAreNamed) {
   }
   error = inputError([&] { BagSequence(old_definition.string(), BagReadOptions()); });
   EXPECT_NE(error.find("--rgb-topic '/camera/rgb/image_rect_color' holds sensor_msgs/Image of another definition "
-                       "(md5sum 0123456789abcdef0123456789abcdef"), std::string::npos) << error;
+                       "(md5sum 0123456789abcdef0123456789abcdef"),
+            std::string::npos)
+      << error;
 
   error = inputError([&] { BagSequence((workDir() / "missing.bag").string(), BagReadOptions()); });
   EXPECT_NE(error.find("missing.bag': does not exist"), std::string::npos) << error;
@@ -366,11 +378,15 @@ TEST(RunSeqBag, BadInputEndsWithAMessageNamingIt) {
   CliRun run = runCli("run-seq --bag " + quote(bag.string()) + " --rgb-topic /camera/color/image_raw --out " +
                       quote((workDir() / "x").string()));
   EXPECT_EQ(run.code, 1);
-  EXPECT_NE(run.err.find("input error: bag '" + bag.string() + "' has no message on --rgb-topic "
-                         "'/camera/color/image_raw'; topics in the bag: "), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("input error: bag '" + bag.string() +
+                         "' has no message on --rgb-topic "
+                         "'/camera/color/image_raw'; topics in the bag: "),
+            std::string::npos)
+      << run.err;
   EXPECT_FALSE(fs::exists(workDir() / "x")) << "nothing is written before the input is known to be usable";
 
-  run = runCli("run-seq --bag " + quote((workDir() / "none.bag").string()) + " --out " + quote((workDir() / "y").string()));
+  run = runCli("run-seq --bag " + quote((workDir() / "none.bag").string()) + " --out " +
+               quote((workDir() / "y").string()));
   EXPECT_EQ(run.code, 1);
   EXPECT_NE(run.err.find("none.bag': does not exist"), std::string::npos) << run.err;
 
@@ -382,10 +398,12 @@ TEST(RunSeqBag, BadInputEndsWithAMessageNamingIt) {
   EXPECT_EQ(run.code, 1);
   EXPECT_NE(run.err.find("yuv422"), std::string::npos) << run.err;
 
-  run = runCli("run-seq --bag " + quote(bag.string()) + " --depth-scale 5000 --out " + quote((workDir() / "w").string()));
+  run =
+      runCli("run-seq --bag " + quote(bag.string()) + " --depth-scale 5000 --out " + quote((workDir() / "w").string()));
   EXPECT_EQ(run.code, 2);
   EXPECT_NE(run.err.find("--depth-scale is for --tum/--frames"), std::string::npos) << run.err;
-  run = runCli("run-seq --tum " + quote(workDir().string()) + " --rgb-topic /a --out " + quote((workDir() / "v").string()));
+  run = runCli("run-seq --tum " + quote(workDir().string()) + " --rgb-topic /a --out " +
+               quote((workDir() / "v").string()));
   EXPECT_EQ(run.code, 2);
   EXPECT_NE(run.err.find("--rgb-topic is for --bag"), std::string::npos) << run.err;
 }

@@ -41,11 +41,22 @@ sensor_msgs::Image colourImage(int w, int h, const std::string& encoding) {
     for (int x = 0; x < w; ++x) {
       std::uint8_t* p = &image.data[std::size_t(y) * image.step + std::size_t(x * channels * depth_bytes)];
       const std::uint8_t r = std::uint8_t(x), g = std::uint8_t(y), b = 200;
-      if (encoding == "rgb8" || encoding == "rgba8") { p[0] = r; p[1] = g; p[2] = b; }
-      if (encoding == "bgr8" || encoding == "bgra8") { p[0] = b; p[1] = g; p[2] = r; }
+      if (encoding == "rgb8" || encoding == "rgba8") {
+        p[0] = r;
+        p[1] = g;
+        p[2] = b;
+      }
+      if (encoding == "bgr8" || encoding == "bgra8") {
+        p[0] = b;
+        p[1] = g;
+        p[2] = r;
+      }
       if (encoding == "rgba8" || encoding == "bgra8") p[3] = 255;
       if (encoding == "mono8") p[0] = r;
-      if (encoding == "mono16") { const std::uint16_t v = std::uint16_t(r * 257); std::memcpy(p, &v, 2); }
+      if (encoding == "mono16") {
+        const std::uint16_t v = std::uint16_t(r * 257);
+        std::memcpy(p, &v, 2);
+      }
     }
   }
   return image;
@@ -145,7 +156,7 @@ TEST(Conversions, DownsamplingScalesSizeAndIntrinsics) {
 
 TEST(Conversions, DepthDownsamplingDoesNotAverageAcrossEdges) {
   auto depth = depthImage(32, 32, "32FC1", 1.0f);
-  setDepth(depth, 0, 0, 3.0f);  // block (0,0): 3, 1, 1, 1 -> 1 (the far sample is another surface)
+  setDepth(depth, 0, 0, 3.0f);           // block (0,0): 3, 1, 1, 1 -> 1 (the far sample is another surface)
   setDepth(depth, 2, 0, std::nanf(""));  // block (1,0): NaN, 1, 1, 1 -> 1
   setDepth(depth, 4, 0, 1.02f);          // block (2,0): 1.02 is the same surface: averaged in
   // The core's rule (mc_flow::downsampleFrame, as the pyramid and `mcflow run-seq`): neighbours within
@@ -168,8 +179,8 @@ TEST(Conversions, InvalidDepthBecomesZero) {
 }
 
 TEST(Conversions, SmallerRegisteredDepthOfTheSameAspectIsResampled) {
-  const auto input = mc_flow_ros::toFrameInput(colourImage(64, 48, "rgb8"), depthImage(32, 24, "16UC1", 0.8f),
-                                               cameraInfo(64, 48), 1);
+  const auto input =
+      mc_flow_ros::toFrameInput(colourImage(64, 48, "rgb8"), depthImage(32, 24, "16UC1", 0.8f), cameraInfo(64, 48), 1);
   EXPECT_EQ(input.frame.depth.width, 64);
   EXPECT_FLOAT_EQ(input.frame.depth(63, 47), 0.8f);
 }
@@ -318,9 +329,9 @@ TEST(Conversions, LabelAndOcclusionImages) {
   const auto labels = mc_flow_ros::makeLabelsImage(f.result, f.pair);
   EXPECT_EQ(labels->encoding, "mono16");
   const auto* ids = reinterpret_cast<const std::uint16_t*>(labels->data.data());
-  EXPECT_EQ(ids[0], 0);       // outlier
-  EXPECT_EQ(ids[1], 7);       // segment 1 -> id 7
-  EXPECT_EQ(ids[4 + 3], 9);   // segment 2 -> id 9
+  EXPECT_EQ(ids[0], 0);      // outlier
+  EXPECT_EQ(ids[1], 7);      // segment 1 -> id 7
+  EXPECT_EQ(ids[4 + 3], 9);  // segment 2 -> id 9
   const auto occlusion = mc_flow_ros::makeOcclusionImage(f.result, f.pair);
   EXPECT_EQ(occlusion->encoding, "mono8");
   EXPECT_EQ(occlusion->data[2 * 4 + 3], 255);
@@ -340,10 +351,10 @@ TEST(Conversions, SceneFlowCloudHasTheDocumentedFields) {
   EXPECT_FALSE(cloud->is_dense);
   EXPECT_EQ(cloud->header.frame_id, "camera_rgb_optical_frame");
   const std::vector<std::pair<std::string, int>> expected = {
-      {"x", sensor_msgs::PointField::FLOAT32},  {"y", sensor_msgs::PointField::FLOAT32},
-      {"z", sensor_msgs::PointField::FLOAT32},  {"rgb", sensor_msgs::PointField::FLOAT32},
-      {"vx", sensor_msgs::PointField::FLOAT32}, {"vy", sensor_msgs::PointField::FLOAT32},
-      {"vz", sensor_msgs::PointField::FLOAT32}, {"label", sensor_msgs::PointField::UINT32},
+      {"x", sensor_msgs::PointField::FLOAT32},     {"y", sensor_msgs::PointField::FLOAT32},
+      {"z", sensor_msgs::PointField::FLOAT32},     {"rgb", sensor_msgs::PointField::FLOAT32},
+      {"vx", sensor_msgs::PointField::FLOAT32},    {"vy", sensor_msgs::PointField::FLOAT32},
+      {"vz", sensor_msgs::PointField::FLOAT32},    {"label", sensor_msgs::PointField::UINT32},
       {"occluded", sensor_msgs::PointField::UINT8}};
   ASSERT_EQ(cloud->fields.size(), expected.size());
   for (std::size_t i = 0; i < expected.size(); ++i) {
@@ -412,8 +423,8 @@ TEST(Conversions, MotionMarkersClearThenOneArrowAndTextPerSegment) {
   EXPECT_GT(v.x(), 0.15);
 }
 
-// With the static world known (segment 7 the world, 9 moving at 0.3 m/s in it): one arrow, for the moving segment, along
-// its world-relative velocity; the world gets none, and it is drawn in the world's one colour in the pictures.
+// With the static world known (segment 7 the world, 9 moving at 0.3 m/s in it): one arrow, for the moving segment,
+// along its world-relative velocity; the world gets none, and it is drawn in the world's one colour in the pictures.
 TEST(Conversions, WithTheWorldKnownOnlyMovingSegmentsGetArrowsAndTheWorldItsOwnColour) {
   Fixture f = makeFixture();
   f.result.world.found = true;
@@ -469,7 +480,7 @@ TEST(Conversions, OdometryIsTheBasesWithItsCovarianceInTheOdomFrame) {
   mc_flow::Odometry odometry;
   odometry.pose.topRightCorner<3, 1>() = Eigen::Vector3d(0, 0, 10);  // 10 m ahead of the first pose (optical z)
   odometry.pose_covariance.bottomRightCorner<3, 3>() = 1e-4 * Eigen::Matrix3d::Identity();  // rotation only
-  odometry.velocity << 0, 0, 1, 0, 0, 0;  // 1 m/s forward (optical z)
+  odometry.velocity << 0, 0, 1, 0, 0, 0;                                                    // 1 m/s forward (optical z)
   // The camera is mounted with the usual optical rotation: base x = camera z, base y = -camera x, base z = -camera y.
   Eigen::Isometry3d base_from_camera = Eigen::Isometry3d::Identity();
   base_from_camera.linear() << 0, 0, 1, -1, 0, 0, 0, -1, 0;

@@ -66,8 +66,8 @@ TEST(InputGate, AJumpBackRestartsTheStreamAtMostEveryFiveSeconds) {
 TEST(InputGate, GapsInHeaderSeqCountAsLostButAPublisherRestartDoesNot) {
   InputGate g = gate();
   g.admit(InputGate::kDepth, header(1, 10), at(0));
-  g.admit(InputGate::kDepth, header(2, 13), at(0));     // 11 and 12 lost
-  g.admit(InputGate::kDepth, header(3, 5000), at(0));   // another publisher: not a loss
+  g.admit(InputGate::kDepth, header(2, 13), at(0));    // 11 and 12 lost
+  g.admit(InputGate::kDepth, header(3, 5000), at(0));  // another publisher: not a loss
   g.admit(InputGate::kDepth, header(4, 5001), at(0));
   diagnostic_updater::DiagnosticStatusWrapper status;
   g.addTo(status, at(1));

@@ -69,8 +69,9 @@ TEST(InputWatch, InputThatStoppedSaysSoWithCountsAndLastStamp) {
   ASSERT_TRUE(w);
   EXPECT_EQ(w->problem, InputSilence::Stopped);
   EXPECT_FALSE(w->restart_synchroniser);
-  EXPECT_TRUE(contains(w->text, "no input for 16 s; 20/20/20 rgb/depth/camera_info messages received, last at t = "
-                                "1311868164.500000"))
+  EXPECT_TRUE(contains(w->text,
+                       "no input for 16 s; 20/20/20 rgb/depth/camera_info messages received, last at t = "
+                       "1311868164.500000"))
       << w->text;
   EXPECT_TRUE(contains(w->text, "input stopped")) << w->text;
   EXPECT_FALSE(contains(w->text, "camera_info is the most common cause")) << w->text;
@@ -84,8 +85,9 @@ TEST(InputWatch, OneInputThatStoppedIsNamed) {
   const auto w = describeInputSilence(s, kWarnAfter);
   ASSERT_TRUE(w);
   EXPECT_EQ(w->problem, InputSilence::Stopped);
-  EXPECT_TRUE(contains(w->text, "no input on /camera/depth_registered/image_rect for 11 s while "
-                                "/camera/rgb/image_rect_color and /camera/rgb/camera_info still arrive"))
+  EXPECT_TRUE(contains(w->text,
+                       "no input on /camera/depth_registered/image_rect for 11 s while "
+                       "/camera/rgb/image_rect_color and /camera/rgb/camera_info still arrive"))
       << w->text;
   EXPECT_TRUE(contains(w->text, "30/18/30")) << w->text;
   EXPECT_TRUE(contains(w->text, "depth t = 190.250000")) << w->text;

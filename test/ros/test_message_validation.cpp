@@ -43,7 +43,8 @@ bool exactlyConsistent(const sensor_msgs::Image& m, const EncodingCase& e) {
   return u128(m.height) * m.step == u128(m.data.size());
 }
 
-sensor_msgs::Image header(const EncodingCase& e, std::uint32_t w, std::uint32_t h, std::uint32_t step, std::size_t bytes) {
+sensor_msgs::Image header(const EncodingCase& e, std::uint32_t w, std::uint32_t h, std::uint32_t step,
+                          std::size_t bytes) {
   sensor_msgs::Image m;
   m.header.frame_id = "cam";
   m.encoding = e.name;
@@ -117,7 +118,8 @@ TEST(MessageValidation, OddStepIsALayoutProblemNamingTheStep) {
     FAIL() << "accepted";
   } catch (const FrameInputError& e) {
     EXPECT_EQ(int(e.problem), int(InputProblem::Layout));
-    EXPECT_NE(std::string(e.what()).find("step 129 bytes is not a multiple of the 2-byte value size"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("step 129 bytes is not a multiple of the 2-byte value size"),
+              std::string::npos)
         << e.what();
   }
 }
@@ -150,19 +152,19 @@ TEST(MessageValidation, AdversarialHeadersForEveryEncoding) {
     SCOPED_TRACE(e.name);
     const std::uint32_t pixel = std::uint32_t(e.channels * e.value_bytes);
     const std::uint32_t w = 40, h = 30, row = w * pixel;
-    checkOne(header(e, w, h, row, std::size_t(row) * h), e);            // exact
+    checkOne(header(e, w, h, row, std::size_t(row) * h), e);                          // exact
     checkOne(header(e, w, h, row + pixel * 3, std::size_t(row + pixel * 3) * h), e);  // padded rows
-    checkOne(header(e, w, h, row, std::size_t(row) * h - 1), e);        // one byte short
-    checkOne(header(e, w, h, row, std::size_t(row) * h + 1), e);        // one byte long
-    checkOne(header(e, w, h, row - 1, std::size_t(row - 1) * h), e);    // step below the row
-    checkOne(header(e, w, h, row + 1, std::size_t(row + 1) * h), e);   // odd step
-    checkOne(header(e, w, h, 0, 0), e);                                 // zero step
-    checkOne(header(e, 0, h, row, std::size_t(row) * h), e);            // zero width
-    checkOne(header(e, w, 0, row, 0), e);                               // zero height
-    checkOne(header(e, 0, 0, 0, 0), e);                                 // all zero
-    checkOne(header(e, 0xffffffffu, 0xffffffffu, 0xffffffffu, 16), e);  // huge, tiny data
-    checkOne(header(e, 5000, 5000, 5000 * pixel, 64), e);               // over the pixel limit
-    checkOne(header(e, 0x80000000u, 1, 0x80000000u, 64), e);            // width beyond int
+    checkOne(header(e, w, h, row, std::size_t(row) * h - 1), e);                      // one byte short
+    checkOne(header(e, w, h, row, std::size_t(row) * h + 1), e);                      // one byte long
+    checkOne(header(e, w, h, row - 1, std::size_t(row - 1) * h), e);                  // step below the row
+    checkOne(header(e, w, h, row + 1, std::size_t(row + 1) * h), e);                  // odd step
+    checkOne(header(e, w, h, 0, 0), e);                                               // zero step
+    checkOne(header(e, 0, h, row, std::size_t(row) * h), e);                          // zero width
+    checkOne(header(e, w, 0, row, 0), e);                                             // zero height
+    checkOne(header(e, 0, 0, 0, 0), e);                                               // all zero
+    checkOne(header(e, 0xffffffffu, 0xffffffffu, 0xffffffffu, 16), e);                // huge, tiny data
+    checkOne(header(e, 5000, 5000, 5000 * pixel, 64), e);                             // over the pixel limit
+    checkOne(header(e, 0x80000000u, 1, 0x80000000u, 64), e);                          // width beyond int
     auto swapped = header(e, w, h, row, std::size_t(row) * h);
     swapped.is_bigendian = 1;
     checkOne(swapped, e);  // valid: the other byte order is swapped on conversion
@@ -209,7 +211,10 @@ TEST(MessageValidation, BigEndianDepthIsSwappedNotMisread) {
   for (const EncodingCase& e : {kEncodings[6], kEncodings[7]}) {
     auto m = header(e, 32, 24, std::uint32_t(32 * e.value_bytes), 32 * 24 * e.value_bytes);
     if (e.name == "16UC1") {
-      for (std::size_t i = 0; i < m.data.size(); i += 2) { m.data[i] = 0x03; m.data[i + 1] = 0xE8; }  // 1000 mm, big endian
+      for (std::size_t i = 0; i < m.data.size(); i += 2) {
+        m.data[i] = 0x03;
+        m.data[i + 1] = 0xE8;
+      }  // 1000 mm, big endian
     } else {
       const std::uint8_t one_five[4] = {0x3F, 0xC0, 0x00, 0x00};  // 1.5f, big endian
       for (std::size_t i = 0; i < m.data.size(); i += 4) std::memcpy(&m.data[i], one_five, 4);

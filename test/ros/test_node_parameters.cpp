@@ -47,8 +47,8 @@ TEST(NodeParameters, EachAppearsOnceInTheLaunchFileWithTheNodeletsDefault) {
     const std::regex arg("<arg name=\"" + name + "\" default=\"([^\"]*)\"");
     std::smatch m;
     ASSERT_TRUE(std::regex_search(text, m, arg)) << "no <arg name=\"" << name << "\" default=...>";
-    EXPECT_TRUE(sameDefault(m[1].str(), value)) << "launch default '" << m[1].str() << "', nodelet default '" << value
-                                                << "'";
+    EXPECT_TRUE(sameDefault(m[1].str(), value))
+        << "launch default '" << m[1].str() << "', nodelet default '" << value << "'";
     EXPECT_EQ(count(text, "<arg name=\"" + name + "\""), 1);
     EXPECT_EQ(count(text, "<param name=\"" + name + "\""), 1);
   }

@@ -86,7 +86,8 @@ TEST(NodeStatus, EachPipelineStepIsCountedAndWarnedInWords) {
   std::vector<StepWarning> w = status.recordStep(started, "12.000000000", 1.0);
   ASSERT_EQ(w.size(), 1u);
   EXPECT_EQ(w[0].key, "reset:gap");
-  EXPECT_EQ(w[0].text, "frame 12.000000000: 2.5 s since the previous frame (> max_pair_interval 1 s): starting a new sequence");
+  EXPECT_EQ(w[0].text,
+            "frame 12.000000000: 2.5 s since the previous frame (> max_pair_interval 1 s): starting a new sequence");
 
   mc_flow::SequenceStep repeated;
   repeated.outcome = Outcome::RepeatedStamp;

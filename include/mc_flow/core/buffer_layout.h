@@ -19,11 +19,11 @@ constexpr std::uint64_t kDefaultMaxInputPixels = 16384ull * 16384ull;
 
 /// @brief A buffer layout as declared by a header. All sizes are as read, before any check.
 struct BufferLayout {
-  std::uint64_t width = 0;          ///< [px]
-  std::uint64_t height = 0;         ///< [px]
-  std::uint64_t channels = 1;       ///< values per pixel
-  std::uint64_t value_bytes = 1;    ///< bytes per value (1, 2, 4)
-  std::uint64_t row_step = 0;       ///< [bytes] from one row to the next
+  std::uint64_t width = 0;            ///< [px]
+  std::uint64_t height = 0;           ///< [px]
+  std::uint64_t channels = 1;         ///< values per pixel
+  std::uint64_t value_bytes = 1;      ///< bytes per value (1, 2, 4)
+  std::uint64_t row_step = 0;         ///< [bytes] from one row to the next
   std::uint64_t available_bytes = 0;  ///< bytes really present for the pixels
   /// true: the data must be exactly height * row_step bytes (a message); false: at least that (a file
   /// whose payload may be followed by other bytes).

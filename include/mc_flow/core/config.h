@@ -45,11 +45,11 @@ struct Config {
 /// @brief One row of config_fields.def; the values as the text that Config::set() parses.
 struct ConfigFieldInfo {
   std::string name;
-  std::string type;         ///< C++ type: double, int, unsigned, bool, Regularizer, Backend
+  std::string type;  ///< C++ type: double, int, unsigned, bool, Regularizer, Backend
   std::string default_text;
-  std::string min_text;     ///< inclusive; for an enum its first enumerator, for a bool false
-  std::string max_text;     ///< inclusive; for an enum its last enumerator, for a bool true
-  std::string unit;         ///< "1": dimensionless; "-": not a quantity (flag, choice)
+  std::string min_text;  ///< inclusive; for an enum its first enumerator, for a bool false
+  std::string max_text;  ///< inclusive; for an enum its last enumerator, for a bool true
+  std::string unit;      ///< "1": dimensionless; "-": not a quantity (flag, choice)
   std::string description;
 };
 

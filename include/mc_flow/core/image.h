@@ -34,7 +34,9 @@ struct Image {
   const T* ptr() const { return data.data(); }
   bool sameSize(int w, int h) const { return width == w && height == h; }
   template <typename U>
-  bool sameSize(const Image<U>& o) const { return width == o.width && height == o.height; }
+  bool sameSize(const Image<U>& o) const {
+    return width == o.width && height == o.height;
+  }
 };
 
 using ImageF = Image<float>;

@@ -60,12 +60,12 @@ struct LabelCostModel {
 
 /// @brief One rigid motion refitted on the union of a group of motion labels' pixels (refitUnions).
 struct UnionFit {
-  Vector6d twist = Vector6d::Zero();  ///< the union's motion
-  std::vector<double> member_cost;    ///< each member's data cost under `twist` [normalised Cauchy cost]
-  double cost = 0;                    ///< their sum
-  double pixels = 0;                  ///< the members' weighted pixels [px]
+  Vector6d twist = Vector6d::Zero();      ///< the union's motion
+  std::vector<double> member_cost;        ///< each member's data cost under `twist` [normalised Cauchy cost]
+  double cost = 0;                        ///< their sum
+  double pixels = 0;                      ///< the members' weighted pixels [px]
   Matrix6d curvature = Matrix6d::Zero();  ///< the union's Gauss-Newton curvature H at `twist`
-  int iterations = 0;                 ///< accepted Gauss-Newton steps
+  int iterations = 0;                     ///< accepted Gauss-Newton steps
 };
 
 /// @brief What a label owns (u_i >= 0.5, valid depth): pixel count, sum of P, sum of P P^T [m, m^2].
@@ -115,8 +115,8 @@ class LabelStore {
   /// @brief Without changing the labels: the pixels each cut would move, and the cost model of the labelling
   /// with all cuts applied (cut c as motion label labelCount()-1+c) at `twists` (one per label of that
   /// labelling).
-  virtual CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists,
-                             bool use_occlusion, const Config& config) = 0;
+  virtual CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
+                             const Config& config) = 0;
   /// @brief Applies the cuts; cut c becomes motion label labelCount()-1+c (before the outlier label).
   /// Resets the dual variables.
   virtual void applyCuts(const std::vector<LabelCut>& cuts) = 0;

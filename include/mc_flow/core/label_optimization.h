@@ -20,10 +20,10 @@ namespace mc_flow {
 /// @brief Everything the primal-dual iteration needs, at one resolution.
 struct LabelProblem {
   int width = 0, height = 0, count = 0;  ///< count includes the outlier label (last)
-  std::vector<float> data_cost;           ///< count planes, D_i(x); the outlier plane is K_D
-  ImageF weight_x;                        ///< r_1(x): weight of u(x+1,y) - u(x,y); 0 at the last column
-  ImageF weight_y;                        ///< r_2(x): weight of u(x,y+1) - u(x,y); 0 at the last row
-  ImageU8 outlier_only;                   ///< 1 where only the outlier label is feasible (no depth)
+  std::vector<float> data_cost;          ///< count planes, D_i(x); the outlier plane is K_D
+  ImageF weight_x;                       ///< r_1(x): weight of u(x+1,y) - u(x,y); 0 at the last column
+  ImageF weight_y;                       ///< r_2(x): weight of u(x,y+1) - u(x,y); 0 at the last row
+  ImageU8 outlier_only;                  ///< 1 where only the outlier label is feasible (no depth)
   Regularizer regularizer = Regularizer::Quadratic;
   double lambda = 1.0;
 };
@@ -32,7 +32,12 @@ struct LabelProblem {
 struct LabelDual {
   int width = 0, height = 0, count = 0;
   std::vector<float> p;  ///< plane 2*i = p_x of label i, 2*i+1 = p_y
-  void reset(int w, int h, int n) { width = w; height = h; count = n; p.assign(std::size_t(w) * h * n * 2, 0.f); }
+  void reset(int w, int h, int n) {
+    width = w;
+    height = h;
+    count = n;
+    p.assign(std::size_t(w) * h * n * 2, 0.f);
+  }
 };
 
 struct LabelStats {
@@ -81,7 +86,8 @@ class LabelOptimizer {
 /// @brief The CPU implementation (OpenMP).
 std::unique_ptr<LabelOptimizer> makeCpuLabelOptimizer();
 /// @brief The CUDA implementation (host-memory problems: tests and mcflow_bench_labels; the CUDA SolveBackend runs
-/// the same engine on its device buffers); throws BackendError when unavailable (cudaBackendAvailable, solve_backend.h).
+/// the same engine on its device buffers); throws BackendError when unavailable (cudaBackendAvailable,
+/// solve_backend.h).
 std::unique_ptr<LabelOptimizer> makeCudaLabelOptimizer();
 
 }  // namespace mc_flow

@@ -7,7 +7,7 @@
  * label on the GPU) and reduces the largest change its own way.
  *
  * Rounding: every float operation is rounded on its own (rounded.h) in the order the CPU evaluates it, so both
- * backends compute the same bits except for log1p (motion_pixel::log1pF: the device's log1pf in the data costs).
+ * backends compute the same bits except for log1p (log1pF: the device's log1pf in the data costs).
  * The derivation is in docs/ALGORITHM.md.
  */
 #pragma once
@@ -24,28 +24,8 @@
 namespace mc_flow {
 namespace label_pixel {
 
-constexpr float kMinDepth = 1e-3f;  ///< [m] a warped point at or nearer than this is out of view (data cost)
+constexpr float kMinDepth = 1e-3f;    ///< [m] a warped point at or nearer than this is out of view (data cost)
 constexpr float kNoColumnTau = 1e3f;  ///< tau of a pixel whose column of K is empty (no neighbour carries weight)
-
-/// @brief std::max(a, b): b when a < b, else a (NaN in b gives a), as the CPU's std::max.
-MCFLOW_HOST_DEVICE inline float maxF(float a, float b) { return a < b ? b : a; }
-
-/// @brief IEEE-rounded square root on both sides.
-MCFLOW_HOST_DEVICE inline float sqrtRn(float a) {
-#if defined(__CUDA_ARCH__)
-  return __fsqrt_rn(a);
-#else
-  return std::sqrt(a);
-#endif
-}
-
-MCFLOW_HOST_DEVICE inline bool finite(float a) {
-#if defined(__CUDA_ARCH__)
-  return isfinite(a);
-#else
-  return std::isfinite(a);
-#endif
-}
 
 /// @brief Geometric weight (eq. 11) between the frame-1 points (x0, y0, z0) and (x1, y1, z1) of two neighbours:
 /// r = footprint / max(footprint, distance), at least wmin; 1 on a fronto-parallel surface at any depth and
@@ -53,7 +33,7 @@ MCFLOW_HOST_DEVICE inline bool finite(float a) {
 /// fmean = (fx + fy) / 2 of the level; wmin where either point has no depth.
 MCFLOW_HOST_DEVICE inline float geometricWeight(float x0, float y0, float z0, float x1, float y1, float z1, float fmean,
                                                 float wmin) {
-  if (!finite(z0) || !finite(z1)) return wmin;
+  if (!finiteF(z0) || !finiteF(z1)) return wmin;
   const float dx = subRn(x0, x1), dy = subRn(y0, y1), dz = subRn(z0, z1);
   const float distance = sqrtRn(addRn(addRn(mulRn(dx, dx), mulRn(dy, dy)), mulRn(dz, dz)));
   const float footprint = divRn(mulRn(0.5f, addRn(z0, z1)), fmean);
@@ -100,10 +80,10 @@ MCFLOW_HOST_DEVICE float motionLabelCost(const float P2[3], float I1, const Inte
   if (!clampIntoView(width, height, u, v) || !sampleBilinearAt(intensity2, width, height, u, v, I2))
     return t.out_of_view;
   const float rI = divRn(subRn(I1, I2), t.c_intensity);
-  const float cost = motion_pixel::log1pF(mulRn(rI, rI));
+  const float cost = log1pF(mulRn(rI, rI));
   if (!sampleDepthBilinearAt(depth2, width, height, u, v, Z2)) return addRn(cost, t.missing_depth);
   const float rZ = divRn(subRn(P2[2], Z2), t.c_depth);
-  return addRn(cost, mulRn(t.alpha, motion_pixel::log1pF(mulRn(rZ, rZ))));
+  return addRn(cost, mulRn(t.alpha, log1pF(mulRn(rZ, rZ))));
 }
 
 /// @brief A pixel's diagonal preconditioners (Pock & Chambolle 2011, alpha = 1), in the form the iteration uses.

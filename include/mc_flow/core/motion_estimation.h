@@ -29,7 +29,7 @@ enum class MotionStop {
 std::string toString(MotionStop stop);
 
 struct MotionLevelStats {
-  int level = 0;           ///< pyramid level (set by the caller; 0 = input resolution)
+  int level = 0;  ///< pyramid level (set by the caller; 0 = input resolution)
   int iterations = 0;
   int pixels_used = 0;
   double cost_before = 0;  ///< robust cost (normalised Cauchy) at the first iteration
@@ -88,8 +88,9 @@ double motionOutOfViewCost(const Config& config);
 /// @brief IRLS at one level. `labels` has the level's size; `occluded` (may be null) excludes pixels.
 /// `twists` holds one twist per motion label (labels.count - 1; otherwise InputError) and is updated in place.
 /// `accumulator` builds the normal equations (null: a CPU one).
-MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2, const SoftLabels& labels,
-                                        const ImageU8* occluded, std::vector<Vector6d>& twists, const Config& config,
+MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const PyramidLevel& frame2,
+                                        const SoftLabels& labels, const ImageU8* occluded,
+                                        std::vector<Vector6d>& twists, const Config& config,
                                         MotionAccumulator* accumulator = nullptr);
 
 /// @brief Solves H delta = -g where H is 6n x 6n with 6x6 blocks per label pair (diagonal blocks damped), one LDLT
@@ -98,8 +99,7 @@ MotionLevelStats estimateMotionsAtLevel(const PyramidLevel& frame1, const Pyrami
 /// blocks between groups taken as zero; inside a group every block is kept (a principal submatrix stays positive
 /// semidefinite, a matrix with some inner blocks zeroed need not). With `min_coupling` 0: the solution of the whole
 /// matrix up to rounding. Returns the size of the largest group in labels.
-int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen::VectorXd& delta,
-                       double min_coupling);
+int solveCoupledBlocks(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, Eigen::VectorXd& delta, double min_coupling);
 
 /// @brief The same IRLS with an accumulator already bound to a level (setLevel called, or a backend's
 /// device-resident one); `twists` holds one twist per motion label of that binding.

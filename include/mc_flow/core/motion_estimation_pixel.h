@@ -35,14 +35,14 @@ MCFLOW_HOST_DEVICE inline float labelShare(float u, float mass) { return divRn(u
 
 /// @brief The warped point's projection into frame 2 and its derivatives with respect to P2.
 struct Projection {
-  float inv_z;                     ///< 1 / max(z, kMinDepth)
-  float u, v;                      ///< [px], clamped into the image within kBorderMargin (sampling.h)
+  float inv_z;  ///< 1 / max(z, kMinDepth)
+  float u, v;   ///< [px], clamped into the image within kBorderMargin (sampling.h)
   float du_dX, du_dZ, dv_dY, dv_dZ;
 };
 
 /// @brief Projects P2 with (fx, fy, cx, cy); false when it is behind the camera or out of view (clampIntoView).
-MCFLOW_HOST_DEVICE inline bool project(const float P2[3], float fx, float fy, float cx, float cy, int width,
-                                       int height, Projection& p) {
+MCFLOW_HOST_DEVICE inline bool project(const float P2[3], float fx, float fy, float cx, float cy, int width, int height,
+                                       Projection& p) {
   p.inv_z = divRn(1.f, P2[2] < kMinDepth ? kMinDepth : P2[2]);
   p.u = addRn(mulRn(mulRn(fx, P2[0]), p.inv_z), cx);
   p.v = addRn(mulRn(mulRn(fy, P2[1]), p.inv_z), cy);
@@ -75,7 +75,11 @@ MCFLOW_HOST_DEVICE inline void depthRow(const Projection& p, float gx, float gy,
 /// this replaced, so the CPU keeps its bits.
 MCFLOW_HOST_DEVICE inline void residualJacobian(const float P2[3], const float row[3], const float* left_jacobian,
                                                 float out[6]) {
-  const float point[6] = {row[0], row[1], row[2], row[2] * P2[1] - row[1] * P2[2], row[0] * P2[2] - row[2] * P2[0],
+  const float point[6] = {row[0],
+                          row[1],
+                          row[2],
+                          row[2] * P2[1] - row[1] * P2[2],
+                          row[0] * P2[2] - row[2] * P2[0],
                           row[1] * P2[0] - row[0] * P2[1]};
   MCFLOW_UNROLL
   for (int i = 0; i < 6; ++i) {
@@ -89,15 +93,6 @@ MCFLOW_HOST_DEVICE inline void residualJacobian(const float P2[3], const float r
 /// @brief IRLS weight of the normalised Cauchy cost factor * ln(1 + (r/c)^2): factor / (c^2 + r^2).
 MCFLOW_HOST_DEVICE inline float cauchyWeight(float factor, float c, float r) {
   return divRn(factor, addRn(mulRn(c, c), mulRn(r, r)));
-}
-
-/// @brief ln(1 + x) of a float, in float (the host's std::log1p(float), the device's log1pf).
-MCFLOW_HOST_DEVICE inline float log1pF(float x) {
-#if defined(__CUDA_ARCH__)
-  return log1pf(x);
-#else
-  return std::log1p(x);
-#endif
 }
 
 /// @brief The normalised Cauchy cost ln(1 + (r/c)^2) of a residual, in float.

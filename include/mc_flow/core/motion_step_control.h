@@ -81,8 +81,10 @@ MCFLOW_HOST_DEVICE inline double storedPivot(double d) {
 }
 template <PivotForm form>
 MCFLOW_HOST_DEVICE inline double byPivot(double v, double stored) {
-  if constexpr (form == PivotForm::Pivot) return v / stored;
-  else return v * stored;
+  if constexpr (form == PivotForm::Pivot)
+    return v / stored;
+  else
+    return v * stored;
 }
 }  // namespace motion_detail
 

@@ -21,7 +21,7 @@ MCFLOW_HOST_DEVICE inline long long targetPixel(const float P[3], double fx, dou
   const double u = fx * P[0] / P[2] + cx, v = fy * P[1] / P[2] + cy;
   const double ur = std::floor(u + 0.5), vr = std::floor(v + 0.5);
   if (!(ur >= 0 && vr >= 0 && ur < width && vr < height)) return -1;
-  return (long long)(vr) * width + (long long)(ur);
+  return (long long)(vr)*width + (long long)(ur);
 }
 
 /// @brief Whether a point warped to depth z onto a target pixel that `count` points reach, where frame 2 sees depth

@@ -6,6 +6,8 @@
  */
 #pragma once
 
+#include <cmath>
+
 #include "mc_flow/core/host_device.h"
 
 namespace mc_flow {
@@ -43,5 +45,35 @@ MCFLOW_HOST_DEVICE inline float divRn(float a, float b) {
 }
 
 MCFLOW_HOST_DEVICE inline float absF(float a) { return a < 0.f ? -a : a; }
+
+/// @brief std::max(a, b): b when a < b, else a (NaN in b gives a), as the CPU's std::max.
+MCFLOW_HOST_DEVICE inline float maxF(float a, float b) { return a < b ? b : a; }
+
+/// @brief IEEE-rounded square root on both sides.
+MCFLOW_HOST_DEVICE inline float sqrtRn(float a) {
+#if defined(__CUDA_ARCH__)
+  return __fsqrt_rn(a);
+#else
+  return std::sqrt(a);
+#endif
+}
+
+/// @brief std::isfinite of a float on both sides.
+MCFLOW_HOST_DEVICE inline bool finiteF(float a) {
+#if defined(__CUDA_ARCH__)
+  return isfinite(a);
+#else
+  return std::isfinite(a);
+#endif
+}
+
+/// @brief ln(1 + x) of a float, in float (the host's std::log1p(float), the device's log1pf).
+MCFLOW_HOST_DEVICE inline float log1pF(float x) {
+#if defined(__CUDA_ARCH__)
+  return log1pf(x);
+#else
+  return std::log1p(x);
+#endif
+}
 
 }  // namespace mc_flow

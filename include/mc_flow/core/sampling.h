@@ -104,8 +104,8 @@ inline bool sampleDepthBilinear(const ImageF& depth, float x, float y, float& ou
 
 /// @brief sampleDepthBilinearSmoothAt of a host depth image.
 inline bool sampleDepthBilinearSmooth(const ImageF& depth, float x, float y, float max_jump, float& out) {
-  return sampleDepthBilinearSmoothAt(sampling_detail::HostChannel{depth, 0}, depth.width, depth.height, x, y,
-                                     max_jump, out);
+  return sampleDepthBilinearSmoothAt(sampling_detail::HostChannel{depth, 0}, depth.width, depth.height, x, y, max_jump,
+                                     out);
 }
 
 }  // namespace mc_flow

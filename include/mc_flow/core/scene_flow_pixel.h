@@ -41,7 +41,8 @@ MCFLOW_HOST_DEVICE inline void addMotionLabel(MotionSums& s, int i, double u, co
 
 /// @brief The motion label with the largest u at pixel `idx` (the lowest index on ties); `u` holds a plane of `plane`
 /// values per label.
-MCFLOW_HOST_DEVICE inline int largestMotionLabel(const float* u, std::size_t plane, std::size_t idx, int motion_labels) {
+MCFLOW_HOST_DEVICE inline int largestMotionLabel(const float* u, std::size_t plane, std::size_t idx,
+                                                 int motion_labels) {
   int label = 0;
   for (int i = 1; i < motion_labels; ++i)
     if (u[i * plane + idx] > u[label * plane + idx]) label = i;
@@ -64,14 +65,14 @@ MCFLOW_HOST_DEVICE void warpPoint(const float P[3], MotionSums& s, const double*
     se3ExpRows(s.xi, T);
   }
   for (int r = 0; r < 3; ++r)
-    Q[r] = transform[4 * r] * double(P[0]) + transform[4 * r + 1] * double(P[1]) +
-           transform[4 * r + 2] * double(P[2]) + transform[4 * r + 3];
+    Q[r] = transform[4 * r] * double(P[0]) + transform[4 * r + 1] * double(P[1]) + transform[4 * r + 2] * double(P[2]) +
+           transform[4 * r + 3];
 }
 
 /// @brief Optical flow of pixel (x, y) whose point moved to Q (finite): false when Q is not in front of the camera
 /// (a point moved behind it has no image position).
-MCFLOW_HOST_DEVICE inline bool opticalFlow(const float Q[3], double fx, double fy, double cx, double cy, int x,
-                                           int y, float flow[2]) {
+MCFLOW_HOST_DEVICE inline bool opticalFlow(const float Q[3], double fx, double fy, double cx, double cy, int x, int y,
+                                           float flow[2]) {
   if (!(Q[2] > 0.f)) return false;
   flow[0] = float(fx * Q[0] / Q[2] + cx - x);
   flow[1] = float(fy * Q[1] / Q[2] + cy - y);

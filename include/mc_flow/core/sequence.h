@@ -43,11 +43,11 @@ RgbdFrame downsampleFrame(RgbdFrame frame, int factor, double depth_range);
 
 /// @brief One frame of a stream at the input resolution.
 struct StreamFrame {
-  RgbdFrame frame;      ///< intensity [0, 1], depth [m] (0 or NaN = invalid)
-  Intrinsics K;         ///< of `frame`
-  double stamp = 0;     ///< [s]
-  std::string source;   ///< camera / frame id: a change starts a new sequence
-  std::any extra;       ///< the caller's data carried with the frame (e.g. a display image)
+  RgbdFrame frame;     ///< intensity [0, 1], depth [m] (0 or NaN = invalid)
+  Intrinsics K;        ///< of `frame`
+  double stamp = 0;    ///< [s]
+  std::string source;  ///< camera / frame id: a change starts a new sequence
+  std::any extra;      ///< the caller's data carried with the frame (e.g. a display image)
   /// The camera's optical frame in another source's odometry frame at `stamp` (e.g. wheel odometry through TF). When
   /// both frames of a pair have one, the camera's motion between them is the static world's prior
   /// (estimateStaticWorld: the segments it explains are the world).
@@ -60,7 +60,7 @@ struct PreparedFrame {
   Intrinsics K;
   double stamp = 0;
   std::string source;
-  int downsample = 1;                  ///< input pixels per processing pixel (per axis)
+  int downsample = 1;  ///< input pixels per processing pixel (per axis)
   int input_width = 0, input_height = 0;
   std::any extra;
   std::optional<Eigen::Matrix4d> camera_pose_prior;
@@ -69,18 +69,19 @@ struct PreparedFrame {
 /// @brief A segment's motion accumulated since it appeared (camera frame of its first pair's frame 1).
 struct SegmentTrack {
   Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();  ///< product of its transforms, latest first
-  Eigen::Vector3d origin = Eigen::Vector3d::Zero();     ///< [m] its centroid moved to the latest frame
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();    ///< [m] its centroid moved to the latest frame
   long first_pair = 0, last_pair = 0;
 };
 
 /// @brief The camera's own motion, integrated over the stream from the static world's motion of each solved pair.
 /// Convention (docs/ALGORITHM.md, "Static world and odometry"): `pose` is the camera's optical frame (REP 103: x right,
 /// y down, z forward) in the odometry frame, which is the optical frame of the pipeline's first frame (identity there).
-/// A stream reset or a failed pair holds the pose (no motion is known over the gap; odometry stays continuous, REP 105).
+/// A stream reset or a failed pair holds the pose (no motion is known over the gap; odometry stays continuous, REP
+/// 105).
 struct Odometry {
   Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();
   Matrix6d pose_covariance = Matrix6d::Zero();  ///< of a perturbation exp(d) on the right of `pose` (camera frame)
-  Vector6d velocity = Vector6d::Zero();  ///< the camera's (v [m/s], w [rad/s]) over the last pair, camera frame
+  Vector6d velocity = Vector6d::Zero();         ///< the camera's (v [m/s], w [rad/s]) over the last pair, camera frame
   Matrix6d velocity_covariance = Matrix6d::Zero();
   double stamp = 0;  ///< [s] of the frame `pose` belongs to
   long pairs = 0;    ///< solved pairs integrated
@@ -89,20 +90,20 @@ struct Odometry {
 /// @brief What one frame did.
 struct SequenceStep {
   enum class Outcome {
-    Solved,          ///< a pair (first, second) was solved: `result`
-    Started,         ///< the frame starts a sequence (the first, or after a reset): nothing to solve yet
-    RepeatedStamp,   ///< the stamp repeats the previous frame's: the frame is dropped
-    PairFailed,      ///< the solver refused the pair (`problem`); the frame is kept as the next pair's first
+    Solved,         ///< a pair (first, second) was solved: `result`
+    Started,        ///< the frame starts a sequence (the first, or after a reset): nothing to solve yet
+    RepeatedStamp,  ///< the stamp repeats the previous frame's: the frame is dropped
+    PairFailed,     ///< the solver refused the pair (`problem`); the frame is kept as the next pair's first
   };
   Outcome outcome = Outcome::Started;
-  std::string reset_key;     ///< "back", "gap" or "input" when the frame started a new sequence after one
-  std::string reset_reason;  ///< why, in words
-  std::string problem;       ///< PairFailed: the solver's message
-  std::string backend_fallback;  ///< the GPU failed: the solver continues on the CPU (the pair is failed)
-  const PreparedFrame* first = nullptr;   ///< Solved: the pair's frames (valid until the next push)
+  std::string reset_key;                 ///< "back", "gap" or "input" when the frame started a new sequence after one
+  std::string reset_reason;              ///< why, in words
+  std::string problem;                   ///< PairFailed: the solver's message
+  std::string backend_fallback;          ///< the GPU failed: the solver continues on the CPU (the pair is failed)
+  const PreparedFrame* first = nullptr;  ///< Solved: the pair's frames (valid until the next push)
   const PreparedFrame* second = nullptr;
-  const Result* result = nullptr;         ///< Solved (valid until the next push)
-  long pair_index = -1;                   ///< Solved: 0, 1, ... over the pipeline's life
+  const Result* result = nullptr;  ///< Solved (valid until the next push)
+  long pair_index = -1;            ///< Solved: 0, 1, ... over the pipeline's life
   /// Solved: each segment's motion relative to the static world (result->segments order).
   std::vector<WorldVelocity> world_velocities;
 };

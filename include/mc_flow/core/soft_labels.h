@@ -18,7 +18,8 @@ struct SoftLabels {
   std::vector<float> data;
 
   SoftLabels() = default;
-  SoftLabels(int w, int h, int n, float fill = 0.f) : width(w), height(h), count(n), data(std::size_t(w) * h * n, fill) {}
+  SoftLabels(int w, int h, int n, float fill = 0.f)
+      : width(w), height(h), count(n), data(std::size_t(w) * h * n, fill) {}
   std::size_t planeSize() const { return std::size_t(width) * height; }
   float* plane(int i) { return data.data() + std::size_t(i) * planeSize(); }
   const float* plane(int i) const { return data.data() + std::size_t(i) * planeSize(); }

@@ -41,8 +41,8 @@ enum class MotionLabels {
 /// @brief Result of one label step (data costs, then primal-dual iterations from the warm start).
 struct LabelStepStats {
   int iterations = 0;
-  double energy = 0;        ///< E(u) of eq. 4 at the end
-  double mean_change = 0;   ///< sum over planes of |u_after - u_before|, divided by the pixel count
+  double energy = 0;       ///< E(u) of eq. 4 at the end
+  double mean_change = 0;  ///< sum over planes of |u_after - u_before|, divided by the pixel count
 };
 
 /// @brief The solve's state and stages. One per Solver; not thread-safe.

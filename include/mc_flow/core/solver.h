@@ -24,12 +24,12 @@ class SolveBackend;
 /// @brief One rigid part. The twist and transform map frame-1 points to where they are in frame 2
 /// (camera optical frame of frame 1), over the frame interval (not per second).
 struct Segment {
-  int id = 0;                   ///< >= 1, the value of its pixels in Result::labels (0: outlier or no depth); 1..m for
-                                ///< a pair solved alone, kept through a stream when the previous result is passed on
-  Vector6d twist = Vector6d::Zero();  ///< (v [m], w [rad]) over the interval
+  int id = 0;  ///< >= 1, the value of its pixels in Result::labels (0: outlier or no depth); 1..m for
+               ///< a pair solved alone, kept through a stream when the previous result is passed on
+  Vector6d twist = Vector6d::Zero();                        ///< (v [m], w [rad]) over the interval
   Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();  ///< exp(twist)
-  double support = 0;           ///< sum of u over the pixels (input resolution)
-  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  ///< [m] support-weighted centroid of its points
+  double support = 0;                                       ///< sum of u over the pixels (input resolution)
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();       ///< [m] support-weighted centroid of its points
   Matrix6d covariance = Matrix6d::Zero();  ///< of `twist` (twistCovariance of its pixels' fit at the processing level)
 };
 
@@ -44,12 +44,12 @@ struct OuterIterationStats {
   int labels_before = 0;  ///< motion labels at the start (outlier label not counted)
   int labels_after = 0;   ///< after merging / removal
   int merged = 0, removed = 0, split = 0;
-  double smallest_refused_merge = 0;  ///< predicted data-cost increase of the cheapest merge not taken
-  int motion_iterations = 0;  ///< IRLS iterations summed over levels
+  double smallest_refused_merge = 0;            ///< predicted data-cost increase of the cheapest merge not taken
+  int motion_iterations = 0;                    ///< IRLS iterations summed over levels
   std::vector<MotionLevelStats> motion_levels;  ///< the motion step per level, coarse to fine
-  int label_iterations = 0;   ///< primal-dual iterations
-  double label_change = 0;    ///< mean |u_k+1 - u_k| at the label level
-  double energy = 0;          ///< E(u) of eq. 4 after the label step
+  int label_iterations = 0;                     ///< primal-dual iterations
+  double label_change = 0;                      ///< mean |u_k+1 - u_k| at the label level
+  double energy = 0;                            ///< E(u) of eq. 4 after the label step
 };
 
 /// @brief How a solve started.
@@ -73,12 +73,12 @@ struct Result {
   ImageF moved_depth;      ///< [m] depth of each frame-1 point after its motion (seen from frame 2); NaN where invalid
   StageTimings timings;
   std::vector<OuterIterationStats> iterations;
-  double energy = 0;             ///< final E(u) (processing level)
-  int valid_pixels = 0;          ///< frame-1 pixels with valid depth at the processing level
+  double energy = 0;     ///< final E(u) (processing level)
+  int valid_pixels = 0;  ///< frame-1 pixels with valid depth at the processing level
   // ---- stream mode (Solver::solve with the previous pair's result) ----
   StartKind start = StartKind::Cold;
-  std::string start_note;        ///< why a given previous result was not used (empty otherwise)
-  int next_id = 1;               ///< the id the next new segment gets (ids are never reused within a stream)
+  std::string start_note;  ///< why a given previous result was not used (empty otherwise)
+  int next_id = 1;         ///< the id the next new segment gets (ids are never reused within a stream)
   std::vector<std::pair<int, int>> merged_ids;  ///< (id, id it merged into) for the previous pair's segments
   std::vector<int> ended_ids;    ///< ids of the previous pair's segments that neither continue nor merged
   std::vector<int> revived_ids;  ///< ids that had merged or ended in an earlier pair and are back
@@ -92,8 +92,8 @@ struct Result {
   int processing_width = 0, processing_height = 0;
   int pyramid_levels = 0;
   Backend backend_kind = Backend::Cpu;  ///< the backend that ran (Cpu or Cuda, never Auto)
-  std::string backend;           ///< toString(backend_kind): "cpu" or "cuda"
-  std::string backend_note;      ///< why Auto chose what it chose
+  std::string backend;                  ///< toString(backend_kind): "cpu" or "cuda"
+  std::string backend_note;             ///< why Auto chose what it chose
 };
 
 /// @brief The motion labels over a solve's outer iterations: the initial count, then the count after each update

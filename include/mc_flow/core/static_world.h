@@ -21,9 +21,9 @@ struct Segment;
 
 /// @brief Which segments of a pair are the static world, and how its points moved.
 struct StaticWorld {
-  bool found = false;            ///< false: no segment (a pair with no motion label)
-  std::vector<int> ids;          ///< the world's segment ids (Segment::id)
-  std::vector<int> labels;       ///< their label indices (Result::segments order)
+  bool found = false;       ///< false: no segment (a pair with no motion label)
+  std::vector<int> ids;     ///< the world's segment ids (Segment::id)
+  std::vector<int> labels;  ///< their label indices (Result::segments order)
   /// Motion of the world's points over the interval in the camera frame of frame 1 (P2 = exp(twist) P1): one robust
   /// rigid fit on the union of the world segments' pixels. The camera moved by its inverse.
   Vector6d twist = Vector6d::Zero();

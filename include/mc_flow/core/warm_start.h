@@ -28,10 +28,10 @@ ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& poi
 
 /// @brief Carried ids as hard initial labels of a pyramid level.
 struct CarriedLabels {
-  ImageI32 hard;             ///< motion label index per level pixel, -1 = uncovered or no depth
-  std::vector<int> ids;      ///< segment id of motion label i
-  int covered = 0;           ///< level pixels with valid depth and a carried label
-  int valid = 0;             ///< level pixels with valid depth
+  ImageI32 hard;         ///< motion label index per level pixel, -1 = uncovered or no depth
+  std::vector<int> ids;  ///< segment id of motion label i
+  int covered = 0;       ///< level pixels with valid depth and a carried label
+  int valid = 0;         ///< level pixels with valid depth
   double coverage() const { return valid > 0 ? double(covered) / valid : 0.0; }
 };
 

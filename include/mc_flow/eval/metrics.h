@@ -3,7 +3,8 @@
  * @brief The paper's metrics (Tables 1-2) plus ground-truth comparisons for synthetic scenes, and a camera trajectory
  * scored as the TUM RGB-D benchmark does (also `mcflow eval-traj`'s maths, io/trajectory_eval.h).
  *
- * Library mc_flow_eval (installed; Eigen and the core only): the `mcflow` tool's evaluations, the benchmarks, the tests.
+ * Library mc_flow_eval (installed; Eigen and the core only): the `mcflow` tool's evaluations, the benchmarks, the
+ * tests.
  */
 #pragma once
 
@@ -22,8 +23,8 @@ namespace mc_flow {
 double median(std::vector<double> values);
 
 struct FlowErrors {
-  double epe = 0;        ///< mean end-point error [px]
-  double aae_deg = 0;    ///< mean angular error [deg] (Barron et al., on (u, v, 1))
+  double epe = 0;      ///< mean end-point error [px]
+  double aae_deg = 0;  ///< mean angular error [deg] (Barron et al., on (u, v, 1))
   std::size_t pixels = 0;
 };
 
@@ -37,7 +38,8 @@ struct ResidualRmse {
 FlowErrors opticalFlowErrors(const ImageF& estimate, const ImageF& truth, const ImageU8* excluded);
 
 /// @brief Mean 3D end-point error [m] of scene flow, same pixel selection.
-double sceneFlowEpe(const ImageF& estimate, const ImageF& truth, const ImageU8* excluded, std::size_t* pixels = nullptr);
+double sceneFlowEpe(const ImageF& estimate, const ImageF& truth, const ImageU8* excluded,
+                    std::size_t* pixels = nullptr);
 
 /// @brief Table 1: warp frame 2 back with the scene flow (P2 = P + flow, sampled at pi(P2)) and take the
 /// RMSE of I1 - I2(pi(P2)) and of [P2]_z - Z2(pi(P2)) over valid, non-excluded pixels.
@@ -59,9 +61,9 @@ double maskIou(const ImageU8& a, const ImageU8& b, const ImageU8* valid);
 /// @brief How a set of estimated segments (pixels of `labels` carrying one of `ids`) overlaps one true part (pixels of
 /// `truth` equal to `truth_id`), over valid pixels (`valid` may be null).
 struct RegionOverlap {
-  std::size_t estimate = 0, truth = 0, common = 0;  ///< pixels
-  double coverage() const { return truth ? double(common) / double(truth) : 0.0; }       ///< of the truth
-  double purity() const { return estimate ? double(common) / double(estimate) : 0.0; }   ///< of the estimate
+  std::size_t estimate = 0, truth = 0, common = 0;                                      ///< pixels
+  double coverage() const { return truth ? double(common) / double(truth) : 0.0; }      ///< of the truth
+  double purity() const { return estimate ? double(common) / double(estimate) : 0.0; }  ///< of the estimate
   /// The estimate is that part: it covers the majority of the part's pixels, and most of its pixels are the part's.
   bool matches() const { return coverage() > 0.5 && purity() > 0.5; }
 };
@@ -81,15 +83,15 @@ using StampedPoses = std::vector<std::pair<double, Eigen::Matrix4d>>;  ///< (sta
 
 /// @brief A camera trajectory's errors as the TUM RGB-D benchmark defines them (Sturm et al., IROS 2012).
 struct TrajectoryErrors {
-  int matched = 0;                 ///< estimated poses with a ground-truth pose within max_difference
-  double ate_rmse_m = 0;           ///< after the rigid alignment (no scale)
-  double rpe_frame_trans_m = 0;    ///< RMSE of consecutive matched frames' relative motion: translation [m]
-  double rpe_frame_rot_deg = 0;    ///< ... rotation [deg]
+  int matched = 0;               ///< estimated poses with a ground-truth pose within max_difference
+  double ate_rmse_m = 0;         ///< after the rigid alignment (no scale)
+  double rpe_frame_trans_m = 0;  ///< RMSE of consecutive matched frames' relative motion: translation [m]
+  double rpe_frame_rot_deg = 0;  ///< ... rotation [deg]
   int rpe_frame_pairs = 0;
-  double rpe_second_trans_m = 0;   ///< over about one second (the first frame at least 1 s later) [m]
-  double rpe_second_rot_deg = 0;   ///< [deg]
+  double rpe_second_trans_m = 0;  ///< over about one second (the first frame at least 1 s later) [m]
+  double rpe_second_rot_deg = 0;  ///< [deg]
   int rpe_second_pairs = 0;
-  Eigen::Matrix4d alignment = Eigen::Matrix4d::Identity();  ///< ground truth <- estimate
+  Eigen::Matrix4d alignment = Eigen::Matrix4d::Identity();             ///< ground truth <- estimate
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> positions;  ///< (ground truth, aligned estimate) per match
 };
 

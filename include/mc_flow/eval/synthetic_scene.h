@@ -22,20 +22,20 @@ namespace mc_flow {
 struct SyntheticSceneOptions {
   int width = 320;
   int height = 240;
-  int variant = 0;              ///< 0..N-1 selects a scene layout/motion set (see syntheticVariantCount())
-  double motion_scale = 1.0;    ///< scales every twist
-  double intensity_noise = 0.0; ///< std dev added to intensity (0..1 units)
-  double depth_noise = 0.0;     ///< [m] std dev at 1 m, growing with depth^2 (Kinect-like)
-  unsigned seed = 1;            ///< noise seed
+  int variant = 0;               ///< 0..N-1 selects a scene layout/motion set (see syntheticVariantCount())
+  double motion_scale = 1.0;     ///< scales every twist
+  double intensity_noise = 0.0;  ///< std dev added to intensity (0..1 units)
+  double depth_noise = 0.0;      ///< [m] std dev at 1 m, growing with depth^2 (Kinect-like)
+  unsigned seed = 1;             ///< noise seed
   /// @brief The tools' --noise: Kinect-like sensor noise, intensity std 0.01 (about 2.5 grey levels) and depth 1.5 mm
   /// at 1 m.
   void addSensorNoise() {
     intensity_noise = 0.01;
     depth_noise = 0.0015;
   }
-  int first_frame = 0;          ///< renderSyntheticPair renders frames (first_frame, first_frame + 1) of the sequence
-  bool stream_events = false;   ///< adds a box that starts moving at frame 10 (part 10) and one that moves straight
-                                ///< out of the view (part 11), for sequences
+  int first_frame = 0;         ///< renderSyntheticPair renders frames (first_frame, first_frame + 1) of the sequence
+  bool stream_events = false;  ///< adds a box that starts moving at frame 10 (part 10) and one that moves straight
+                               ///< out of the view (part 11), for sequences
   /// Nothing in the scene moves, only the camera: every part takes the static scene's apparent motion per
   /// frame, a translation of camera_only_translation_m [m] and a rotation of camera_only_rotation_deg [deg]
   /// about the camera centre (camera frame; the inverse of the camera's own motion), at constant velocity.
@@ -49,7 +49,7 @@ struct SyntheticSceneOptions {
 };
 
 struct SyntheticPart {
-  int id = 0;            ///< value in SyntheticPair::gt_parts
+  int id = 0;  ///< value in SyntheticPair::gt_parts
   std::string name;
   Vector6d twist = Vector6d::Zero();  ///< motion over the pair interval (frame-1 camera frame)
 };
@@ -58,11 +58,11 @@ struct SyntheticPart {
 struct SyntheticPair {
   Intrinsics intrinsics;
   RgbdFrame frame1, frame2;
-  ImageU8 color1, color2;     ///< 3 channels RGB
-  ImageF gt_scene_flow;       ///< 3 channels [m]; NaN where frame 1 has no surface
-  ImageF gt_optical_flow;     ///< 2 channels [px]; NaN where frame 1 has no surface
-  ImageU8 gt_occlusion;       ///< 255 where the frame-1 point is hidden or out of view in frame 2
-  ImageI32 gt_parts;          ///< part id per pixel (0 = static background)
+  ImageU8 color1, color2;  ///< 3 channels RGB
+  ImageF gt_scene_flow;    ///< 3 channels [m]; NaN where frame 1 has no surface
+  ImageF gt_optical_flow;  ///< 2 channels [px]; NaN where frame 1 has no surface
+  ImageU8 gt_occlusion;    ///< 255 where the frame-1 point is hidden or out of view in frame 2
+  ImageI32 gt_parts;       ///< part id per pixel (0 = static background)
   std::vector<SyntheticPart> parts;
 };
 
@@ -86,8 +86,7 @@ inline SyntheticPair renderSyntheticPair(int width, int height) {
 
 /// @brief Renders frame `t` of a smoothly moving sequence (t = 0, 1, 2, ...): the colour, the frame and,
 /// when t > 0, nothing else. Consecutive frames t, t+1 form a pair with motion like renderSyntheticPair.
-void renderSyntheticFrame(const SyntheticSceneOptions& options, int t, RgbdFrame& frame, ImageU8& color,
-                          Intrinsics& K);
+void renderSyntheticFrame(const SyntheticSceneOptions& options, int t, RgbdFrame& frame, ImageU8& color, Intrinsics& K);
 
 /// @brief Ground-truth twists of the parts between frame t and t+1 of the sequence.
 std::vector<SyntheticPart> syntheticSequenceMotions(const SyntheticSceneOptions& options, int t);

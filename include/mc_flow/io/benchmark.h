@@ -56,7 +56,8 @@ enum class ExclusionMask {
 /// invalid depth: the cases mc_flow::warpResidualRmse skips). With this mask every flow is scored on the same
 /// pixels.
 ImageU8 commonExclusionMask(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K,
-                            const std::vector<const ImageF*>& scene_flows, const std::vector<const ImageU8*>& occlusions);
+                            const std::vector<const ImageF*>& scene_flows,
+                            const std::vector<const ImageU8*>& occlusions);
 
 /// @brief One row of the table.
 struct MethodScore {

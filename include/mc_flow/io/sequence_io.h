@@ -18,8 +18,8 @@ namespace io {
 
 /// @brief One frame of a sequence on disk.
 struct SequenceFrameFiles {
-  double stamp = 0;       ///< [s]
-  std::string rgb, depth; ///< paths
+  double stamp = 0;        ///< [s]
+  std::string rgb, depth;  ///< paths
 };
 
 /// @brief The frames of a TUM RGB-D sequence directory: `associations.txt` or `associate.txt` ("t_rgb rgb t_depth
@@ -49,7 +49,6 @@ std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose);
 /// @brief A trajectory in the TUM RGB-D format: stamp -> pose. Lines starting with '#' and empty lines are skipped.
 /// Throws InputError naming the file and line of a malformed line or a quaternion far from unit length.
 std::vector<std::pair<double, Eigen::Matrix4d>> readTumTrajectory(const std::string& path);
-
 
 /// @brief The segment ids over time: one column per pair, one row per id (ascending), a cell in the id's
 /// colour where the id exists in that pair, darker for smaller support. `ids_per_pair[p]` = (id, support).

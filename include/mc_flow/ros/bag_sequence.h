@@ -24,9 +24,9 @@ namespace mc_flow_ros {
 /// resolved names). Defaults: what the nodelet subscribes to under the camera namespace `camera` (launch/
 /// mc_flow.launch) and what the demo bag (make_synthetic_bag) holds.
 struct BagTopics {
-  std::string rgb = "/camera/rgb/image_rect_color";         ///< sensor_msgs/Image, colour encodings
-  std::string depth = "/camera/depth_registered/image_rect"; ///< sensor_msgs/Image, 16UC1 [mm] or 32FC1 [m]
-  std::string info = "/camera/rgb/camera_info";              ///< sensor_msgs/CameraInfo of the colour camera
+  std::string rgb = "/camera/rgb/image_rect_color";           ///< sensor_msgs/Image, colour encodings
+  std::string depth = "/camera/depth_registered/image_rect";  ///< sensor_msgs/Image, 16UC1 [mm] or 32FC1 [m]
+  std::string info = "/camera/rgb/camera_info";               ///< sensor_msgs/CameraInfo of the colour camera
 };
 
 /// @brief How the frames are paired and converted.
@@ -45,8 +45,8 @@ struct BagReadOptions {
 
 /// @brief One paired frame at the processing resolution.
 struct BagFrame {
-  mc_flow::StreamFrame frame;  ///< stamp: the colour message's header stamp [s]; source: its frame_id
-  mc_flow::ImageU8 colour;     ///< RGB at the processing resolution (pictures only)
+  mc_flow::StreamFrame frame;        ///< stamp: the colour message's header stamp [s]; source: its frame_id
+  mc_flow::ImageU8 colour;           ///< RGB at the processing resolution (pictures only)
   std::string rgb_name, depth_name;  ///< "BAG:TOPIC@STAMP" of the two messages (report.json's inputs)
 };
 

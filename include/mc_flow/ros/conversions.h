@@ -37,13 +37,13 @@ namespace mc_flow_ros {
 
 /// @brief One synchronised RGB-D frame, converted and resized to the processing resolution.
 struct FrameInput {
-  mc_flow::RgbdFrame frame;   ///< intensity [0, 1], depth [m] (0 = invalid)
-  cv::Mat colour;             ///< CV_8UC3 RGB at the processing resolution (for display outputs)
-  mc_flow::Intrinsics K;      ///< [px] at the processing resolution
-  std_msgs::Header header;    ///< stamp and frame_id of the RGB image
-  int downsample = 1;         ///< input pixels per processing pixel (per axis)
+  mc_flow::RgbdFrame frame;               ///< intensity [0, 1], depth [m] (0 = invalid)
+  cv::Mat colour;                         ///< CV_8UC3 RGB at the processing resolution (for display outputs)
+  mc_flow::Intrinsics K;                  ///< [px] at the processing resolution
+  std_msgs::Header header;                ///< stamp and frame_id of the RGB image
+  int downsample = 1;                     ///< input pixels per processing pixel (per axis)
   int input_width = 0, input_height = 0;  ///< RGB image size
-  int valid_depth = 0;        ///< pixels with valid depth at the processing resolution
+  int valid_depth = 0;                    ///< pixels with valid depth at the processing resolution
 };
 
 /// @brief Pinhole intrinsics of an image of `width` x `height` pixels from camera_info. Uses P (the
@@ -69,8 +69,8 @@ sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input);
 
 /// @brief Everything the output builders need besides the Result.
 struct PairContext {
-  std_msgs::Header header;       ///< stamp of the current frame, input frame_id
-  ros::Time previous_stamp;      ///< stamp of the previous frame of the pair
+  std_msgs::Header header;               ///< stamp of the current frame, input frame_id
+  ros::Time previous_stamp;              ///< stamp of the previous frame of the pair
   const FrameInput* previous = nullptr;  ///< the pair's first frame (points of the scene flow cloud)
   const FrameInput* current = nullptr;   ///< the pair's second frame
   double solve_time_ms = 0;
@@ -85,19 +85,20 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
 
 /// @brief ~odom: the camera's odometry (mc_flow::Odometry, the camera's optical frame in its first pose) as the
 /// odometry of the frame `child_frame` mounted at `base_from_camera` (identity: the camera itself), so that the base
-/// starts at the identity of `odom_frame`: pose = M C M^-1. Pose covariance in odom_frame (x y z, rotation about x y z),
-/// twist and its covariance in child_frame (REP 105, nav_msgs/Odometry's conventions).
-nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Time& stamp, const std::string& odom_frame,
-                                const std::string& child_frame, const Eigen::Isometry3d& base_from_camera);
+/// starts at the identity of `odom_frame`: pose = M C M^-1. Pose covariance in odom_frame (x y z, rotation about x y
+/// z), twist and its covariance in child_frame (REP 105, nav_msgs/Odometry's conventions).
+nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Time& stamp,
+                                const std::string& odom_frame, const std::string& child_frame,
+                                const Eigen::Isometry3d& base_from_camera);
 
 /// @brief ~camera_path (for display): the camera's poses `poses` (mc_flow::Odometry::pose of each pair, oldest first)
-/// expressed in its latest one, in `header`'s frame (the colour camera's optical frame now): where the camera came from,
-/// drawn in rviz without any TF. ~odom is the odometry itself.
+/// expressed in its latest one, in `header`'s frame (the colour camera's optical frame now): where the camera came
+/// from, drawn in rviz without any TF. ~odom is the odometry itself.
 nav_msgs::Path makeCameraPath(const std::deque<Eigen::Matrix4d>& poses, const std_msgs::Header& header);
 
 /// @brief ~moving_mask: mono8, 255 = a pixel of a segment that moves relative to the static world.
-sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result, const std::vector<mc_flow::WorldVelocity>& world,
-                                          const PairContext& pair);
+sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result,
+                                          const std::vector<mc_flow::WorldVelocity>& world, const PairContext& pair);
 
 /// @brief ~soft_labels: one 32FC<n> image, n = segments + 1; channel i is segment i of ~segments, the
 /// last channel the outlier label; values exactly as the solver produced them (lossless, sum to 1).

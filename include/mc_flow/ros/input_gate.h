@@ -31,15 +31,15 @@ class InputGate {
 
   /// What to do with one message.
   struct Admission {
-    bool pass = true;                    ///< hand it to the synchroniser
-    bool restart_synchroniser = false;   ///< the stream went back: rebuild the synchroniser first, then pass it
-    std::string warning_key, warning;    ///< non-empty: warn (throttled by key)
+    bool pass = true;                   ///< hand it to the synchroniser
+    bool restart_synchroniser = false;  ///< the stream went back: rebuild the synchroniser first, then pass it
+    std::string warning_key, warning;   ///< non-empty: warn (throttled by key)
   };
 
   /// What the once-a-second watch found (no synchronised frame for a while).
   struct Watch {
     std::optional<InputWarning> warning;
-    bool restart_synchroniser = false;   ///< every topic arrives but nothing synchronises: start it afresh
+    bool restart_synchroniser = false;  ///< every topic arrives but nothing synchronises: start it afresh
   };
 
   /// `topics`: the resolved names of the rgb, depth and camera_info inputs (for the words).
@@ -73,14 +73,14 @@ class InputGate {
   ros::WallTime last_sync_time_, subscribed_since_, last_restart_;
   long frames_synced_ = 0;
   long received_[3] = {0, 0, 0};
-  ros::Time last_stamp_[3];                   // last stamp admitted per topic (zero after a restart)
+  ros::Time last_stamp_[3];  // last stamp admitted per topic (zero after a restart)
   std::uint32_t last_seq_[3] = {0, 0, 0};
   long lost_before_callback_[3] = {0, 0, 0};  // header.seq gaps
   long held_back_[3] = {0, 0, 0};             // repeated or backward stamps not passed to the synchroniser
   long restarts_ = 0;
-  long received_at_sync_[3] = {0, 0, 0};      // per-topic arrivals at the last synchronised frame (or restart)
-  long received_at_watch_[3] = {0, 0, 0};     // at the watch's last tick
-  ros::WallTime last_arrival_[3];             // when the watch last saw each count change (its resolution: 1 s)
+  long received_at_sync_[3] = {0, 0, 0};   // per-topic arrivals at the last synchronised frame (or restart)
+  long received_at_watch_[3] = {0, 0, 0};  // at the watch's last tick
+  ros::WallTime last_arrival_[3];          // when the watch last saw each count change (its resolution: 1 s)
 };
 
 /// "1234.500000000" (seconds and nanoseconds of a stamp).

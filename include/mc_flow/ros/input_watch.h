@@ -11,16 +11,16 @@ namespace mc_flow_ros {
 
 /// One input topic as the nodelet's timer sees it.
 struct WatchedTopic {
-  std::string label;       ///< "rgb", "depth", "camera_info"
-  std::string topic;       ///< resolved topic name
-  long received = 0;       ///< messages received since start
+  std::string label;              ///< "rgb", "depth", "camera_info"
+  std::string topic;              ///< resolved topic name
+  long received = 0;              ///< messages received since start
   double seconds_since_last = 0;  ///< [s, wall] since the last message (or since subscribing, if none)
-  bool has_stamp = false;  ///< the last admitted message's stamp is known
-  double stamp = 0;        ///< [s] header.stamp of the last admitted message
+  bool has_stamp = false;         ///< the last admitted message's stamp is known
+  double stamp = 0;               ///< [s] header.stamp of the last admitted message
 };
 
 struct InputSnapshot {
-  WatchedTopic topics[3];      ///< rgb, depth, camera_info
+  WatchedTopic topics[3];           ///< rgb, depth, camera_info
   double seconds_without_sync = 0;  ///< [s, wall] since the last synchronised frame (or since subscribing)
   bool approximate_sync = true;
   double approximate_sync_max_interval = 0;  ///< [s], 0 = no limit
@@ -30,8 +30,8 @@ enum class InputSilence { NeverArrived, Stopped, NotSynchronised };
 
 struct InputWarning {
   InputSilence problem;
-  std::string key;   ///< throttling key for warnThrottled ("no_input", "input_stopped", "resync")
-  std::string text;  ///< the warning, naming topics, counts, stamps and durations
+  std::string key;                    ///< throttling key for warnThrottled ("no_input", "input_stopped", "resync")
+  std::string text;                   ///< the warning, naming topics, counts, stamps and durations
   bool restart_synchroniser = false;  ///< a synchroniser that sees every topic but never fires is restarted
 };
 

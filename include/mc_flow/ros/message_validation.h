@@ -35,7 +35,7 @@ EncodingLayout encodingLayout(const std::string& encoding, ImageRole role);
 /// step a multiple of the value size; height * step == data.size() (no wrap); is_bigendian 0 or 1.
 /// A big-endian message with multi-byte values is valid (the conversion swaps it). Returns the encoding's layout.
 EncodingLayout validateImage(const sensor_msgs::Image& image, ImageRole role,
-                   std::uint64_t max_pixels = mc_flow::kDefaultMaxInputPixels);
+                             std::uint64_t max_pixels = mc_flow::kDefaultMaxInputPixels);
 
 /// @brief The pinhole values of camera_info: from P (the rectified projection), or from K when P is all zero.
 struct PinholeValues {

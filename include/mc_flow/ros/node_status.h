@@ -64,7 +64,7 @@ class NodeStatus {
   mutable std::mutex mutex_;
   long frames_dropped_ = 0, frames_skipped_ = 0, pairs_solved_ = 0, sequence_resets_ = 0;
   long warm_starts_ = 0, cold_fallbacks_ = 0;  // pairs by Result::start (the rest started cold)
-  std::string last_start_;                      // the last pair's start kind and, for a fallback, why
+  std::string last_start_;                     // the last pair's start kind and, for a fallback, why
   mc_flow::StageTimings last_timings_;
   double total_solve_ms_ = 0;
   std::string backend_, backend_note_, last_problem_;

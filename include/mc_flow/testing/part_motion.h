@@ -17,17 +17,17 @@ namespace mc_flow {
 struct PartMotionError {
   int part_id = 0;
   std::string name;
-  int pixels = 0;                   ///< pixels of the part with a motion segment in the result (labels > 0)
-  int segment = 0;                  ///< id of the segment covering most of them (Segment::id); 0 when none does
-  double covered_fraction = 0;      ///< share of those pixels in that segment
-  double true_rotation_deg = 0;     ///< the part's rotation over the pair
-  double rotation_error_deg = 0;    ///< angle of exp(segment twist)^-1 exp(part twist); NaN without a segment
+  int pixels = 0;                 ///< pixels of the part with a motion segment in the result (labels > 0)
+  int segment = 0;                ///< id of the segment covering most of them (Segment::id); 0 when none does
+  double covered_fraction = 0;    ///< share of those pixels in that segment
+  double true_rotation_deg = 0;   ///< the part's rotation over the pair
+  double rotation_error_deg = 0;  ///< angle of exp(segment twist)^-1 exp(part twist); NaN without a segment
   /// That error's rotation vector split about the part's longest 3D axis (the principal axis of its frame-1 points)
   /// and across it: a bar's own pixels hardly constrain a rotation about its length (a 5 cm radius moves by 0.9 mm
   /// per degree), so the two tell an unobservable error from a wrong motion. NaN without a segment or with fewer than
   /// 3 points.
   double rotation_error_along_deg = 0, rotation_error_across_deg = 0;
-  double flow_epe_px = 0;           ///< mean optical-flow EPE over the part's pixels not occluded in the truth
+  double flow_epe_px = 0;  ///< mean optical-flow EPE over the part's pixels not occluded in the truth
   /// Rotation error of the best rigid motion for the part's own true scene flow (least squares over its pixels,
   /// Umeyama): what one rigid motion per part can reach at all. Near 0 but for the arm's links, which bend around
   /// the elbow in the generator (synthetic_scene.cpp). NaN with fewer than 3 points.
