@@ -3,12 +3,16 @@
 # a ROS user reaches for (rviz, rosmsg, rosservice, dynparam, rostopic with every message type the package
 # publishes, rosnode, rosrun, rosbag). Idempotent.
 # Headless machines: MCFLOW_NO_RVIZ=1 (or --no-rviz) skips rviz, Xvfb and ImageMagick.
+# --fuzz adds clang 14 with its sanitizer and libFuzzer runtimes and OpenMP, for the sanitized build that also runs the
+# fuzz smoke (scripts/test_sanitized.sh core-io; scripts/test.sh passes it).
 set -euo pipefail
 NO_RVIZ="${MCFLOW_NO_RVIZ:-0}"
+FUZZ=0
 for arg in "$@"; do
   case "$arg" in
     --no-rviz) NO_RVIZ=1 ;;
-    *) echo "install_deps.sh: unknown argument '$arg' (only --no-rviz)" >&2; exit 2 ;;
+    --fuzz) FUZZ=1 ;;
+    *) echo "install_deps.sh: unknown argument '$arg' (--no-rviz, --fuzz)" >&2; exit 2 ;;
   esac
 done
 SUDO=""
@@ -37,6 +41,9 @@ if [ "$NO_RVIZ" = "1" ]; then
   echo "[install_deps] MCFLOW_NO_RVIZ=1 / --no-rviz: skipping ${VIEWER[*]}"
 else
   PACKAGES+=("${VIEWER[@]}")
+fi
+if [ "$FUZZ" = "1" ]; then
+  PACKAGES+=(clang-14 libclang-rt-14-dev libomp-14-dev)
 fi
 missing=()
 for p in "${PACKAGES[@]}"; do
