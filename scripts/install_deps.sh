@@ -28,6 +28,8 @@ PACKAGES=(
   libpcl-conversions-dev librosbag-dev librostest-dev python3-rostest python3-roslaunch python3-rosmaster
   python3-rosbag python3-rostopic python3-rosnode python3-sensor-msgs python3-geometry-msgs rosbash
   libgtest-dev libeigen3-dev libopencv-dev nlohmann-json3-dev libyaml-cpp-dev
+  # the format check of every C++ file (scripts/check_format.sh, ctest format.ClangFormat)
+  clang-format-14
   # command-line tools: rosmsg, rosservice (dynparam needs it), rosnode, rosdiagnostic, image_transport's
   # list_transports; Python messages for rostopic of every output type (sensor_msgs, visualization_msgs,
   # tf2_msgs, diagnostic_msgs, dynamic_reconfigure; mc_flow's own come from the build)
