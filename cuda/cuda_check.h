@@ -17,7 +17,7 @@ namespace cuda_detail {
 /// Kernel launches of this process (every launch site checks with MCFLOW_CUDA_CHECK_LAUNCH, which counts it;
 /// a CUB algorithm call counts as one, MCFLOW_CUDA_CHECK_CUB), and the device and page-locked allocations
 /// of the grow-only buffers. Read by cudaCounters().
-inline std::atomic<std::uint64_t> kernel_launches{0}, device_allocations{0}, pinned_allocations{0};
+inline std::atomic<std::uint64_t> kernel_launches{0}, device_allocations{0}, pinned_allocations{0}, host_waits{0};
 
 /// @brief Throws BackendError naming the call, the place and the CUDA error when `status` is not cudaSuccess.
 inline void check(cudaError_t status, const char* what, const char* file, int line) {
@@ -66,6 +66,10 @@ class DeviceBuffer {
 #define MCFLOW_CUDA_CHECK_LAUNCH(kernel_name)                                       \
   (::mc_flow::cuda_detail::kernel_launches.fetch_add(1, std::memory_order_relaxed), \
    ::mc_flow::cuda_detail::check(cudaGetLastError(), "launch of " kernel_name, __FILE__, __LINE__))
+/// Waits for a stream's work (the host needs its results), counted: each wait is a round trip the solve pays.
+#define MCFLOW_CUDA_WAIT(stream)                                               \
+  (::mc_flow::cuda_detail::host_waits.fetch_add(1, std::memory_order_relaxed), \
+   ::mc_flow::cuda_detail::check(cudaStreamSynchronize(stream), "cudaStreamSynchronize", __FILE__, __LINE__))
 /// Checks a CUB device algorithm call that launches kernels (counted as one launch).
 #define MCFLOW_CUDA_CHECK_CUB(call)                                                 \
   (::mc_flow::cuda_detail::kernel_launches.fetch_add(1, std::memory_order_relaxed), \

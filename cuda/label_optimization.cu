@@ -283,7 +283,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
       if (++rounds_queued % kRoundsBetweenReads == 0 && done < iterations) {
         MCFLOW_CUDA_CHECK(
             cudaMemcpyAsync(&scalars_->loop, loop_state_.get(), sizeof(LoopState), cudaMemcpyDeviceToHost, s));
-        MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+        MCFLOW_CUDA_WAIT(s);
         if (scalars_->loop.stopped) break;
       }
     }
@@ -297,7 +297,7 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(&scalars_->energy, energy_.get(), sizeof(double), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(
         cudaMemcpyAsync(&scalars_->loop, loop_state_.get(), sizeof(LoopState), cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    MCFLOW_CUDA_WAIT(s);
     LabelStats stats;
     stats.iterations = scalars_->loop.iterations;
     stats.last_change = scalars_->loop.last_change;
@@ -492,7 +492,7 @@ class CudaLabelOptimizer final : public LabelOptimizer {
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u.data.data(), u_.get(), plane * n * sizeof(float), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(
         cudaMemcpyAsync(dual.p.data(), p_.get(), plane * n * 2 * sizeof(float), cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    MCFLOW_CUDA_WAIT(s);
     return stats;
   }
 

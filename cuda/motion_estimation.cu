@@ -94,6 +94,9 @@ struct KernelParams {
   // The device IRLS loop's stop flag (null outside it): once a level's loop has stopped, the kernels still
   // queued for its remaining iterations return at once.
   const int* skip = nullptr;
+  // False for a cost model's pass (accumulateLabelBlocks): the per-label sums only, no blended pixels stored for
+  // the label pairs' kernel, no chunk masks.
+  bool label_pairs = true;
 };
 
 // ----------------------------------------------------------------- SE(3) in double (as src/core/se3.cpp)
@@ -289,7 +292,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
         for (int k = 0; k < 6; ++k) gm[k] = mulRn(mass, gm[k]);
 
         // Off-diagonal blocks of the label pairs: summed by accumulatePairs from these.
-        if (n_active > 1) {
+        if (p.label_pairs && n_active > 1) {
 #pragma unroll
           for (int k = 0; k < kUpper; ++k) p.blended_hessian[k * plane + idx] = Hm[k];
           p.active_mass[idx] = active_mass;
@@ -297,12 +300,12 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
         }
       }
     }
-    p.blended[idx] = in_view && n_active > 1 ? 1 : 0;
+    if (p.label_pairs) p.blended[idx] = in_view && n_active > 1 ? 1 : 0;
   }
   // The chunk's label mask: one atomicOr per warp and word (a warp's 32 pixels lie in one chunk; OR is
   // order-independent, so the mask is the same on every run).
   const bool blended = in_view && n_active > 1;
-  for (int w = 0; w < kLabelMaskWords; ++w) {
+  for (int w = 0; w < kLabelMaskWords && p.label_pairs; ++w) {  // label_pairs is uniform: whole warps shuffle
     unsigned long long bits = blended ? active_labels[w] : 0ull;
 #pragma unroll
     for (int offset = 16; offset > 0; offset >>= 1) bits |= __shfl_xor_sync(0xffffffffu, bits, offset);
@@ -946,7 +949,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     upload(labels_.get(), labels.data.data(), plane * std::size_t(labels.count));
     if (occluded) upload(occluded_.get(), occluded->ptr(), plane);
     // The caller's images may change after this call returns: wait until the copies are done.
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_));
+    MCFLOW_CUDA_WAIT(stream_);
     cuda_detail::DeviceLevel level;
     level.width = W;
     level.height = H;
@@ -995,8 +998,29 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     enqueueSums(layout, nullptr);
     MCFLOW_CUDA_CHECK(
         cudaMemcpyAsync(host_sums_.get(), sums_.get(), layout.sum_values * sizeof(double), cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
-    unpack(layout, out);
+    MCFLOW_CUDA_WAIT(s);
+    unpack(layout, out, true);
+  }
+
+  void accumulateLabelBlocks(const std::vector<Vector6d>& twists, MotionNormalEquations& out) override {
+    if (level_.width <= 0)
+      throw InputError("CUDA motion step: accumulateLabelBlocks() called before setLevel() or bind()");
+    const int n = motion_labels_;
+    if (int(twists.size()) != n)
+      throw InputError("CUDA motion step: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
+                       " motion labels");
+    out.reset(n);
+    if (n == 0) return;
+    cudaStream_t s = stream_;
+    const Layout layout = reserve();
+    host_motions_.reserve(std::size_t(n));
+    for (int i = 0; i < n; ++i) host_motions_.get()[i] = labelMotion(twists[std::size_t(i)]);
+    upload(motions_.get(), host_motions_.get(), std::size_t(n));
+    enqueueSums(layout, nullptr, nullptr, false);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(host_sums_.get(), sums_.get(), layout.block_values * sizeof(double),
+                                      cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_WAIT(s);
+    unpack(layout, out, false);
   }
 
   bool iterateLevel(std::vector<Vector6d>& twists, const Config& config, MotionLevelStats& stats) override {
@@ -1062,7 +1086,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     // Down: the accepted twists and the state (the control array and the state are adjacent).
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(control, q.control, control_bytes + twist_bytes + sizeof(IrlsState),
                                       cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    MCFLOW_CUDA_WAIT(s);
     for (int i = 0; i < n; ++i)
       for (int k = 0; k < 6; ++k) twists[std::size_t(i)](k) = control[i].accepted_twist[k];
     stats.iterations = state->iterations;
@@ -1116,8 +1140,9 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     return m;
   }
 
-  // Queues one accumulation at the motions in `motions` (default: motions_) into sums_; `skip` as KernelParams.
-  void enqueueSums(const Layout& l, const int* skip, const LabelMotion* motions = nullptr) {
+  // Queues one accumulation at the motions in `motions` (default: motions_) into sums_; `skip` and `label_pairs` as
+  // KernelParams (without the pairs, only sums_' first block_values are written).
+  void enqueueSums(const Layout& l, const int* skip, const LabelMotion* motions = nullptr, bool label_pairs = true) {
     cudaStream_t s = stream_;
     const int n = motion_labels_;
     KernelParams p;
@@ -1159,8 +1184,10 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
                          std::to_string(shared_bytes) + " bytes of shared memory, the device allows " +
                          std::to_string(max_shared_bytes_));
     p.sum_regions = regions;
-    MCFLOW_CUDA_CHECK(
-        cudaMemsetAsync(chunk_labels_.get(), 0, l.pair_chunks * kLabelMaskWords * sizeof(unsigned long long), s));
+    p.label_pairs = label_pairs;
+    if (label_pairs)
+      MCFLOW_CUDA_CHECK(
+          cudaMemsetAsync(chunk_labels_.get(), 0, l.pair_chunks * kLabelMaskWords * sizeof(unsigned long long), s));
     p.chunk_labels = chunk_labels_.get();
     accumulateNormalEquations<<<l.blocks, kThreads, shared_bytes, s>>>(p);
     MCFLOW_CUDA_CHECK_LAUNCH("accumulateNormalEquations");
@@ -1168,7 +1195,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     reduceBlockPartials<<<reduce_blocks, kThreads, 0, s>>>(partials_.get(), int(l.blocks), int(l.block_values),
                                                            sums_.get(), skip);
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
-    if (l.pairs > 0) {
+    if (label_pairs && l.pairs > 0) {
       const int chunks = int(l.pair_chunks);
       // One pair per block up to kPairBlocks blocks (a 320x240 level with up to 21 labels), beyond that several.
       const int pair_stride = int(std::min<long long>(l.pairs, std::max<long long>(1, kPairBlocks / chunks)));
@@ -1182,7 +1209,8 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     }
   }
 
-  void unpack(const Layout& l, MotionNormalEquations& out) {
+  // `label_pairs`: the sums hold the pairs' blocks (accumulate) or not (accumulateLabelBlocks: they stay zero).
+  void unpack(const Layout& l, MotionNormalEquations& out, bool label_pairs) {
     const int n = motion_labels_;
     const std::size_t label_values = l.label_values, block_values = l.block_values;
     // Unpack: symmetric diagonal blocks from their upper triangles, pair blocks into (a,b) and (b,a).
@@ -1206,7 +1234,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       out.label_cost(i) = label[kLabelCost];
       out.label_pixels(i) = label[kLabelPixels];
     }
-    for (int a = 0; a < n; ++a)
+    for (int a = 0; a < n && label_pairs; ++a)
       for (int b = a + 1; b < n; ++b) {
         const std::size_t pair = std::size_t(a) * n - std::size_t(a) * (a + 1) / 2 + std::size_t(b - a - 1);
         fillSymmetric(sums + block_values + pair * kUpper, 6 * a, 6 * b, true);

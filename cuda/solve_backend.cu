@@ -137,7 +137,7 @@ class CudaSolveBackend final : public SolveBackend {
         cudaMemcpyAsync(hard_labels_.get(), staged, p * sizeof(int), cudaMemcpyHostToDevice, stream_.stream));
     labelsFromHardLabels(level, motion_labels);
     // The staging buffer is reused by the next small transfer: wait for this one.
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
+    MCFLOW_CUDA_WAIT(stream_.stream);
   }
 
   std::vector<Eigen::Vector3f> kmeansCentres(int level, int k, int max_iterations, double tolerance_m,
@@ -340,7 +340,7 @@ class CudaSolveBackend final : public SolveBackend {
     double* sums = staged_doubles_.reserve(2);
     MCFLOW_CUDA_CHECK(
         cudaMemcpyAsync(sums, scalar_.get(), (carried_held_ ? 2 : 1) * sizeof(double), cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));
+    MCFLOW_CUDA_WAIT(s);
     LabelStepStats out;
     out.iterations = ls.iterations;
     out.energy = ls.energy;  // E(u) of eq. 4, without the switching cost
@@ -421,7 +421,7 @@ class CudaSolveBackend final : public SolveBackend {
     };
     // Checked here, not inside the OpenMP threads: they must not throw.
     MCFLOW_CUDA_CHECK(static_cast<cudaError_t>(fillOutputImages(staged, result)));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));  // the label sums
+    MCFLOW_CUDA_WAIT(s);  // the label sums
     result.segments.assign(std::size_t(n), Segment());
     for (int i = 0; i < n; ++i) {
       Segment& segment = result.segments[std::size_t(i)];
@@ -436,7 +436,7 @@ class CudaSolveBackend final : public SolveBackend {
     SoftLabels u(L.width, L.height, count_, 0.f);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u.data.data(), labels(), u.data.size() * sizeof(float), cudaMemcpyDeviceToHost,
                                       stream_.stream));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
+    MCFLOW_CUDA_WAIT(stream_.stream);
     return u;
   }
 
@@ -496,7 +496,7 @@ class CudaSolveBackend final : public SolveBackend {
     const DeviceLevel& L = levels_[std::size_t(level_)];
     accumulator_->bind(L, scratch(), count_ + m, use_occlusion ? occlusion_.get() : nullptr, config);
     MotionNormalEquations equations;
-    accumulator_->accumulate(twists, equations);
+    accumulator_->accumulateLabelBlocks(twists, equations);
     trial.model = costModelFromEquations(equations, count_ - 1 + m);
     std::vector<unsigned long long> counts(static_cast<std::size_t>(m));
     if (m > 0) download(counts.data(), moved_.get(), counts.size(), staged_counts_);
@@ -519,7 +519,7 @@ class CudaSolveBackend final : public SolveBackend {
     requireTwists("costModel", twists);
     MotionAccumulator& accumulator = motionAccumulator(level_, MotionLabels::Current, use_occlusion, config);
     MotionNormalEquations equations;
-    accumulator.accumulate(twists, equations);
+    accumulator.accumulateLabelBlocks(twists, equations);
     return costModelFromEquations(equations, count_ - 1);
   }
 
@@ -581,7 +581,7 @@ class CudaSolveBackend final : public SolveBackend {
     reserveLabels(plane(), count_ + m);  // may move the labels to the other buffer
     cuda_detail::launchCutLabels(labels(), levels_[std::size_t(level_)].points1, count_, cuts_.get(), m, scratch(),
                                  moved_.get(), s);
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(s));  // the staging buffer is reused next
+    MCFLOW_CUDA_WAIT(s);  // the staging buffer is reused next
   }
 
   // The twists and their transforms (packMotions) into motions_.
@@ -636,7 +636,7 @@ class CudaSolveBackend final : public SolveBackend {
   void download(T* host, const T* device, std::size_t count, PinnedBuffer<T>& staging) {
     T* staged = staging.reserve(count);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(staged, device, count * sizeof(T), cudaMemcpyDeviceToHost, stream_.stream));
-    MCFLOW_CUDA_CHECK(cudaStreamSynchronize(stream_.stream));
+    MCFLOW_CUDA_WAIT(stream_.stream);
     std::copy_n(staged, count, host);
   }
 
@@ -696,6 +696,7 @@ CudaCounters cudaCounters() {
   c.kernel_launches = cuda_detail::kernel_launches.load();
   c.device_allocations = cuda_detail::device_allocations.load();
   c.pinned_allocations = cuda_detail::pinned_allocations.load();
+  c.host_waits = cuda_detail::host_waits.load();
   return c;
 }
 

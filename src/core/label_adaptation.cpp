@@ -79,7 +79,7 @@ LabelCostModel labelCostModel(const PyramidLevel& frame1, const PyramidLevel& fr
                      " motion labels");
   accumulator.setLevel(frame1, frame2, u, occluded, config);
   MotionNormalEquations equations;
-  accumulator.accumulate(twists, equations);
+  accumulator.accumulateLabelBlocks(twists, equations);
   return costModelFromEquations(equations, n);
 }
 

@@ -165,7 +165,8 @@ int partsBench(const Config& base, const std::vector<Regularizer>& regs, int wid
 
 // Median wall time per stage over `repeat` solves of one pair, and the kernel launches.
 struct StageMedians {
-  double total = 0, cpu = 0, pyr = 0, init = 0, motion = 0, labels = 0, occl = 0, output = 0, launches = 0;
+  double total = 0, cpu = 0, pyr = 0, init = 0, motion = 0, labels = 0, adapt = 0, occl = 0, output = 0, launches = 0,
+         waits = 0;
   // The motion step's split (outer iterations): time in the accumulator, in the host's step control and solves,
   // and the IRLS iterations (each one accumulation and, on a GPU, one host round trip).
   double motion_accumulate = 0, motion_solve = 0, irls = 0;
@@ -173,19 +174,22 @@ struct StageMedians {
 
 StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K,
                              int repeat, Result& r) {
-  std::vector<double> total, cpu, pyr, init, motion, labels, occl, output, launches, accumulate, solve, irls;
+  std::vector<double> total, cpu, pyr, init, motion, labels, adapt, occl, output, launches, waits, accumulate, solve,
+      irls;
   for (int rep = 0; rep < repeat; ++rep) {
     const std::clock_t cpu_start = std::clock();
-    const std::uint64_t launches_before = cudaCounters().kernel_launches;
+    const CudaCounters before = cudaCounters();
     solver.recycle(std::move(r));  // as a stream does: the previous result's image memory is reused
     r = solver.solve(frame1, frame2, K);
     cpu.push_back(1000.0 * double(std::clock() - cpu_start) / CLOCKS_PER_SEC);
-    launches.push_back(double(cudaCounters().kernel_launches - launches_before));
+    launches.push_back(double(cudaCounters().kernel_launches - before.kernel_launches));
+    waits.push_back(double(cudaCounters().host_waits - before.host_waits));
     total.push_back(r.timings.total);
     pyr.push_back(r.timings.preprocessing);
     init.push_back(r.timings.initialisation);
     motion.push_back(r.timings.motion);
-    labels.push_back(r.timings.labels + r.timings.adaptation);
+    labels.push_back(r.timings.labels);
+    adapt.push_back(r.timings.adaptation);
     occl.push_back(r.timings.occlusion);
     output.push_back(r.timings.outputs);
     double acc = 0, sol = 0, its = 0;
@@ -199,8 +203,22 @@ StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const Rgbd
     solve.push_back(sol);
     irls.push_back(its);
   }
-  return {median(total), median(cpu),    median(pyr),      median(init),       median(motion), median(labels),
-          median(occl),  median(output), median(launches), median(accumulate), median(solve),  median(irls)};
+  StageMedians m;
+  m.total = median(total);
+  m.cpu = median(cpu);
+  m.pyr = median(pyr);
+  m.init = median(init);
+  m.motion = median(motion);
+  m.labels = median(labels);
+  m.adapt = median(adapt);
+  m.occl = median(occl);
+  m.output = median(output);
+  m.launches = median(launches);
+  m.waits = median(waits);
+  m.motion_accumulate = median(accumulate);
+  m.motion_solve = median(solve);
+  m.irls = median(irls);
+  return m;
 }
 
 // The real pairs on any machine: folders <pair>_<W>x<H> of PFM frames and intrinsics.txt (mcflow export-real).
@@ -217,9 +235,9 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
       "# mcflow_bench --real %s: regularizer %s, repeat %d (median times); residuals: RMSE after warping frame 2 "
       "back, occluded pixels excluded\n",
       dir.c_str(), base.regularizer == Regularizer::Quadratic ? "quad" : "tv", repeat);
-  std::printf("%-28s %6s %7s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %7s %7s %5s\n", "pair", "segs", "rmseI",
-              "rmseZ_mm", "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "occl", "output", "launches",
-              "m_acc", "m_lm", "irls");
+  std::printf("%-28s %6s %7s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %6s %7s %7s %5s\n", "pair", "segs", "rmseI",
+              "rmseZ_mm", "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "adapt", "occl", "output",
+              "launches", "waits", "m_acc", "m_lm", "irls");
   std::printf("# last column: motion labels over the outer iterations, K-means > after each (merged, split)\n");
   std::map<std::string, std::vector<double>> totals_by_size;
   for (const std::filesystem::path& folder : folders) {
@@ -240,10 +258,11 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
     const ResidualRmse rr = warpResidualRmse(frame1, frame2, K, &r.scene_flow, &r.occlusion);
     const std::string counts = labelCountTrace(r, true);
     std::printf(
-        "%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.0f %7.2f %7.2f %5.0f  %s\n",
+        "%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.2f %8.1f %8.1f %8.0f %6.0f %7.2f %7.2f %5.0f  "
+        "%s\n",
         folder.filename().string().c_str(), r.segments.size(), rr.photometric, 1000.0 * rr.geometric, m.total, m.cpu,
-        m.pyr, m.init, m.motion, m.labels, m.occl, m.output, m.launches, m.motion_accumulate, m.motion_solve, m.irls,
-        counts.c_str());
+        m.pyr, m.init, m.motion, m.labels, m.adapt, m.occl, m.output, m.launches, m.waits, m.motion_accumulate,
+        m.motion_solve, m.irls, counts.c_str());
     std::fflush(stdout);
     totals_by_size[std::to_string(frame1.width()) + "x" + std::to_string(frame1.height())].push_back(m.total);
   }
@@ -421,9 +440,10 @@ int main(int argc, char** argv) {
 
     std::printf("# mcflow_bench: synthetic scenes %dx%d, noise %s, repeat %d (median times)\n", width, height,
                 noise ? "on" : "off", repeat);
-    std::printf("%-8s %-5s %7s %7s %8s %7s %7s %7s %7s %6s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %7s %7s %5s\n",
+    std::printf("%-8s %-5s %7s %7s %8s %7s %7s %7s %7s %6s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %6s %7s %7s %5s\n",
                 "scene", "reg", "EPE", "AAE", "EPE3D_mm", "seg", "occ", "rmseI", "rmseZ", "labels", "total_ms",
-                "cpu_ms", "pyr", "init", "motion", "labels", "occl", "output", "launches", "m_acc", "m_lm", "irls");
+                "cpu_ms", "pyr", "init", "motion", "labels", "adapt", "occl", "output", "launches", "waits", "m_acc",
+                "m_lm", "irls");
     for (int variant = 0; variant < syntheticVariantCount(); ++variant) {
       const SyntheticPair pair = renderSyntheticPair(sceneOptions(variant, width, height, noise));
       for (Regularizer reg : regs) {
@@ -439,11 +459,11 @@ int main(int argc, char** argv) {
         const ResidualRmse rr =
             warpResidualRmse(pair.frame1, pair.frame2, pair.intrinsics, &r.scene_flow, &r.occlusion);
         std::printf(
-            "synth-%-2d %-5s %7.3f %7.3f %8.2f %7.3f %7.3f %7.4f %7.4f %6d | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f "
-            "%8.1f %8.0f %7.2f %7.2f %5.0f\n",
+            "synth-%-2d %-5s %7.3f %7.3f %8.2f %7.3f %7.3f %7.4f %7.4f %6d | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.2f "
+            "%8.1f %8.1f %8.0f %6.0f %7.2f %7.2f %5.0f\n",
             variant, reg == Regularizer::Quadratic ? "quad" : "tv", fe.epe, fe.aae_deg, epe3d * 1000.0, seg, occ,
             rr.photometric, rr.geometric, int(r.segments.size()), m.total, m.cpu, m.pyr, m.init, m.motion, m.labels,
-            m.occl, m.output, m.launches, m.motion_accumulate, m.motion_solve, m.irls);
+            m.adapt, m.occl, m.output, m.launches, m.waits, m.motion_accumulate, m.motion_solve, m.irls);
         std::fflush(stdout);
       }
     }

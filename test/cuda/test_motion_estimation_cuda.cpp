@@ -322,6 +322,41 @@ TEST(CudaMotionAccumulator, RepeatedRunsAreBitIdentical) {
   }
 }
 
+TEST(CudaMotionAccumulator, LabelBlocksAreTheFullPassBitForBit) {
+  SKIP_WITHOUT_GPU();
+  // A cost model's pass skips the label pairs' sums: every value it keeps must be the full pass's, bit for bit
+  // (the solver's merge tests read them), and the blocks between labels stay zero. Blended labels, an occlusion mask
+  // and a pass after a full one (the blended-pixel buffers then hold the full pass's values).
+  const Scene s = makeScene(160, 120, 1);
+  Config config;
+  const SoftLabels u = makeLabels(s.pair, 6, LabelKind::Blended, 5u);
+  const ImageU8 occluded = makeOcclusion(s.pair, 3u);
+  const std::vector<Vector6d> twists = makeTwists(s.pair, 6, TwistKind::Truth, 2u);
+  auto gpu = makeCudaMotionAccumulator();
+  gpu->setLevel(s.p1[0], s.p2[0], u, &occluded, config);
+  MotionNormalEquations full, blocks, blocks_first;
+  gpu->accumulateLabelBlocks(twists, blocks_first);
+  gpu->accumulate(twists, full);
+  gpu->accumulateLabelBlocks(twists, blocks);
+  double off_diagonal = 0;
+  for (int a = 0; a < 6; ++a)
+    for (int b = 0; b < 6; ++b) {
+      if (a == b) {
+        EXPECT_TRUE((blocks.H.block<6, 6>(6 * a, 6 * a) == full.H.block<6, 6>(6 * a, 6 * a))) << "label " << a;
+      } else {
+        EXPECT_TRUE((blocks.H.block<6, 6>(6 * a, 6 * b).isZero(0.0))) << "labels " << a << ", " << b;
+        off_diagonal += (full.H.block<6, 6>(6 * a, 6 * b).cwiseAbs().sum());
+      }
+    }
+  EXPECT_GT(off_diagonal, 0.0) << "the scene must have blended pixels, or the test shows nothing";
+  EXPECT_TRUE(blocks.g == full.g);
+  EXPECT_TRUE(blocks.label_cost == full.label_cost);
+  EXPECT_TRUE(blocks.label_pixels == full.label_pixels);
+  EXPECT_EQ(blocks.cost, full.cost);
+  EXPECT_EQ(blocks.pixels, full.pixels);
+  EXPECT_TRUE(blocks_first.H == blocks.H && blocks_first.g == blocks.g && blocks_first.cost == blocks.cost);
+}
+
 TEST(CudaMotionAccumulator, RejectsMismatchedInputs) {
   SKIP_WITHOUT_GPU();
   const Scene s = makeScene(40, 30, 1);

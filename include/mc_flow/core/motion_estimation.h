@@ -64,6 +64,13 @@ class MotionAccumulator {
                         const ImageU8* occluded, const Config& config) = 0;
   /// @brief Linearises at `twists` (one per motion label) and writes the sums into `out`.
   virtual void accumulate(const std::vector<Vector6d>& twists, MotionNormalEquations& out) = 0;
+  /// @brief What a label's cost model needs (label_adaptation.h): each label's diagonal block of H, its part of g,
+  /// its cost and pixels, and the totals, the same values accumulate() gives them; the blocks between labels may be
+  /// left zero. The CUDA accumulator then skips the label pairs' sums (half of a pass at 320x240); the default (the
+  /// CPU's, where the pairs cost little) is accumulate().
+  virtual void accumulateLabelBlocks(const std::vector<Vector6d>& twists, MotionNormalEquations& out) {
+    accumulate(twists, out);
+  }
   /// @brief Runs the whole IRLS loop of the bound level where the sums are computed, with the step control of
   /// motion_step_control.h, updating `twists` and filling `stats` as estimateMotionsWith's host loop does. Returns
   /// false when this accumulator only builds sums (the host loop then runs; the CPU's case).

@@ -121,6 +121,7 @@ struct CudaCounters {
   std::uint64_t kernel_launches = 0;     ///< kernels launched; a CUB algorithm call counts as one
   std::uint64_t device_allocations = 0;  ///< cudaMalloc calls of the grow-only device buffers
   std::uint64_t pinned_allocations = 0;  ///< cudaMallocHost calls of the page-locked staging buffers
+  std::uint64_t host_waits = 0;          ///< stream synchronisations: the host waiting for results it needs
 };
 CudaCounters cudaCounters();
 
