@@ -61,18 +61,29 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
     }
     if (!world.labels.empty()) world.chosen_by = "prior";
   }
-  // 2. The stream's memory: the segments that carry an id of the previous pair's world.
+  // 2. The stream's memory: the segments that carry an id of the previous pair's world, unless a segment outside them
+  // has outgrown them (world_outgrown_ratio): a first pair's world can be a moving thing together with part of the
+  // room, whose id the stream would otherwise keep while the room's own segment grows around it.
   if (world.labels.empty() && !previous_world_ids.empty()) {
+    double remembered_pixels = 0;
     for (int i = 0; i < n; ++i)
       if (std::find(previous_world_ids.begin(), previous_world_ids.end(), segments[std::size_t(i)].id) !=
-          previous_world_ids.end())
+          previous_world_ids.end()) {
         world.labels.push_back(i);
+        remembered_pixels += own.pixels[std::size_t(i)];
+      }
+    const bool widest_remembered = std::find(world.labels.begin(), world.labels.end(), widest) != world.labels.end();
+    if (!world.labels.empty() && !widest_remembered &&
+        own.pixels[std::size_t(widest)] > config.world_outgrown_ratio * remembered_pixels) {
+      world.labels.clear();
+      world.chosen_by = "outgrown";  // the widest segment below, named for why the memory was left
+    }
     if (!world.labels.empty()) world.chosen_by = "previous";
   }
   // 3. The widest segment.
   if (world.labels.empty()) {
     world.labels.push_back(widest);
-    world.chosen_by = "widest";
+    if (world.chosen_by.empty()) world.chosen_by = "widest";
   }
 
   // One robust rigid fit on the union, from the motion of its widest member: a world split into segments gives one

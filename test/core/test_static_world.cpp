@@ -195,3 +195,33 @@ TEST(StaticWorld, AWarmResultKeptAfterTheEnergyCheckHasItsOwnWorld) {
   std::printf("warm results kept after the energy check: %d of 13 pairs\n", kept);
   EXPECT_GE(kept, 1) << "the path under test was not taken";
 }
+
+TEST(StaticWorld, AWorldOutgrownByAnotherSegmentIsLeftForIt) {
+  // A stream whose remembered world is a small moving part (as a first pair's world can be: a box merged with part of
+  // the room) gives the world to the segment that holds more than world_outgrown_ratio times its pixels; with the
+  // ratio at its upper bound the memory is kept.
+  const StreamFrame f0 = test::syntheticStreamFrame(0, 0.0), f1 = test::syntheticStreamFrame(1, 1 / 30.0),
+                    f2 = test::syntheticStreamFrame(2, 2 / 30.0);
+  Solver first(cpuConfig());
+  Result previous = first.solve(f0.frame, f1.frame, f0.K);
+  ASSERT_GE(previous.segments.size(), 2u);
+  ASSERT_EQ(previous.world.chosen_by, "widest");
+  const int room_id = previous.world.ids.front();
+  const auto smallest = std::min_element(previous.segments.begin(), previous.segments.end(),
+                                         [](const Segment& a, const Segment& b) { return a.support < b.support; });
+  ASSERT_NE(smallest->id, room_id);
+  previous.world.ids = {smallest->id};  // the stream remembers the part as its world
+
+  Solver solver(cpuConfig());
+  const Result outgrown = solver.solve(f1.frame, f2.frame, f1.K, previous);
+  ASSERT_TRUE(outgrown.world.found);
+  EXPECT_EQ(outgrown.world.chosen_by, "outgrown");
+  EXPECT_EQ(outgrown.world.ids, std::vector<int>{room_id});
+
+  Config keep = cpuConfig();
+  keep.world_outgrown_ratio = 1e6;
+  Solver keeping(keep);
+  const Result kept = keeping.solve(f1.frame, f2.frame, f1.K, previous);
+  EXPECT_EQ(kept.world.chosen_by, "previous");
+  EXPECT_EQ(kept.world.ids, std::vector<int>{smallest->id});
+}

@@ -29,8 +29,10 @@ struct StaticWorld {
   Vector6d twist = Vector6d::Zero();
   Matrix6d covariance = Matrix6d::Zero();  ///< of `twist` [m^2, m rad, rad^2]
   double pixels = 0;                       ///< weighted pixels of the fit (processing level)
-  std::string chosen_by;  ///< "prior" (agrees with the camera-motion prior), "previous" (the previous pair's world ids)
-                          ///< or "widest" (the segment of most pixels)
+  /// Why these segments: "prior" (agree with the camera-motion prior), "previous" (the previous pair's world ids),
+  /// "widest" (the segment of most pixels) or "outgrown" (the widest, which has outgrown the previous world by
+  /// Config::world_outgrown_ratio).
+  std::string chosen_by;
 };
 
 /// @brief The covariance of a twist fitted by the motion step's Gauss-Newton model: (E / (2 N - 6)) H^-1 with H the
@@ -44,7 +46,8 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
 /// segment's twist). In this order: the segments whose pixels `camera_motion_prior` (the camera's motion over the
 /// pair, frame 1 -> frame 2, e.g. from wheel odometry; null: none) explains as well as their own motions up to
 /// merge_refit_tolerance (oneMotionExplains, against the widest segment's noise level); else the segments carrying an
-/// id of `previous_world_ids` (a stream keeps its world); else the widest segment. Also fills each segment's twist
+/// id of `previous_world_ids` (a stream keeps its world), unless the widest segment is not among them and holds more
+/// than Config::world_outgrown_ratio times their pixels; else the widest segment. Also fills each segment's twist
 /// covariance (`segment_covariances`, in `segments` order). Passes over the label level's pixels: one, one more with a
 /// prior, and one per fit iteration.
 StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& segments,
