@@ -11,7 +11,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <iostream>
 #include <limits>
@@ -30,6 +29,7 @@
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/eval/metrics.h"
+#include "mc_flow/eval/real_pairs.h"
 #include "mc_flow/eval/synthetic_scene.h"
 #include "mc_flow/io/benchmark.h"
 #include "mc_flow/io/camera_info.h"
@@ -751,7 +751,7 @@ int cmdDemo(const CommandLine& args) {
 
 /// --pairs A,B (at least one name), or the pairs of the shared set.
 std::vector<std::string> realPairSelection(const CommandLine& args) {
-  if (!args.has("pairs")) return io::realPairNames();
+  if (!args.has("pairs")) return realPairNames();
   const std::vector<std::string> pairs = args.list("pairs", "");
   if (pairs.empty()) throw CommandLineError("--pairs '" + args.text("pairs", "") + "' names no pair");
   return pairs;
@@ -763,19 +763,10 @@ int cmdExportReal(const CommandLine& args) {
   const Config config;  // the loader's depth cleaning and halving use the default depth range, as bench-real
   for (const std::string& name : pairs)
     for (int halvings = 0; halvings <= 1; ++halvings) {
-      const io::RealPair pair = io::loadRealPair(data, name, halvings, config);
+      const RealPair pair = io::loadRealPair(data, name, halvings, config);
       const std::string dir =
           out + "/" + name + "_" + std::to_string(pair.frame1.width()) + "x" + std::to_string(pair.frame1.height());
-      std::filesystem::create_directories(dir);
-      io::writePfm(dir + "/intensity0.pfm", pair.frame1.intensity);
-      io::writePfm(dir + "/depth0.pfm", pair.frame1.depth);
-      io::writePfm(dir + "/intensity1.pfm", pair.frame2.intensity);
-      io::writePfm(dir + "/depth1.pfm", pair.frame2.depth);
-      std::ofstream intrinsics(dir + "/intrinsics.txt");
-      intrinsics.precision(17);
-      intrinsics << pair.intrinsics.fx << " " << pair.intrinsics.fy << " " << pair.intrinsics.cx << " "
-                 << pair.intrinsics.cy << "\n";
-      if (!intrinsics) throw io::FileError("cannot write " + dir + "/intrinsics.txt");
+      writeRealPairFolder(dir, pair);
       std::printf("%s\n", dir.c_str());
     }
   return 0;
@@ -789,25 +780,19 @@ int cmdBenchReal(const CommandLine& args) {
   const std::string mask_text = args.text("mask", "union");
   if (mask_text != "union" && mask_text != "mcflow")
     throw CommandLineError("--mask '" + mask_text + "': expected union or mcflow");
-  const io::ExclusionMask mask = mask_text == "mcflow" ? io::ExclusionMask::McFlowOnly : io::ExclusionMask::UnionOfAll;
+  const ExclusionMask mask = mask_text == "mcflow" ? ExclusionMask::McFlowOnly : ExclusionMask::UnionOfAll;
   const int halvings = args.has("full-resolution") ? 0 : 1;
 
-  std::vector<io::PairScores> scores;
   std::string backend;
-  for (const std::string& name : pairs) {
-    progress("pair " + name + ": loading and solving (one label, MC-TV, MC-Quad; " + std::to_string(repeat) +
-             " run(s) each)...");
-    const io::RealPair pair = io::loadRealPair(data, name, halvings, config);
-    const io::PairSolves solves = io::solveRealPair(pair, config, repeat);
-    backend = solves.quad.backend;
-    scores.push_back(io::scoreRealPair(pair, solves, mask));
-  }
+  const std::vector<PairScores> scores = benchRealPairs(
+      pairs, [&](const std::string& name) { return io::loadRealPair(data, name, halvings, config); }, config, repeat,
+      mask, progress, &backend);
   std::printf(
       "# mcflow bench-real: %s, %s input, processing level %d, backend %s, %d run(s) per solve (median "
       "times), excluded: %s\n",
       data.c_str(), halvings ? "320x240 (halved)" : "640x480", config.processing_level, backend.c_str(), repeat,
-      mask == io::ExclusionMask::UnionOfAll ? "occlusions of all solves" : "occlusions of MC-Flow");
-  std::fputs(io::realBenchTable(scores).c_str(), stdout);
+      mask == ExclusionMask::UnionOfAll ? "occlusions of all solves" : "occlusions of MC-Flow");
+  std::fputs(realBenchTable(scores).c_str(), stdout);
   return 0;
 }
 
