@@ -30,7 +30,7 @@ endif()
 
 # Writes the demo bag: a synthetic RGB-D sequence with moving parts (no camera needed).
 add_executable(make_synthetic_bag src/ros/make_synthetic_bag.cpp)
-target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet mc_flow_eval)
+target_link_libraries(make_synthetic_bag PRIVATE mc_flow_nodelet mc_flow_eval mc_flow_cli)
 set_target_properties(make_synthetic_bag PROPERTIES
   RUNTIME_OUTPUT_DIRECTORY ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_BIN_DESTINATION})
 
@@ -43,7 +43,7 @@ target_compile_options(mcflow_bench_nodelet PRIVATE -Wall -Wextra)
 # The install space (catkin_make install, catkin_make_isolated --install; test/install/check_install.sh): the nodelet
 # and the libraries catkin_package() exports in lib/, the tools in lib/mc_flow (rosrun mc_flow mcflow), every header
 # but the benchmark and test harness's (include/mc_flow/testing) under include/mc_flow/.
-install(TARGETS mc_flow_nodelet mc_flow_io mc_flow_eval mc_flow_formats mc_flow_core
+install(TARGETS mc_flow_nodelet mc_flow_io mc_flow_eval mc_flow_formats mc_flow_cli mc_flow_core
   ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
   LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION})
 install(TARGETS mcflow make_synthetic_bag RUNTIME DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})

@@ -16,12 +16,12 @@ add_custom_command(OUTPUT ${CATKIN_DEVEL_PREFIX}/${CATKIN_PACKAGE_INCLUDE_DESTIN
   DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/include/mc_flow/core/config_fields.def)
 
 # Exported to packages that find mc_flow through catkin: the nodelet library and the ROS-free libraries under it
-# (solver, evaluation, file formats, file I/O), in link order. The ROS-free ones are static archives; their own
+# (solver, evaluation, file formats, file I/O, command line), in link order. The ROS-free ones are static archives; their own
 # dependencies (Eigen, OpenMP, yaml-cpp, the CUDA runtime) come from cmake/mc_flow-extras.cmake.in.
 # test/install/check_install.sh builds a package on them from the install space.
 catkin_package(
   INCLUDE_DIRS include
-  LIBRARIES mc_flow_nodelet mc_flow_io mc_flow_eval mc_flow_formats mc_flow_core
+  LIBRARIES mc_flow_nodelet mc_flow_io mc_flow_eval mc_flow_formats mc_flow_cli mc_flow_core
   CFG_EXTRAS mc_flow-extras.cmake  # from cmake/mc_flow-extras.cmake.in
   CATKIN_DEPENDS roscpp nodelet message_filters image_transport cv_bridge sensor_msgs geometry_msgs std_msgs
     visualization_msgs nav_msgs tf2_ros dynamic_reconfigure diagnostic_updater message_runtime)

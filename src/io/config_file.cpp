@@ -7,7 +7,6 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/io/image_io.h"
 #include "mc_flow/io/report_io.h"
-#include "mc_flow/io/text.h"
 
 namespace mc_flow {
 namespace io {
@@ -57,16 +56,6 @@ void applyConfigFile(const std::string& path, Config& config) {
     } catch (const std::exception& e) {
       throw ConfigError(what + ", key '" + key + "' = '" + value + "': " + e.what());
     }
-  }
-}
-
-void applyConfigAssignment(const std::string& assignment, Config& config) {
-  const std::size_t eq = assignment.find('=');
-  if (eq == std::string::npos || eq == 0) throw ConfigError("--set '" + assignment + "': expected name=value");
-  try {
-    config.set(trimWhitespace(assignment.substr(0, eq)), trimWhitespace(assignment.substr(eq + 1)));
-  } catch (const std::exception& e) {
-    throw ConfigError("--set '" + assignment + "': " + e.what());
   }
 }
 

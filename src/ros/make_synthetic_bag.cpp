@@ -5,7 +5,7 @@
  *
  * Usage: make_synthetic_bag OUTPUT.bag [--frames N] [--rate HZ] [--width W] [--height H] [--variant V]
  *        [--namespace /camera] [--frame-id camera_rgb_optical_frame] [--depth-encoding 32FC1|16UC1]
- *        [--depth-noise M] [--intensity-noise I]
+ *        [--depth-noise M] [--intensity-noise I] (make_synthetic_bag --help lists every option)
  */
 #include <cmath>
 #include <cstdint>
@@ -21,9 +21,14 @@
 #include <sensor_msgs/image_encodings.h>
 #include <tf2_msgs/TFMessage.h>
 
+#include "mc_flow/cli/command_line.h"
 #include "mc_flow/eval/synthetic_scene.h"
 
 namespace {
+
+using mc_flow::CommandLine;
+using mc_flow::CommandLineError;
+using mc_flow::ConfigSettings;
 
 struct Options {
   std::string output;
@@ -38,78 +43,62 @@ struct Options {
   mc_flow::SyntheticSceneOptions scene;
 };
 
-void usage() {
-  std::cerr << "usage: make_synthetic_bag OUTPUT.bag [--frames N (20)] [--rate HZ (10)] [--width W (640)]\n"
-               "       [--height H (480)] [--variant V (0)] [--namespace NS (/camera)]\n"
-               "       [--frame-id ID (camera_rgb_optical_frame)] [--base-frame ID (camera_link)]\n"
-               "       [--depth-encoding 32FC1|16UC1] [--depth-frame-id ID (the colour one)] [--no-tf]\n"
-               "       [--depth-noise M (0)] [--intensity-noise I (0)]\n";
+CommandLine commandLine() {
+  return CommandLine("make_synthetic_bag",
+                     {{"frames", true, "number of frames, at least 2 (default 20)"},
+                      {"rate", true, "frame rate [Hz] (default 10)"},
+                      {"width", true, "image width (default 640)"},
+                      {"height", true, "image height (default 480)"},
+                      {"variant", true, "scene variant (default 0)"},
+                      {"namespace", true, "topic namespace (default /camera)"},
+                      {"frame-id", true, "colour optical frame (default camera_rgb_optical_frame)"},
+                      {"base-frame", true, "body frame of /tf_static (default camera_link)"},
+                      {"depth-encoding", true, "32FC1 (metres, default) | 16UC1 (millimetres)"},
+                      {"depth-frame-id", true, "frame of the depth images (default: the colour one)"},
+                      {"no-tf", false, "no /tf_static: only the three camera topics, as many recorded bags"},
+                      {"depth-noise", true, "[m] depth noise at 1 m (default 0)"},
+                      {"intensity-noise", true, "intensity noise, intensity in [0, 1] (default 0)"}},
+                     ConfigSettings::Refused, {"OUTPUT.bag"});
 }
 
-bool parse(int argc, char** argv, Options& o) {
-  o.scene.width = 640;
-  o.scene.height = 480;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::runtime_error("missing value after " + arg);
-      return argv[++i];
-    };
-    if (arg == "--frames")
-      o.frames = std::stoi(next());
-    else if (arg == "--rate")
-      o.rate = std::stod(next());
-    else if (arg == "--width")
-      o.scene.width = std::stoi(next());
-    else if (arg == "--height")
-      o.scene.height = std::stoi(next());
-    else if (arg == "--variant")
-      o.scene.variant = std::stoi(next());
-    else if (arg == "--namespace")
-      o.ns = next();
-    else if (arg == "--frame-id")
-      o.frame_id = next();
-    else if (arg == "--base-frame")
-      o.base_frame = next();
-    else if (arg == "--depth-encoding")
-      o.depth_encoding = next();
-    else if (arg == "--depth-frame-id")
-      o.depth_frame_id = next();
-    else if (arg == "--no-tf")
-      o.write_tf = false;
-    else if (arg == "--depth-noise")
-      o.scene.depth_noise = std::stod(next());
-    else if (arg == "--intensity-noise")
-      o.scene.intensity_noise = std::stod(next());
-    else if (arg == "-h" || arg == "--help")
-      return false;
-    else if (!arg.empty() && arg[0] == '-')
-      throw std::runtime_error("unknown option " + arg);
-    else
-      o.output = arg;
-  }
-  if (o.output.empty()) throw std::runtime_error("no output file given");
-  if (o.frames < 2) throw std::runtime_error("--frames " + std::to_string(o.frames) + ": need at least 2");
-  if (!(o.rate > 0)) throw std::runtime_error("--rate must be > 0");
-  if (o.depth_encoding != "32FC1" && o.depth_encoding != "16UC1") {
-    throw std::runtime_error("--depth-encoding " + o.depth_encoding + ": use 32FC1 or 16UC1");
-  }
+Options parse(const CommandLine& cli) {
+  Options o;
+  o.output = cli.positionalText(0, "");
+  if (o.output.empty()) throw CommandLineError("no output file given");
+  o.frames = cli.integer("frames", o.frames, 2, 1000000);
+  o.rate = cli.number("rate", o.rate);
+  if (!(o.rate > 0)) throw CommandLineError("--rate '" + cli.text("rate", "") + "': must be > 0");
+  o.scene.width = cli.integer("width", 640, 1, 100000);
+  o.scene.height = cli.integer("height", 480, 1, 100000);
+  o.scene.variant = cli.integer("variant", o.scene.variant, 0, mc_flow::syntheticVariantCount() - 1);
+  o.ns = cli.text("namespace", o.ns);
+  o.frame_id = cli.text("frame-id", o.frame_id);
+  o.base_frame = cli.text("base-frame", o.base_frame);
+  o.depth_encoding = cli.text("depth-encoding", o.depth_encoding);
+  if (o.depth_encoding != "32FC1" && o.depth_encoding != "16UC1")
+    throw CommandLineError("--depth-encoding '" + o.depth_encoding + "': use 32FC1 or 16UC1");
+  o.depth_frame_id = cli.text("depth-frame-id", o.depth_frame_id);
+  o.write_tf = !cli.has("no-tf");
+  o.scene.depth_noise = cli.number("depth-noise", o.scene.depth_noise);
+  o.scene.intensity_noise = cli.number("intensity-noise", o.scene.intensity_noise);
   while (!o.ns.empty() && o.ns.back() == '/') o.ns.pop_back();
-  return true;
+  return o;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
+  CommandLine cli = commandLine();
   Options o;
   try {
-    if (!parse(argc, argv, o)) {
-      usage();
+    cli.parse(argc, argv);
+    if (cli.helpRequested()) {
+      std::cout << cli.usage();
       return 0;
     }
-  } catch (const std::exception& e) {
-    std::cerr << "make_synthetic_bag: " << e.what() << "\n";
-    usage();
+    o = parse(cli);
+  } catch (const CommandLineError& e) {
+    std::cerr << "make_synthetic_bag: " << e.what() << "\n" << cli.usage();
     return 2;
   }
   ros::Time::init();

@@ -110,7 +110,7 @@ InputMessages realMessages(const std::string& dir, int t, const ros::Time& stamp
   std::string name = dir;
   while (!name.empty() && name.back() == '/') name.pop_back();
   name = name.substr(name.find_last_of('/') + 1);
-  return toMessages(colour, depth, mc_flow::io::realPairIntrinsics640(name), stamp);
+  return toMessages(colour, depth, mc_flow::realPairIntrinsics640(name), stamp);
 }
 
 // Minor page faults of the process so far: a fresh allocation of a few MB (a message's buffer) costs a fault per

@@ -11,13 +11,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <iostream>
-#include <map>
+#include <limits>
 #include <memory>
 #include <optional>
-#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -25,11 +23,13 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "mc_flow/cli/command_line.h"
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/eval/metrics.h"
+#include "mc_flow/eval/real_pairs.h"
 #include "mc_flow/eval/synthetic_scene.h"
 #include "mc_flow/io/benchmark.h"
 #include "mc_flow/io/camera_info.h"
@@ -50,23 +50,15 @@ namespace {
 
 using namespace mc_flow;
 
-/// A command line that does not follow the usage: print the usage and exit 2.
-struct UsageError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
+constexpr int kMaxImageSide = 16384;  // [px] --width/--height of the synthetic scenes
 
-struct Option {
-  std::string name;  // without the leading "--"
-  bool takes_value;
-  std::string help;
-};
-
+/// A subcommand: its help and its options (each subcommand parses its own CommandLine; a usage error exits 2).
 struct Command {
   std::string name, synopsis, description;
-  std::vector<Option> options;
+  std::vector<CommandLineOption> options;
 };
 
-const std::vector<Option> kInputOptions = {
+const std::vector<CommandLineOption> kInputOptions = {
     {"rgb1", true, "colour image of frame 1 (8-bit RGB/grey PNG/JPG/PPM/PGM, or 16-bit grey)"},
     {"depth1", true, "depth of frame 1: 16-bit PNG/PGM (see --depth-scale) or float PFM/EXR/TIFF in metres"},
     {"rgb2", true, "colour image of frame 2"},
@@ -85,13 +77,13 @@ std::vector<Command> commands() {
       "scene_flow.pfm, labels.png, soft_labels.npy, occlusion.png, segments.json, report.json, "
       "segmentation.png, flow.png and overview.png into DIR.",
       kInputOptions};
-  for (const Option& o : std::vector<Option>{
+  for (const CommandLineOption& o : std::vector<CommandLineOption>{
            {"max-depth", true, "[m] depth beyond this is invalid (Config::max_depth)"},
            {"regularizer", true, "quad | tv"},
            {"labels", true, "initial number of labels (K-means clusters, Config::initial_labels)"},
            {"backend", true, "auto | cpu | cuda"},
            {"config", true, "JSON or YAML file of Config fields (keys = Config member names)"},
-           {"set", true, "name=value: sets one Config field; may be repeated; overrides --config and flags"},
+           {"set", true, "name=value: sets one Config field; may be repeated; overrides --config and flags", true},
            {"processing-level", true, "pyramid level the solver finishes at (0 = input resolution)"},
            {"out", true, "output directory (created)"},
            {"verbose", false, "progress of the solver on stderr"},
@@ -135,9 +127,9 @@ std::vector<Command> commands() {
        {"cold", false, "solve every pair from scratch (ids are still matched by overlap)"},
        {"max-frames", true, "stop after this many frames"}}};
   // The solver options of `run` (not its pair inputs).
-  for (const Option& o : run.options) {
+  for (const CommandLineOption& o : run.options) {
     bool input = false;
-    for (const Option& i : kInputOptions) input = input || i.name == o.name;
+    for (const CommandLineOption& i : kInputOptions) input = input || i.name == o.name;
     if (!input) run_seq.options.push_back(o);
   }
   list.push_back(run_seq);
@@ -171,7 +163,7 @@ std::vector<Command> commands() {
       "a `mcflow synth` directory the inputs default to its files. Prints a table and writes "
       "DIR/eval.json.",
       {{"result", true, "directory written by `mcflow run`"}, {"gt", true, "directory written by `mcflow synth`"}}};
-  for (const Option& o : kInputOptions) eval.options.push_back(o);
+  for (const CommandLineOption& o : kInputOptions) eval.options.push_back(o);
   eval.options.push_back({"help", false, "this help"});
   list.push_back(eval);
 
@@ -199,7 +191,7 @@ std::vector<Command> commands() {
        {{"data", true, "directory of the real pairs (e.g. $MCFLOW_SHARED_DATA/real_pairs)"},
         {"pairs", true, "comma-separated folder names (default: the four pairs of the shared set)"},
         {"config", true, "JSON or YAML file of Config fields"},
-        {"set", true, "name=value: sets one Config field; may be repeated"},
+        {"set", true, "name=value: sets one Config field; may be repeated", true},
         {"processing-level", true, "pyramid level the solver finishes at (Config::processing_level)"},
         {"backend", true, "auto | cpu | cuda"},
         {"full-resolution", false, "keep the 640x480 input (default: halve to 320x240)"},
@@ -242,77 +234,13 @@ void printMainUsage(std::ostream& out) {
   out << "\nexit codes: 0 success, 1 bad input/config/file, 2 usage error or unusable backend, 3 internal error\n";
 }
 
+/// The subcommand's own command line: only the options of its table (--set only where it declares it).
+CommandLine commandLine(const Command& c) {
+  return CommandLine("mcflow " + c.name, c.options, ConfigSettings::Refused);
+}
+
 void printCommandUsage(const Command& c, std::ostream& out) {
-  out << "usage: " << c.synopsis << "\n\n" << c.description << "\n\noptions:\n";
-  for (const Option& o : c.options) {
-    std::string left = "--" + o.name + (o.takes_value ? " VALUE" : "");
-    out << "  " << left << std::string(left.size() < 24 ? 24 - left.size() : 1, ' ') << o.help << "\n";
-  }
-}
-
-struct Arguments {
-  std::map<std::string, std::string> values;
-  std::vector<std::string> assignments;  // --set, in order
-  std::set<std::string> flags;
-  bool has(const std::string& name) const { return values.count(name) || flags.count(name); }
-  std::string get(const std::string& name) const {
-    auto it = values.find(name);
-    return it == values.end() ? std::string() : it->second;
-  }
-  std::string require(const std::string& name) const {
-    if (!values.count(name)) throw UsageError("missing required option --" + name);
-    return values.at(name);
-  }
-};
-
-Arguments parseArguments(const Command& command, int argc, char** argv, int first) {
-  Arguments args;
-  for (int i = first; i < argc; ++i) {
-    std::string token = argv[i];
-    if (token.rfind("--", 0) != 0) throw UsageError("unexpected argument '" + token + "'");
-    std::string name = token.substr(2), value;
-    bool inline_value = false;
-    const std::size_t eq = name.find('=');
-    if (eq != std::string::npos) {
-      value = name.substr(eq + 1);
-      name = name.substr(0, eq);
-      inline_value = true;
-    }
-    const Option* option = nullptr;
-    for (const Option& o : command.options)
-      if (o.name == name) option = &o;
-    if (!option) throw UsageError("unknown option '--" + name + "' for `mcflow " + command.name + "`");
-    if (!option->takes_value) {
-      if (inline_value) throw UsageError("option --" + name + " takes no value");
-      args.flags.insert(name);
-      continue;
-    }
-    if (!inline_value) {
-      if (i + 1 >= argc) throw UsageError("option --" + name + " needs a value");
-      value = argv[++i];
-    }
-    if (name == "set")
-      args.assignments.push_back(value);
-    else if (args.values.count(name))
-      throw UsageError("option --" + name + " given twice");
-    else
-      args.values[name] = value;
-  }
-  return args;
-}
-
-double parseNumber(const std::string& flag, const std::string& text) {
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (text.empty() || !end || *end != '\0' || !std::isfinite(v))
-    throw InputError("--" + flag + " '" + text + "': expected a number");
-  return v;
-}
-
-int parseInteger(const std::string& flag, const std::string& text) {
-  const double v = parseNumber(flag, text);
-  if (v != std::floor(v) || std::fabs(v) > 1e9) throw InputError("--" + flag + " '" + text + "': expected an integer");
-  return int(v);
+  out << "usage: " << c.synopsis << "\n\n" << c.description << "\n\noptions:\n" << commandLine(c).optionsHelp();
 }
 
 double elapsedMs(std::chrono::steady_clock::time_point since) {
@@ -321,50 +249,62 @@ double elapsedMs(std::chrono::steady_clock::time_point since) {
 
 void progress(const std::string& message) { std::cerr << "mcflow: " << message << std::endl; }
 
-io::PairPaths inputPaths(const Arguments& args) {
+/// --depth-scale: 16-bit depth units per metre (> 0), or `fallback`.
+double depthScale(const CommandLine& args, double fallback) {
+  const double scale = args.number("depth-scale", fallback);
+  if (!(scale > 0)) throw CommandLineError("--depth-scale '" + args.text("depth-scale", "") + "': must be > 0");
+  return scale;
+}
+
+io::PairPaths inputPaths(const CommandLine& args) {
   io::PairPaths paths;
-  paths.rgb1 = args.require("rgb1");
-  paths.depth1 = args.require("depth1");
-  paths.rgb2 = args.require("rgb2");
-  paths.depth2 = args.require("depth2");
-  if (args.has("depth-scale")) {
-    paths.depth_scale = parseNumber("depth-scale", args.get("depth-scale"));
-    if (!(paths.depth_scale > 0)) throw InputError("--depth-scale '" + args.get("depth-scale") + "': must be > 0");
-  }
+  paths.rgb1 = args.required("rgb1");
+  paths.depth1 = args.required("depth1");
+  paths.rgb2 = args.required("rgb2");
+  paths.depth2 = args.required("depth2");
+  paths.depth_scale = depthScale(args, paths.depth_scale);
   return paths;
 }
 
-Intrinsics inputIntrinsics(const Arguments& args, int width, int height) {
+/// Where a pair's intrinsics come from: --intrinsics FX,FY,CX,CY or a --camera-info file (empty: not given).
+struct IntrinsicsSource {
+  std::string text, camera_info;
+};
+
+IntrinsicsSource intrinsicsSource(const CommandLine& args) {
   if (args.has("intrinsics") && args.has("camera-info"))
-    throw UsageError("give either --intrinsics or --camera-info, not both");
-  if (args.has("intrinsics")) return io::parseIntrinsics(args.get("intrinsics"));
-  if (!args.has("camera-info")) throw UsageError("missing --intrinsics FX,FY,CX,CY or --camera-info FILE");
-  const io::CameraInfo info = io::loadCameraInfo(args.get("camera-info"));
+    throw CommandLineError("give either --intrinsics or --camera-info, not both");
+  return {args.text("intrinsics", ""), args.text("camera-info", "")};
+}
+
+Intrinsics inputIntrinsics(const IntrinsicsSource& source, int width, int height) {
+  if (!source.text.empty()) return io::parseIntrinsics(source.text);
+  if (source.camera_info.empty()) throw CommandLineError("missing --intrinsics FX,FY,CX,CY or --camera-info FILE");
+  const io::CameraInfo info = io::loadCameraInfo(source.camera_info);
   if (width > 0 && info.width > 0 && (info.width != width || info.height != height))
-    std::cerr << "mcflow: warning: camera info '" << args.get("camera-info") << "' is for " << info.width << "x"
+    std::cerr << "mcflow: warning: camera info '" << source.camera_info << "' is for " << info.width << "x"
               << info.height << " but the images are " << width << "x" << height << "\n";
   return info.intrinsics;
 }
 
 /// Config from --config, then the dedicated flags, then --set, then --verbose; validated.
-Config buildConfig(const Arguments& args) {
+Config buildConfig(const CommandLine& args) {
   Config config;
-  if (args.has("config")) io::applyConfigFile(args.get("config"), config);
-  if (args.has("max-depth")) config.max_depth = parseNumber("max-depth", args.get("max-depth"));
-  if (args.has("labels")) config.initial_labels = parseInteger("labels", args.get("labels"));
-  if (args.has("processing-level"))
-    config.processing_level = parseInteger("processing-level", args.get("processing-level"));
+  if (args.has("config")) io::applyConfigFile(args.text("config", ""), config);
+  config.max_depth = args.number("max-depth", config.max_depth);
+  config.initial_labels = args.integer("labels", config.initial_labels);  // Config::validate checks the range
+  config.processing_level = args.integer("processing-level", config.processing_level);
   try {
-    if (args.has("regularizer")) config.regularizer = parseRegularizer(args.get("regularizer"));
+    if (args.has("regularizer")) config.regularizer = parseRegularizer(args.text("regularizer", ""));
   } catch (const ConfigError& e) {
-    throw ConfigError("--regularizer '" + args.get("regularizer") + "': " + e.what());
+    throw ConfigError("--regularizer '" + args.text("regularizer", "") + "': " + e.what());
   }
   try {
-    if (args.has("backend")) config.backend = parseBackend(args.get("backend"));
+    if (args.has("backend")) config.backend = parseBackend(args.text("backend", ""));
   } catch (const ConfigError& e) {
-    throw ConfigError("--backend '" + args.get("backend") + "': " + e.what());
+    throw ConfigError("--backend '" + args.text("backend", "") + "': " + e.what());
   }
-  for (const std::string& a : args.assignments) io::applyConfigAssignment(a, config);
+  args.applySettings(config);
   if (args.has("verbose")) config.verbose = true;
   try {
     config.validate();
@@ -375,8 +315,8 @@ Config buildConfig(const Arguments& args) {
 }
 
 /// Loads, solves and writes one pair; returns the result.
-Result solveAndWrite(const io::PairPaths& paths, const Arguments& args, const Config& config, const std::string& out,
-                     io::LoadedPair* loaded, Intrinsics* used_K) {
+Result solveAndWrite(const io::PairPaths& paths, const IntrinsicsSource& intrinsics, const Config& config,
+                     const std::string& out, io::LoadedPair* loaded, Intrinsics* used_K) {
   io::createOutputDirectory(out);  // fail on an unwritable directory before the solve
   Solver solver(config);           // fails fast on an unusable backend
 
@@ -392,7 +332,7 @@ Result solveAndWrite(const io::PairPaths& paths, const Arguments& args, const Co
       io::checkRunSize(pair.frame1.width(), pair.frame1.height(), config, solver.backendName() == "cpu", available);
   if (!size.error.empty()) throw InputError(size.error);
   if (!size.warning.empty()) std::cerr << "mcflow: warning: " << size.warning << std::endl;
-  const Intrinsics K = inputIntrinsics(args, pair.frame1.width(), pair.frame1.height());
+  const Intrinsics K = inputIntrinsics(intrinsics, pair.frame1.width(), pair.frame1.height());
   io::RunInfo info{paths.rgb1, paths.depth1, paths.rgb2, paths.depth2, paths.depth_scale, elapsedMs(load_start), 0};
 
   progress("solving (" + solver.backendName() + " backend, " + std::to_string(pair.frame1.width()) + "x" +
@@ -420,14 +360,15 @@ void printTimings(const Result& result) {
               t.initialisation, t.motion, t.labels, t.adaptation, t.occlusion, t.total, result.backend.c_str());
 }
 
-int cmdRun(const Arguments& args) {
-  const std::string out = args.require("out");
+int cmdRun(const CommandLine& args) {
+  const std::string out = args.required("out");
   const io::PairPaths paths = inputPaths(args);
-  if (!args.has("intrinsics") && !args.has("camera-info"))
-    throw UsageError("missing --intrinsics FX,FY,CX,CY or --camera-info FILE");
-  if (args.has("intrinsics")) io::parseIntrinsics(args.get("intrinsics"));  // report bad text before loading
+  const IntrinsicsSource intrinsics = intrinsicsSource(args);
+  if (intrinsics.text.empty() && intrinsics.camera_info.empty())
+    throw CommandLineError("missing --intrinsics FX,FY,CX,CY or --camera-info FILE");
+  if (!intrinsics.text.empty()) io::parseIntrinsics(intrinsics.text);  // report bad text before loading
   const Config config = buildConfig(args);
-  const Result result = solveAndWrite(paths, args, config, out, nullptr, nullptr);
+  const Result result = solveAndWrite(paths, intrinsics, config, out, nullptr, nullptr);
   printSegments(result);
   printTimings(result);
   std::printf("wrote %s\n", out.c_str());
@@ -455,34 +396,26 @@ struct SequenceSource {
   double depth_scale = 1000.0;  // report.json: units per metre of 16-bit depth
 };
 
-int maxFrames(const Arguments& args) {
-  if (!args.has("max-frames")) return -1;
-  const int max_frames = parseInteger("max-frames", args.get("max-frames"));
-  if (max_frames < 2) throw InputError("--max-frames " + std::to_string(max_frames) + ": must be >= 2");
-  return max_frames;
-}
+/// --max-frames N (at least 2), or -1: all frames.
+int maxFrames(const CommandLine& args) { return args.integer("max-frames", -1, 2, std::numeric_limits<int>::max()); }
 
 /// --tum DIR or --frames DIR: image files, downsampled by the pipeline.
-SequenceSource fileSequence(const Arguments& args, int downsample) {
-  const std::string dir = args.has("tum") ? args.get("tum") : args.get("frames");
-  const double fps = args.has("fps") ? parseNumber("fps", args.get("fps")) : 30.0;
+SequenceSource fileSequence(const CommandLine& args, int downsample) {
+  const std::string dir = args.has("tum") ? args.text("tum", "") : args.text("frames", "");
+  const double fps = args.number("fps", 30.0);
   auto frames = std::make_shared<std::vector<io::SequenceFrameFiles>>(
       args.has("tum") ? io::listTumSequence(dir) : io::listNumberedFrames(dir, fps));
   const int max_frames = maxFrames(args);
   if (max_frames > 0 && int(frames->size()) > max_frames) frames->resize(std::size_t(max_frames));
   if (frames->size() < 2)
     throw InputError("sequence '" + dir + "' has " + std::to_string(frames->size()) + " frame(s)");
-  double depth_scale = args.has("tum") ? 5000.0 : 1000.0;
-  if (args.has("depth-scale")) {
-    depth_scale = parseNumber("depth-scale", args.get("depth-scale"));
-    if (!(depth_scale > 0)) throw InputError("--depth-scale '" + args.get("depth-scale") + "': must be > 0");
-  }
-  auto intrinsics_args = std::make_shared<Arguments>(args);
+  const double depth_scale = depthScale(args, args.has("tum") ? 5000.0 : 1000.0);
+  IntrinsicsSource intrinsics = intrinsicsSource(args);
   const std::string default_info = (std::filesystem::path(dir) / "camera_info.yaml").string();
-  if (!args.has("intrinsics") && !args.has("camera-info")) {
+  if (intrinsics.text.empty() && intrinsics.camera_info.empty()) {
     if (!io::fileExists(default_info))
-      throw UsageError("missing --intrinsics FX,FY,CX,CY or --camera-info FILE (and no " + default_info + ")");
-    intrinsics_args->values["camera-info"] = default_info;
+      throw CommandLineError("missing --intrinsics FX,FY,CX,CY or --camera-info FILE (and no " + default_info + ")");
+    intrinsics.camera_info = default_info;
   }
   auto K = std::make_shared<std::optional<Intrinsics>>();
   SequenceSource source;
@@ -495,7 +428,7 @@ SequenceSource fileSequence(const Arguments& args, int downsample) {
     SequenceInput in;
     ImageU8 colour;
     in.stream.frame = io::loadRgbdFrame(f.rgb, f.depth, depth_scale, &colour);
-    if (!*K) *K = inputIntrinsics(*intrinsics_args, in.stream.frame.width(), in.stream.frame.height());
+    if (!*K) *K = inputIntrinsics(intrinsics, in.stream.frame.width(), in.stream.frame.height());
     in.stream.K = **K;
     in.stream.stamp = f.stamp;
     in.stream.source = dir;
@@ -518,27 +451,26 @@ SequenceSource fileSequence(const Arguments& args, int downsample) {
 }
 
 /// --bag FILE: the nodelet's message conversion (it downsamples, so the pipeline does not).
-SequenceSource bagSequence(const Arguments& args, const Config& config, int downsample) {
+SequenceSource bagSequence(const CommandLine& args, const Config& config, int downsample) {
 #ifdef MCFLOW_WITH_ROSBAG
   if (args.has("depth-scale"))
-    throw UsageError(
+    throw CommandLineError(
         "--depth-scale is for --tum/--frames: a bag's depth is 16UC1 in millimetres or 32FC1 in metres "
         "(REP 118), read as the nodelet reads it");
-  if (args.has("fps")) throw UsageError("--fps is for --frames: a bag's frames carry their stamps");
+  if (args.has("fps")) throw CommandLineError("--fps is for --frames: a bag's frames carry their stamps");
   mc_flow_ros::BagReadOptions options;
-  if (args.has("rgb-topic")) options.topics.rgb = args.get("rgb-topic");
-  if (args.has("depth-topic")) options.topics.depth = args.get("depth-topic");
-  if (args.has("info-topic")) options.topics.info = args.get("info-topic");
-  if (args.has("max-stamp-difference")) {
-    options.max_stamp_difference = parseNumber("max-stamp-difference", args.get("max-stamp-difference"));
-    if (!(options.max_stamp_difference >= 0))
-      throw InputError("--max-stamp-difference '" + args.get("max-stamp-difference") + "': must be >= 0");
-  }
+  options.topics.rgb = args.text("rgb-topic", options.topics.rgb);
+  options.topics.depth = args.text("depth-topic", options.topics.depth);
+  options.topics.info = args.text("info-topic", options.topics.info);
+  options.max_stamp_difference = args.number("max-stamp-difference", options.max_stamp_difference);
+  if (!(options.max_stamp_difference >= 0))
+    throw CommandLineError("--max-stamp-difference '" + args.text("max-stamp-difference", "") + "': must be >= 0");
   // --intrinsics / --camera-info are for the bag's images as they are (0x0: inputIntrinsics checks no size).
-  if (args.has("intrinsics") || args.has("camera-info")) options.intrinsics = inputIntrinsics(args, 0, 0);
+  if (args.has("intrinsics") || args.has("camera-info"))
+    options.intrinsics = inputIntrinsics(intrinsicsSource(args), 0, 0);
   options.downsample = downsample;
   options.depth_range = config.depth_downsample_range;
-  const std::string path = args.get("bag");
+  const std::string path = args.text("bag", "");
   auto bag = std::make_shared<mc_flow_ros::BagSequence>(path, options);
   progress(bag->summary());
   SequenceSource source;
@@ -571,25 +503,24 @@ SequenceSource bagSequence(const Arguments& args, const Config& config, int down
   (void)args;
   (void)config;
   (void)downsample;
-  throw UsageError(
+  throw CommandLineError(
       "--bag needs the ROS build: this mcflow was built without ROS (MCFLOW_WITH_ROS=OFF or catkin not "
       "found), so it cannot read rosbags; rebuild with ROS (scripts/build.sh) or export the bag's frames "
       "to a folder and use --tum/--frames");
 #endif
 }
 
-int cmdRunSeq(const Arguments& args) {
-  const std::string out = args.require("out");
+int cmdRunSeq(const CommandLine& args) {
+  const std::string out = args.required("out");
   if (int(args.has("tum")) + int(args.has("frames")) + int(args.has("bag")) != 1)
-    throw UsageError("give one of --tum DIR, --frames DIR or --bag FILE");
+    throw CommandLineError("give one of --tum DIR, --frames DIR or --bag FILE");
   if (!args.has("bag"))
     for (const char* option : {"rgb-topic", "depth-topic", "info-topic", "max-stamp-difference"})
-      if (args.has(option)) throw UsageError(std::string("--") + option + " is for --bag");
+      if (args.has(option)) throw CommandLineError(std::string("--") + option + " is for --bag");
   Config config = buildConfig(args);
   if (args.has("cold")) config.warm_start = false;
-  const int downsample = args.has("downsample") ? parseInteger("downsample", args.get("downsample")) : 0;
-  const double max_interval =
-      args.has("max-pair-interval") ? parseNumber("max-pair-interval", args.get("max-pair-interval")) : 1.0;
+  const int downsample = args.integer("downsample", 0);  // SequencePipeline checks it
+  const double max_interval = args.number("max-pair-interval", 1.0);
   const SequenceSource source =
       args.has("bag") ? bagSequence(args, config, downsample) : fileSequence(args, downsample);
   io::createOutputDirectory(out);
@@ -687,9 +618,8 @@ int cmdRunSeq(const Arguments& args) {
   return solved > 0 ? 0 : 1;
 }
 
-int cmdSynthSequence(const Arguments& args, SyntheticSceneOptions options, int frame_count) {
-  const std::string out = args.require("out");
-  if (frame_count < 2) throw InputError("--frames " + std::to_string(frame_count) + ": a sequence needs at least 2");
+int cmdSynthSequence(const CommandLine& args, SyntheticSceneOptions options, int frame_count) {
+  const std::string out = args.required("out");
   options.stream_events = !args.has("no-events");
   const double tum_scale = 5000.0, fps = 30.0;
   io::createOutputDirectory(out);
@@ -727,22 +657,17 @@ int cmdSynthSequence(const Arguments& args, SyntheticSceneOptions options, int f
   return 0;
 }
 
-int cmdSynth(const Arguments& args) {
-  const std::string out = args.require("out");
+int cmdSynth(const CommandLine& args) {
+  const std::string out = args.required("out");
   SyntheticSceneOptions options;
-  if (args.has("variant")) options.variant = parseInteger("variant", args.get("variant"));
-  if (args.has("width")) options.width = parseInteger("width", args.get("width"));
-  if (args.has("height")) options.height = parseInteger("height", args.get("height"));
-  if (args.has("seed")) options.seed = unsigned(parseInteger("seed", args.get("seed")));
+  options.variant = args.integer("variant", options.variant, 0, syntheticVariantCount() - 1);
+  options.width = args.integer("width", options.width, 16, kMaxImageSide);
+  options.height = args.integer("height", options.height, 12, kMaxImageSide);
+  if (args.has("seed")) options.seed = unsigned(args.integer("seed", 0));
   if (args.has("noise")) options.addSensorNoise();
-  if (options.variant < 0 || options.variant >= syntheticVariantCount())
-    throw InputError("--variant " + std::to_string(options.variant) + ": expected 0.." +
-                     std::to_string(syntheticVariantCount() - 1));
-  if (options.width < 16 || options.height < 12)
-    throw InputError("--width/--height " + std::to_string(options.width) + "x" + std::to_string(options.height) +
-                     ": too small (at least 16x12)");
-  if (args.has("frames")) return cmdSynthSequence(args, options, parseInteger("frames", args.get("frames")));
-  if (args.has("no-events")) throw UsageError("--no-events is for sequences (--frames N)");
+  if (args.has("frames"))
+    return cmdSynthSequence(args, options, args.integer("frames", 0, 2, std::numeric_limits<int>::max()));
+  if (args.has("no-events")) throw CommandLineError("--no-events is for sequences (--frames N)");
   progress("rendering variant " + std::to_string(options.variant) + " at " + std::to_string(options.width) + "x" +
            std::to_string(options.height) + "...");
   const SyntheticPair pair = renderSyntheticPair(options);
@@ -762,27 +687,27 @@ io::EvalMetrics evaluateAndWrite(const std::string& result_dir, const io::Ground
   return metrics;
 }
 
-int cmdEval(const Arguments& args) {
-  const std::string result_dir = args.require("result");
+int cmdEval(const CommandLine& args) {
+  const std::string result_dir = args.required("result");
   io::GroundTruthFiles truth;
   const bool with_truth = args.has("gt");
-  if (with_truth) truth = io::loadGroundTruthDirectory(args.get("gt"));
+  if (with_truth) truth = io::loadGroundTruthDirectory(args.text("gt", ""));
 
   io::LoadedPair inputs;
   Intrinsics K;
   bool with_inputs = false;
   if (args.has("rgb1") || args.has("depth1") || args.has("rgb2") || args.has("depth2")) {
     inputs = io::loadPair(inputPaths(args));
-    K = inputIntrinsics(args, inputs.frame1.width(), inputs.frame1.height());
+    K = inputIntrinsics(intrinsicsSource(args), inputs.frame1.width(), inputs.frame1.height());
     with_inputs = true;
-  } else if (with_truth && io::fileExists((std::filesystem::path(args.get("gt")) / "rgb1.png").string())) {
-    const std::string gt = args.get("gt");
+  } else if (with_truth && io::fileExists((std::filesystem::path(args.text("gt", "")) / "rgb1.png").string())) {
+    const std::string gt = args.text("gt", "");
     inputs = io::loadPair(io::syntheticPairPaths(gt));
     K = io::parseIntrinsics(io::readTextFile((std::filesystem::path(gt) / "intrinsics.txt").string()));
     with_inputs = true;
   }
   if (!with_truth && !with_inputs)
-    throw UsageError("nothing to evaluate against: give --gt DIR and/or the inputs (--rgb1 ... --intrinsics)");
+    throw CommandLineError("nothing to evaluate against: give --gt DIR and/or the inputs (--rgb1 ... --intrinsics)");
   const io::EvalMetrics metrics = evaluateAndWrite(result_dir, with_truth ? &truth : nullptr,
                                                    with_inputs ? &inputs : nullptr, with_inputs ? &K : nullptr);
   std::cout << io::evalTable(metrics);
@@ -790,22 +715,21 @@ int cmdEval(const Arguments& args) {
   return 0;
 }
 
-int cmdDemo(const Arguments& args) {
-  const std::string out = args.require("out");
+int cmdDemo(const CommandLine& args) {
+  const std::string out = args.required("out");
   SyntheticSceneOptions options;
-  if (args.has("width")) options.width = parseInteger("width", args.get("width"));
-  if (args.has("height")) options.height = parseInteger("height", args.get("height"));
+  options.width = args.integer("width", options.width, 16, kMaxImageSide);
+  options.height = args.integer("height", options.height, 12, kMaxImageSide);
   progress("rendering the synthetic pair (variant 0, " + std::to_string(options.width) + "x" +
            std::to_string(options.height) + ")...");
   const SyntheticPair pair = renderSyntheticPair(options);
   io::writeSyntheticDirectory(out, pair);
 
   Config config = buildConfig(args);
-  Arguments run_args = args;
-  run_args.values["intrinsics"] = io::formatIntrinsics(pair.intrinsics);
   io::LoadedPair loaded;
   Intrinsics K;
-  const Result result = solveAndWrite(io::syntheticPairPaths(out), run_args, config, out, &loaded, &K);
+  const Result result =
+      solveAndWrite(io::syntheticPairPaths(out), {io::formatIntrinsics(pair.intrinsics), ""}, config, out, &loaded, &K);
   const io::GroundTruthFiles truth = io::loadGroundTruthDirectory(out);
   const io::EvalMetrics metrics = evaluateAndWrite(out, &truth, &loaded, &K);
 
@@ -825,95 +749,70 @@ int cmdDemo(const Arguments& args) {
   return 0;
 }
 
-std::vector<std::string> splitList(const std::string& text) {
-  std::vector<std::string> items;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    const std::size_t comma = std::min(text.find(',', start), text.size());
-    if (comma > start) items.push_back(text.substr(start, comma - start));
-    start = comma + 1;
-  }
-  return items;
+/// --pairs A,B (at least one name), or the pairs of the shared set.
+std::vector<std::string> realPairSelection(const CommandLine& args) {
+  if (!args.has("pairs")) return realPairNames();
+  const std::vector<std::string> pairs = args.list("pairs", "");
+  if (pairs.empty()) throw CommandLineError("--pairs '" + args.text("pairs", "") + "' names no pair");
+  return pairs;
 }
 
-int cmdExportReal(const Arguments& args) {
-  const std::string data = args.require("data"), out = args.require("out");
-  const std::vector<std::string> pairs = args.has("pairs") ? splitList(args.get("pairs")) : io::realPairNames();
-  if (pairs.empty()) throw UsageError("--pairs '" + args.get("pairs") + "' names no pair");
+int cmdExportReal(const CommandLine& args) {
+  const std::string data = args.required("data"), out = args.required("out");
+  const std::vector<std::string> pairs = realPairSelection(args);
   const Config config;  // the loader's depth cleaning and halving use the default depth range, as bench-real
   for (const std::string& name : pairs)
     for (int halvings = 0; halvings <= 1; ++halvings) {
-      const io::RealPair pair = io::loadRealPair(data, name, halvings, config);
+      const RealPair pair = io::loadRealPair(data, name, halvings, config);
       const std::string dir =
           out + "/" + name + "_" + std::to_string(pair.frame1.width()) + "x" + std::to_string(pair.frame1.height());
-      std::filesystem::create_directories(dir);
-      io::writePfm(dir + "/intensity0.pfm", pair.frame1.intensity);
-      io::writePfm(dir + "/depth0.pfm", pair.frame1.depth);
-      io::writePfm(dir + "/intensity1.pfm", pair.frame2.intensity);
-      io::writePfm(dir + "/depth1.pfm", pair.frame2.depth);
-      std::ofstream intrinsics(dir + "/intrinsics.txt");
-      intrinsics.precision(17);
-      intrinsics << pair.intrinsics.fx << " " << pair.intrinsics.fy << " " << pair.intrinsics.cx << " "
-                 << pair.intrinsics.cy << "\n";
-      if (!intrinsics) throw io::FileError("cannot write " + dir + "/intrinsics.txt");
+      writeRealPairFolder(dir, pair);
       std::printf("%s\n", dir.c_str());
     }
   return 0;
 }
 
-int cmdBenchReal(const Arguments& args) {
-  const std::string data = args.require("data");
+int cmdBenchReal(const CommandLine& args) {
+  const std::string data = args.required("data");
   const Config config = buildConfig(args);
-  const std::vector<std::string> pairs = args.has("pairs") ? splitList(args.get("pairs")) : io::realPairNames();
-  if (pairs.empty()) throw UsageError("--pairs '" + args.get("pairs") + "' names no pair");
-  const int repeat = args.has("repeat") ? parseInteger("repeat", args.get("repeat")) : 1;
-  if (repeat < 1) throw InputError("--repeat " + std::to_string(repeat) + ": must be >= 1");
-  io::ExclusionMask mask = io::ExclusionMask::UnionOfAll;
-  if (args.has("mask")) {
-    if (args.get("mask") == "mcflow")
-      mask = io::ExclusionMask::McFlowOnly;
-    else if (args.get("mask") != "union")
-      throw InputError("--mask '" + args.get("mask") + "': expected union or mcflow");
-  }
+  const std::vector<std::string> pairs = realPairSelection(args);
+  const int repeat = args.integer("repeat", 1, 1, std::numeric_limits<int>::max());
+  const std::string mask_text = args.text("mask", "union");
+  if (mask_text != "union" && mask_text != "mcflow")
+    throw CommandLineError("--mask '" + mask_text + "': expected union or mcflow");
+  const ExclusionMask mask = mask_text == "mcflow" ? ExclusionMask::McFlowOnly : ExclusionMask::UnionOfAll;
   const int halvings = args.has("full-resolution") ? 0 : 1;
 
-  std::vector<io::PairScores> scores;
   std::string backend;
-  for (const std::string& name : pairs) {
-    progress("pair " + name + ": loading and solving (one label, MC-TV, MC-Quad; " + std::to_string(repeat) +
-             " run(s) each)...");
-    const io::RealPair pair = io::loadRealPair(data, name, halvings, config);
-    const io::PairSolves solves = io::solveRealPair(pair, config, repeat);
-    backend = solves.quad.backend;
-    scores.push_back(io::scoreRealPair(pair, solves, mask));
-  }
+  const std::vector<PairScores> scores = benchRealPairs(
+      pairs, [&](const std::string& name) { return io::loadRealPair(data, name, halvings, config); }, config, repeat,
+      mask, progress, &backend);
   std::printf(
       "# mcflow bench-real: %s, %s input, processing level %d, backend %s, %d run(s) per solve (median "
       "times), excluded: %s\n",
       data.c_str(), halvings ? "320x240 (halved)" : "640x480", config.processing_level, backend.c_str(), repeat,
-      mask == io::ExclusionMask::UnionOfAll ? "occlusions of all solves" : "occlusions of MC-Flow");
-  std::fputs(io::realBenchTable(scores).c_str(), stdout);
+      mask == ExclusionMask::UnionOfAll ? "occlusions of all solves" : "occlusions of MC-Flow");
+  std::fputs(realBenchTable(scores).c_str(), stdout);
   return 0;
 }
 
 }  // namespace
 
-int cmdEvalTraj(const Arguments& args) {
-  if (!args.has("gt") || !args.has("est")) throw UsageError("eval-traj needs --gt FILE and --est FILE");
-  const double max_difference =
-      args.has("max-difference") ? parseNumber("max-difference", args.get("max-difference")) : 0.02;
-  const double offset = args.has("offset") ? parseNumber("offset", args.get("offset")) : 0.0;
-  const io::StampedPoses gt = io::readTumTrajectory(args.get("gt"));
-  const io::StampedPoses est = io::readTumTrajectory(args.get("est"));
+int cmdEvalTraj(const CommandLine& args) {
+  if (!args.has("gt") || !args.has("est")) throw CommandLineError("eval-traj needs --gt FILE and --est FILE");
+  const double max_difference = args.number("max-difference", 0.02);
+  const double offset = args.number("offset", 0.0);
+  const io::StampedPoses gt = io::readTumTrajectory(args.text("gt", ""));
+  const io::StampedPoses est = io::readTumTrajectory(args.text("est", ""));
   const io::TrajectoryErrors e = io::evaluateTrajectory(gt, est, max_difference, offset);
   std::printf("# mcflow eval-traj: %s against %s (%d of %zu poses matched within %.3f s, offset %.3f s)\n",
-              args.get("est").c_str(), args.get("gt").c_str(), e.matched, est.size(), max_difference, offset);
+              args.text("est", "").c_str(), args.text("gt", "").c_str(), e.matched, est.size(), max_difference, offset);
   std::printf(
       "ate_rmse_m %.4f\nrpe_frame_trans_m %.4f\nrpe_frame_rot_deg %.3f\nrpe_second_trans_m %.4f\n"
       "rpe_second_rot_deg %.3f\n",
       e.ate_rmse_m, e.rpe_frame_trans_m, e.rpe_frame_rot_deg, e.rpe_second_trans_m, e.rpe_second_rot_deg);
   if (e.rpe_second_pairs == 0) std::printf("# the trajectory spans less than 1 s: no per-second RPE\n");
-  if (args.has("plot")) io::writeImage(args.get("plot"), io::trajectoryPlot(e));
+  if (args.has("plot")) io::writeImage(args.text("plot", ""), io::trajectoryPlot(e));
   return 0;
 }
 
@@ -936,9 +835,10 @@ int main(int argc, char** argv) {
     printMainUsage(std::cerr);
     return 2;
   }
+  CommandLine args = commandLine(*command);
   try {
-    const Arguments args = parseArguments(*command, argc, argv, 2);
-    if (args.has("help")) {
+    args.parse(argc - 1, argv + 1);  // argv[1], the command, stands where parse expects the program
+    if (args.helpRequested()) {
       printCommandUsage(*command, std::cout);
       return 0;
     }
@@ -950,7 +850,7 @@ int main(int argc, char** argv) {
     if (name == "export-real") return cmdExportReal(args);
     if (name == "eval-traj") return cmdEvalTraj(args);
     return cmdDemo(args);
-  } catch (const UsageError& e) {
+  } catch (const CommandLineError& e) {
     std::cerr << "mcflow " << name << ": " << e.what() << "\n\n";
     printCommandUsage(*command, std::cerr);
     return 2;

@@ -7,7 +7,9 @@
 //                [--regularizer both|quad|tv] [--set name=value ...] [--camera-only] [--parts [--truth-start]] [--real
 //                DIR]
 //
-// --real DIR: the real pairs as `mcflow export-real` writes them (PFM, no OpenCV needed), one row per pair and size.
+// --real DIR: the real pairs as `mcflow export-real` writes them (PFM, no OpenCV needed), one row per pair and size;
+// with --table the accuracy table of `mcflow bench-real` instead, computed by the same code
+// (mc_flow/eval/real_pairs.h).
 // --concurrent N [--devices 0,1]: N solvers (N cameras) in N threads, each solving synth-0 `repeat` times, solver i on
 // CUDA device devices[i % count] (Config::cuda_device; without --devices all on cuda_device): pairs per second against
 // one solver alone on the first listed device, and whether every solver's result equals that solver's alone, bit for
@@ -18,7 +20,6 @@
 #include <cstdlib>
 #include <ctime>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <memory>
 #include <chrono>
@@ -30,9 +31,9 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/solver.h"
-#include "mc_flow/io/flow_io.h"
 #include "mc_flow/testing/bench.h"
 #include "mc_flow/eval/metrics.h"
+#include "mc_flow/eval/real_pairs.h"
 #include "mc_flow/testing/part_motion.h"
 #include "mc_flow/eval/synthetic_scene.h"
 #include "mc_flow/testing/same_result.h"
@@ -221,8 +222,9 @@ StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const Rgbd
   return m;
 }
 
-// The real pairs on any machine: folders <pair>_<W>x<H> of PFM frames and intrinsics.txt (mcflow export-real).
-int realBench(const std::string& dir, const std::string& match, const Config& base, int repeat) {
+// The folders <pair>_<W>x<H> of PFM frames and intrinsics.txt (mcflow export-real) in `dir` whose name contains
+// `match`, sorted.
+std::vector<std::filesystem::path> realPairFolders(const std::string& dir, const std::string& match) {
   std::vector<std::filesystem::path> folders;
   for (const auto& entry : std::filesystem::directory_iterator(dir))
     if (entry.is_directory() && std::filesystem::exists(entry.path() / "intrinsics.txt") &&
@@ -231,6 +233,13 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
   if (folders.empty())
     throw InputError("--real " + dir + ": no folder with intrinsics.txt (write them with mcflow export-real)");
   std::sort(folders.begin(), folders.end());
+  return folders;
+}
+
+// The real pairs on any machine, timed: one row per folder with one regulariser, each solve's own occlusions
+// excluded from its residuals.
+int realBench(const std::string& dir, const std::string& match, const Config& base, int repeat) {
+  const std::vector<std::filesystem::path> folders = realPairFolders(dir, match);
   std::printf(
       "# mcflow_bench --real %s: regularizer %s, repeat %d (median times); residuals: RMSE after warping frame 2 "
       "back, occluded pixels excluded\n",
@@ -241,17 +250,9 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
   std::printf("# last column: motion labels over the outer iterations, K-means > after each (merged, split)\n");
   std::map<std::string, std::vector<double>> totals_by_size;
   for (const std::filesystem::path& folder : folders) {
-    auto frame = [&](const char* intensity, const char* depth) {
-      RgbdFrame f;
-      f.intensity = io::readPfm((folder / intensity).string());
-      f.depth = io::readPfm((folder / depth).string());
-      return f;
-    };
-    const RgbdFrame frame1 = frame("intensity0.pfm", "depth0.pfm"), frame2 = frame("intensity1.pfm", "depth1.pfm");
-    Intrinsics K;
-    std::ifstream in(folder / "intrinsics.txt");
-    if (!(in >> K.fx >> K.fy >> K.cx >> K.cy))
-      throw InputError((folder / "intrinsics.txt").string() + ": expected four numbers fx fy cx cy");
+    const RealPair pair = readRealPairFolder(folder.string());
+    const RgbdFrame &frame1 = pair.frame1, &frame2 = pair.frame2;
+    const Intrinsics& K = pair.intrinsics;
     Solver solver(base);
     Result r;
     const StageMedians m = solveRepeatedly(solver, frame1, frame2, K, repeat, r);
@@ -268,6 +269,32 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
   }
   for (const auto& [size, totals] : totals_by_size)
     std::printf("# %s: median total over %zu pairs %.1f ms\n", size.c_str(), totals.size(), median(totals));
+  return 0;
+}
+
+// The real pairs on any machine, scored as `mcflow bench-real` scores them (the same code: zero flow, one label,
+// MC-TV and MC-Quad on one pixel set; the table of docs/ACCURACY.md), from the folders of mcflow export-real.
+int realTable(const std::string& dir, const std::string& match, const Config& config, int repeat) {
+  std::map<std::string, std::string> folder_of;  // pair name -> folder
+  std::vector<std::string> names;
+  for (const std::filesystem::path& folder : realPairFolders(dir, match)) {
+    const std::string name = readRealPairFolder(folder.string()).name;
+    if (folder_of.count(name))
+      throw InputError("--real " + dir + ": pair '" + name + "' is there at two sizes (choose one with --match, e.g. " +
+                       "--match 320x240)");
+    folder_of[name] = folder.string();
+    names.push_back(name);
+  }
+  std::string backend;
+  const std::vector<PairScores> scores = benchRealPairs(
+      names, [&](const std::string& name) { return readRealPairFolder(folder_of.at(name)); }, config, repeat,
+      ExclusionMask::UnionOfAll,
+      [](const std::string& message) { std::fprintf(stderr, "mcflow_bench: %s\n", message.c_str()); }, &backend);
+  std::printf(
+      "# mcflow_bench --real %s --table: processing level %d, backend %s, %d run(s) per solve (median times), "
+      "excluded: occlusions of all solves\n",
+      dir.c_str(), config.processing_level, backend.c_str(), repeat);
+  std::fputs(realBenchTable(scores).c_str(), stdout);
   return 0;
 }
 
@@ -373,31 +400,35 @@ int concurrentBench(const Config& base, int width, int height, int solvers, int 
 }  // namespace
 
 int main(int argc, char** argv) {
-  CommandLine cli("mcflow_bench", {{"width", true, "image width (default 320)"},
-                                   {"height", true, "image height (default 240)"},
-                                   {"backend", true, "auto | cpu | cuda (default auto)"},
-                                   {"repeat", true, "solves per scene; times are the median (default 3)"},
-                                   {"noise", false, "add intensity and depth noise to the scenes"},
-                                   {"regularizer", true, "both | quad | tv (default both)"},
-                                   {"camera-only", false,
-                                    "static scenes seen by a moving camera (with Kinect-like noise): segments and "
-                                    "EPE of the default solve against one motion label (initial_labels=1)"},
-                                   {"parts", false,
-                                    "per rigid part of the synthetic scenes: covering segment, rotation error and "
-                                    "flow error; whether the arm's two links got a segment each"},
-                                   {"truth-start", false,
-                                    "with --parts: every solve starts from the true parts (motions unknown, no "
-                                    "splits): the motions' errors when the segments are right"},
-                                   {"concurrent", true,
-                                    "N solvers in N threads on synth-0: throughput against one, results against "
-                                    "one's bit for bit"},
-                                   {"devices", true,
-                                    "with --concurrent: CUDA devices, comma-separated (e.g. 0,1); solver i runs on the "
-                                    "(i mod count)-th; sets the backend to cuda (default: cuda_device)"},
-                                   {"match", true, "with --real: only the folders whose name contains this text"},
-                                   {"real", true,
-                                    "DIR of real pairs written by `mcflow export-real` (PFM): time, segments and "
-                                    "residuals per pair"}});
+  CommandLine cli("mcflow_bench",
+                  {{"width", true, "image width (default 320)"},
+                   {"height", true, "image height (default 240)"},
+                   {"backend", true, "auto | cpu | cuda (default auto)"},
+                   {"repeat", true, "solves per scene; times are the median (default 3; 1 with --table)"},
+                   {"noise", false, "add intensity and depth noise to the scenes"},
+                   {"regularizer", true, "both | quad | tv (default both)"},
+                   {"camera-only", false,
+                    "static scenes seen by a moving camera (with Kinect-like noise): segments and "
+                    "EPE of the default solve against one motion label (initial_labels=1)"},
+                   {"parts", false,
+                    "per rigid part of the synthetic scenes: covering segment, rotation error and "
+                    "flow error; whether the arm's two links got a segment each"},
+                   {"truth-start", false,
+                    "with --parts: every solve starts from the true parts (motions unknown, no "
+                    "splits): the motions' errors when the segments are right"},
+                   {"concurrent", true,
+                    "N solvers in N threads on synth-0: throughput against one, results against "
+                    "one's bit for bit"},
+                   {"devices", true,
+                    "with --concurrent: CUDA devices, comma-separated (e.g. 0,1); solver i runs on the "
+                    "(i mod count)-th; sets the backend to cuda (default: cuda_device)"},
+                   {"match", true, "with --real: only the folders whose name contains this text"},
+                   {"table", false,
+                    "with --real: the accuracy table of `mcflow bench-real` (zero flow, one label, "
+                    "MC-TV, MC-Quad on one pixel set; the same code) instead of the timed rows"},
+                   {"real", true,
+                    "DIR of real pairs written by `mcflow export-real` (PFM): time, segments and "
+                    "residuals per pair"}});
   try {
     cli.parse(argc, argv);
   } catch (const CommandLineError& e) {
@@ -425,6 +456,11 @@ int main(int argc, char** argv) {
       }
       return concurrentBench(base, width, height, cli.integer("concurrent", 2, 1, 64), repeat,
                              parseDevices(cli, base.cuda_device));
+    }
+    if (cli.has("table") && !cli.has("real")) throw CommandLineError("--table needs --real DIR");
+    if (cli.has("table")) {
+      if (cli.has("regularizer")) throw CommandLineError("--table solves with both regularisers: no --regularizer");
+      return realTable(cli.text("real", ""), cli.text("match", ""), base, cli.integer("repeat", 1, 1, 1000));
     }
     if (cli.has("real")) {
       Config real = base;

@@ -32,6 +32,7 @@ for f in setup.bash lib/libmc_flow_nodelet.so share/mc_flow/nodelet_plugins.xml 
          include/mc_flow/McFlowConfig.h include/mc_flow/SegmentArray.h include/mc_flow/MotionSegment.h \
          include/mc_flow/core/solver.h include/mc_flow/core/config_fields.def include/mc_flow/eval/synthetic_scene.h \
          include/mc_flow/io/image_io.h include/mc_flow/ros/conversions.h \
+         include/mc_flow/cli/command_line.h lib/libmc_flow_cli.a \
          lib/libmc_flow_core.a lib/libmc_flow_eval.a lib/libmc_flow_formats.a lib/libmc_flow_io.a \
          lib/mc_flow/mcflow lib/mc_flow/make_synthetic_bag lib/mc_flow/demo_monitor.py lib/mc_flow/start_rviz.py; do
   [ -e "$prefix/$f" ] || fail "the install space has no $f"

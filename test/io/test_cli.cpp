@@ -13,6 +13,8 @@
 #include <fstream>
 #include <map>
 #include <set>
+#include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -398,6 +400,45 @@ TEST(CliErrors, UnknownFlagAndCommand) {
   run = runCli("run " + inputArgs() + " --intrinsics " + intrinsicsText());  // no --out
   EXPECT_EQ(run.code, 2);
   EXPECT_NE(run.err.find("--out"), std::string::npos) << run.err;
+}
+
+// Every subcommand parses with the one CommandLine: a usage error exits 2 naming the option (and the value), and
+// prints the subcommand's usage; --help and -h print it to stdout.
+TEST(CliErrors, EverySubcommandNamesTheOptionAndValueAndExits2) {
+  const std::string out = outArg("e_usage");
+  struct Case {
+    std::string arguments;
+    std::vector<std::string> needles;
+  };
+  const std::vector<Case> cases = {
+      {"synth" + out + " --width abc", {"--width", "'abc'"}},
+      {"synth" + out + " --variant 99", {"--variant", "'99'"}},
+      {"synth" + out + " --set alpha=1", {"unknown option", "--set"}},
+      {"synth" + out + " --noise=yes", {"--noise", "takes no value"}},
+      {"synth" + out + " --out", {"--out", "needs a value"}},
+      {"demo" + out + " --width 64 --width 80", {"--width", "given twice"}},
+      {"run " + inputArgs() + " --intrinsics " + intrinsicsText() + out + " --set alpha", {"--set", "'alpha'"}},
+      {"run " + inputArgs() + " --intrinsics " + intrinsicsText() + out + " --max-depth far", {"--max-depth", "far"}},
+      {"run-seq --tum " + quote(workDir().string()) + out + " --fps x", {"--fps", "'x'"}},
+      {"eval-traj --gt a --est b --offset 1s", {"--offset", "'1s'"}},
+      {"bench-real --data d --repeat 0", {"--repeat", "'0'"}},
+      {"bench-real --data d --mask none", {"--mask", "'none'"}},
+      {"export-real --data d --out o --pairs ,", {"--pairs", "names no pair"}},
+      {"eval stray", {"unexpected argument", "stray"}},
+  };
+  for (const Case& c : cases) {
+    const CliRun run = runCli(c.arguments);
+    EXPECT_EQ(run.code, 2) << c.arguments << "\n" << run.err;
+    for (const std::string& needle : c.needles) EXPECT_NE(run.err.find(needle), std::string::npos) << run.err;
+    EXPECT_NE(run.err.find("usage: mcflow"), std::string::npos) << run.err;
+  }
+  for (const char* command : {"run", "run-seq", "synth", "eval", "demo", "bench-real", "eval-traj", "export-real"})
+    for (const char* help : {"--help", "-h"}) {
+      const CliRun run = runCli(std::string(command) + " " + help);
+      EXPECT_EQ(run.code, 0) << command << " " << help << ": " << run.err;
+      EXPECT_EQ(run.out.rfind(std::string("usage: mcflow ") + command, 0), 0u) << run.out;
+      EXPECT_NE(run.out.find("--help"), std::string::npos) << run.out;
+    }
 }
 
 TEST(CliErrors, UnwritableOutputDirectory) {

@@ -567,9 +567,6 @@ TEST(ConfigFile, ErrorsNameFileAndKey) {
   expectThrowNaming<ConfigError>([&] { io::applyConfigFile(bad_value, c); }, {bad_value, "alpha", "fast"});
   expectThrowNaming<ConfigError>([&] { io::applyConfigFile(tempPath("no_such_config.yaml"), c); },
                                  {"no_such_config.yaml", "does not exist"});
-  EXPECT_THROW(io::applyConfigAssignment("alpha", c), ConfigError);
-  io::applyConfigAssignment("alpha=0.75", c);
-  EXPECT_EQ(c.alpha, 0.75);
 }
 
 TEST(ConfigFile, NestedMissingAndRepeatedValuesNameFileKeyAndLine) {

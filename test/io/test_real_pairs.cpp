@@ -1,11 +1,11 @@
 // The solver on the four real RGB-D pairs of the shared data set ($MCFLOW_SHARED_DATA/real_pairs), scored as the
 // paper's Table 1: RMSE of the photometric and geometric residuals after warping frame 2 back.
 //
-// Resolution: the 640x480 inputs are halved to 320x240 (the paper's resolution) with io::halveFrame, i.e. the
+// Resolution: the 640x480 inputs are halved to 320x240 (the paper's resolution) with halveFrame, i.e. the
 // solver's own depth-aware pyramid downsampling (core downsampleIntensity / downsampleDepth), and the intrinsics
 // with Intrinsics::scaled(0.5); the solver then runs at processing_level 0 on 320x240.
 //
-// Pixel set: one per pair, shared by every method (io::commonExclusionMask): pixels with valid depth that no solve
+// Pixel set: one per pair, shared by every method (commonExclusionMask): pixels with valid depth that no solve
 // (one label, MC-TV, MC-Quad) marks as occluded (the union of the three estimated occlusion masks) and where
 // every compared warp (zero flow included) lands inside frame 2 on valid depth. So MC-Flow is never scored on
 // fewer or easier pixels than the baselines.
@@ -37,6 +37,9 @@
 #ifndef MCFLOW_CLI_PATH
 #error "MCFLOW_CLI_PATH must name the mcflow binary"
 #endif
+#ifndef MCFLOW_BENCH_PATH
+#error "MCFLOW_BENCH_PATH must name the mcflow_bench binary"
+#endif
 
 namespace fs = std::filesystem;
 using namespace mc_flow;
@@ -59,9 +62,9 @@ constexpr double kWholeRigidMargin = 1.05;
 bool isWholeRigidScene(const std::string& pair) { return pair == "tum_fr2_desk"; }
 
 struct Evaluated {
-  io::RealPair pair;
-  io::PairSolves solves;
-  io::PairScores scores;
+  RealPair pair;
+  PairSolves solves;
+  PairScores scores;
 };
 
 // Each pair is loaded and solved once (one label, MC-TV, MC-Quad) per process.
@@ -72,9 +75,9 @@ const Evaluated& evaluated(const std::string& name) {
   Config config;  // defaults: the paper's parameters
   Evaluated e;
   e.pair = io::loadRealPair(realPairsDir().string(), name, 1, config);
-  e.solves = io::solveRealPair(e.pair, config, 1);
-  e.scores = io::scoreRealPair(e.pair, e.solves, io::ExclusionMask::UnionOfAll);
-  std::printf("%s", io::realBenchTable({e.scores}).c_str());
+  e.solves = solveRealPair(e.pair, config, 1);
+  e.scores = scoreRealPair(e.pair, e.solves, ExclusionMask::UnionOfAll);
+  std::printf("%s", realBenchTable({e.scores}).c_str());
   return cache.emplace(name, std::move(e)).first->second;
 }
 
@@ -100,9 +103,9 @@ class RealPairs : public ::testing::TestWithParam<std::string> {
 
   void expectMcFlowBeatsBaselines(const std::string& method) {
     const Evaluated& e = get();
-    const io::MethodScore& mc = e.scores.method(method);
-    const io::MethodScore& zero = e.scores.method("zero flow");
-    const io::MethodScore& one = e.scores.method("one label");
+    const MethodScore& mc = e.scores.method(method);
+    const MethodScore& zero = e.scores.method("zero flow");
+    const MethodScore& one = e.scores.method("one label");
     const bool rigid = isWholeRigidScene(GetParam());
     const double margin = rigid ? kWholeRigidMargin : 1.0;
     SCOPED_TRACE(GetParam() + " " + method + " on " + std::to_string(e.scores.pixels) + " pixels");
@@ -131,7 +134,7 @@ TEST_P(RealPairs, McFlowBeatsZeroFlowAndOneRigidMotion) {
   // hard parts cannot decide the comparison: at least half of the pixels with valid depth.
   std::size_t valid = 0;
   for (float z : e.pair.frame1.depth.data) valid += isValidDepth(z) ? 1 : 0;
-  for (const io::MethodScore& m : e.scores.methods) EXPECT_EQ(m.rmse.pixels, e.scores.pixels) << m.method;
+  for (const MethodScore& m : e.scores.methods) EXPECT_EQ(m.rmse.pixels, e.scores.pixels) << m.method;
   EXPECT_GE(double(e.scores.pixels), 0.5 * double(valid)) << "scored " << e.scores.pixels << " of " << valid;
 
   expectMcFlowBeatsBaselines("MC-Quad");
@@ -144,7 +147,7 @@ TEST_P(RealPairs, McFlowBeatsZeroFlowAndOneRigidMotion) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(SharedData, RealPairs, ::testing::ValuesIn(io::realPairNames()),
+INSTANTIATE_TEST_SUITE_P(SharedData, RealPairs, ::testing::ValuesIn(realPairNames()),
                          [](const ::testing::TestParamInfo<std::string>& info) { return info.param; });
 
 // The loader itself: a missing pair is an error naming the path (the CLI and these tests rely on it).
@@ -164,20 +167,36 @@ struct CliOutput {
   std::string out, err;
 };
 
-CliOutput runBenchReal(const std::string& arguments) {
-  static int counter = 0;
+const fs::path& benchWorkDir() {
   static const test::TempDir work("mcflow_bench_real_");
-  const fs::path& dir = work.path();
+  return work.path();
+}
+
+// Runs `tool arguments`, its output captured.
+CliOutput runTool(const std::string& tool, const std::string& arguments) {
+  static int counter = 0;
+  const fs::path& dir = benchWorkDir();
   const std::string tag = std::to_string(counter++);
   const fs::path out = dir / ("stdout_" + tag), err = dir / ("stderr_" + tag);
-  const std::string command = "'" + std::string(MCFLOW_CLI_PATH) + "' bench-real " + arguments + " >'" + out.string() +
-                              "' 2>'" + err.string() + "'";
+  const std::string command = "'" + tool + "' " + arguments + " >'" + out.string() + "' 2>'" + err.string() + "'";
   const int status = std::system(command.c_str());
   CliOutput result;
   result.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   result.out = io::readTextFile(out.string());
   result.err = io::readTextFile(err.string());
   return result;
+}
+
+CliOutput runBenchReal(const std::string& arguments) { return runTool(MCFLOW_CLI_PATH, "bench-real " + arguments); }
+
+// The table's lines without the times (after '|') and without the first line (the tool's own header).
+std::vector<std::string> tableWithoutTimes(const std::string& text) {
+  std::vector<std::string> lines;
+  std::istringstream in(text);
+  std::string line;
+  std::getline(in, line);
+  while (std::getline(in, line)) lines.push_back(line.substr(0, line.find('|')));
+  return lines;
 }
 
 TEST(BenchRealCli, PrintsTheTableForOnePair) {
@@ -199,6 +218,26 @@ TEST(BenchRealCli, PrintsTheTableForOnePair) {
     EXPECT_TRUE(std::isfinite(geometric_mm) && geometric_mm > 0) << method << ": " << geometric_mm;
   }
   EXPECT_NE(run.out.find("average"), std::string::npos) << run.out;
+}
+
+// One code path for real pairs: `mcflow export-real` + `mcflow_bench --real DIR --table` (the GPU machine's way, no
+// OpenCV) prints the table of `mcflow bench-real` on the PNG pairs, every number but the times the same.
+TEST(BenchRealCli, McflowBenchOnTheExportedPairPrintsTheSameTable) {
+  const std::string data = realPairsDir().string(), exported = (benchWorkDir() / "exported").string();
+  ASSERT_EQ(runTool(MCFLOW_CLI_PATH, "export-real --data '" + data + "' --pairs robot --out '" + exported + "'").code,
+            0);
+  const std::string settings = " --backend cpu --set outer_iterations=1";
+  const CliOutput png = runBenchReal("--data '" + data + "' --pairs robot" + settings);
+  ASSERT_EQ(png.code, 0) << png.err;
+  const CliOutput pfm = runTool(MCFLOW_BENCH_PATH, "--real '" + exported + "' --match 320x240 --table" + settings);
+  ASSERT_EQ(pfm.code, 0) << pfm.err;
+  EXPECT_EQ(pfm.out.rfind("# mcflow_bench --real", 0), 0u) << pfm.out;
+  EXPECT_EQ(tableWithoutTimes(pfm.out), tableWithoutTimes(png.out)) << "mcflow_bench:\n"
+                                                                    << pfm.out << "mcflow bench-real:\n"
+                                                                    << png.out;
+  EXPECT_EQ(runTool(MCFLOW_BENCH_PATH, "--real '" + exported + "' --table" + settings).code, 1)
+      << "a pair at two sizes must be refused";
+  EXPECT_EQ(runTool(MCFLOW_BENCH_PATH, "--table" + settings).code, 2);
 }
 
 TEST(BenchRealCli, MissingDataDirectoryIsAnInputErrorNamingIt) {

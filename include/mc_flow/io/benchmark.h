@@ -1,97 +1,23 @@
 /**
  * @file benchmark.h
- * @brief The paper's Table 1 on the real RGB-D pairs: residual RMSE after warping frame 2 back, for zero flow,
- * one rigid motion (Config::initial_labels = 1: dense robust visual odometry) and MC-Flow with both
- * regularisers, all scored on one common pixel set; plus solve times per stage.
+ * @brief The real RGB-D pairs of the shared set as PNG files (OpenCV decodes them): the loader of `mcflow bench-real`
+ * and `mcflow export-real`. What is done with a pair (preparing, solving, scoring, the table) is
+ * mc_flow/eval/real_pairs.h, shared with `mcflow_bench --real`.
  */
 #pragma once
 
-#include <cstddef>
 #include <string>
-#include <vector>
 
 #include "mc_flow/core/config.h"
-#include "mc_flow/core/image.h"
-#include "mc_flow/eval/metrics.h"
-#include "mc_flow/core/solver.h"
+#include "mc_flow/eval/real_pairs.h"
 
 namespace mc_flow {
 namespace io {
 
-/// @brief One real pair ready for the solver.
-struct RealPair {
-  std::string name;
-  RgbdFrame frame1, frame2;  ///< depth cleaned to [min_depth, max_depth] (0 elsewhere)
-  Intrinsics intrinsics;     ///< at the frames' resolution [px]
-};
-
-/// @brief The folders of the shared real-pair set, in table order.
-std::vector<std::string> realPairNames();
-
-/// @brief Intrinsics at 640x480 of a pair of the shared set (from its README); throws InputError naming an
-/// unknown pair.
-Intrinsics realPairIntrinsics640(const std::string& name);
-
-/// @brief Sets depth outside [min_depth, max_depth] or non-finite to 0 (what the solver's pyramid does), so the
-/// metrics see the same valid pixels as the solver.
-ImageF cleanDepth(const ImageF& depth, const Config& config);
-
-/// @brief Halves a frame as the solver's pyramid does: [1 3 3 1] intensity filter and the depth-aware
-/// mc_flow::downsampleDepth (no averaging across discontinuities, range Config::depth_downsample_range).
-/// The depth is cleaned first. Pair it with Intrinsics::scaled(0.5).
-RgbdFrame halveFrame(const RgbdFrame& frame, const Config& config);
-
-/// @brief Loads `data_dir`/`name`/{color,depth}{0,1}.png (16-bit depth, 5000 units per metre) and halves it
-/// `halvings` times (1 = 320x240, the paper's resolution). Throws InputError naming the missing file.
+/// @brief Loads `data_dir`/`name`/{color,depth}{0,1}.png (16-bit depth, 5000 units per metre) and prepares it
+/// (prepareRealPair: depth cleaned, halved `halvings` times; 1 = 320x240, the paper's resolution). Throws
+/// InputError naming the missing file.
 RealPair loadRealPair(const std::string& data_dir, const std::string& name, int halvings, const Config& config);
-
-/// @brief How the pixels excluded from every method's residual are chosen.
-enum class ExclusionMask {
-  UnionOfAll,  ///< occlusions estimated by any of the solves (one label, MC-TV, MC-Quad)
-  McFlowOnly,  ///< occlusions estimated by the MC-Flow solves (TV, Quad) only
-};
-
-/// @brief 255 where a pixel is excluded: any of `occlusions` set, or the warp of any of `scene_flows` (null =
-/// zero flow) cannot be scored there (invalid frame-1 depth, non-finite flow, projection outside frame 2 or onto
-/// invalid depth: the cases mc_flow::warpResidualRmse skips). With this mask every flow is scored on the same
-/// pixels.
-ImageU8 commonExclusionMask(const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K,
-                            const std::vector<const ImageF*>& scene_flows,
-                            const std::vector<const ImageU8*>& occlusions);
-
-/// @brief One row of the table.
-struct MethodScore {
-  std::string method;       ///< "zero flow", "one label", "MC-TV", "MC-Quad"
-  ResidualRmse rmse;        ///< on the pair's common pixel set
-  bool solved = false;      ///< false for zero flow (no segments, no timings)
-  int segments = 0;         ///< motion segments of the result
-  std::string label_trace;  ///< labelCountTrace(result, true): the count over the outer iterations
-  StageTimings timings;     ///< median over the repetitions [ms], per stage
-};
-
-/// @brief The four rows of one pair.
-struct PairScores {
-  std::string pair;
-  int width = 0, height = 0;
-  std::size_t pixels = 0;  ///< pixels scored (the same for every row)
-  std::vector<MethodScore> methods;
-  const MethodScore& method(const std::string& name) const;  ///< throws InputError on an unknown name
-};
-
-/// @brief The solves of one pair: one label, MC-TV and MC-Quad (from `base`, with only initial_labels /
-/// regularizer changed), each run `repeat` times (timings = median; results of the last run).
-struct PairSolves {
-  Result one_label, tv, quad;
-  StageTimings one_label_time, tv_time, quad_time;
-};
-PairSolves solveRealPair(const RealPair& pair, const Config& base, int repeat);
-
-/// @brief Scores zero flow and the three solves on the common pixel set chosen by `mask`.
-PairScores scoreRealPair(const RealPair& pair, const PairSolves& solves, ExclusionMask mask);
-
-/// @brief Per-pair table (photometric RMSE, geometric RMSE [mm], segments, time per stage [ms]), the average over
-/// pairs of each method, then each MC-Flow solve's motion labels over the outer iterations.
-std::string realBenchTable(const std::vector<PairScores>& scores);
 
 }  // namespace io
 }  // namespace mc_flow

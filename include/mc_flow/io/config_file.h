@@ -21,8 +21,5 @@ std::vector<std::pair<std::string, std::string>> parseFlatKeyValues(const std::s
 /// @brief Reads `path` and applies every key with Config::set; errors name the file and the key.
 void applyConfigFile(const std::string& path, Config& config);
 
-/// @brief Applies "name=value" (the CLI's --set); errors quote the text.
-void applyConfigAssignment(const std::string& assignment, Config& config);
-
 }  // namespace io
 }  // namespace mc_flow
