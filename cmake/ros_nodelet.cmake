@@ -3,6 +3,7 @@
 add_library(mc_flow_nodelet SHARED
   src/ros/conversions.cpp
   src/ros/input_gate.cpp
+  src/ros/input_subscription.cpp
   src/ros/input_watch.cpp
   src/ros/message_validation.cpp
   src/ros/node_parameters.cpp
@@ -60,13 +61,14 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     add_custom_target(tests)
   endif()
 
-  # Unit tests that need no running node: conversions, message validation, reconfigure mapping, input watch.
+  # Unit tests that need no running node: conversions, message validation, reconfigure mapping, the nodelet's parts.
   add_executable(test_ros_units
     test/ros/test_conversions.cpp
     test/ros/test_message_validation.cpp
     test/ros/test_reconfigure.cpp
     test/ros/test_input_watch.cpp
     test/ros/test_input_gate.cpp
+    test/ros/test_input_subscription.cpp
     test/ros/test_node_status.cpp
     test/ros/test_node_parameters.cpp)
   target_link_libraries(test_ros_units PRIVATE mc_flow_nodelet GTest::gtest GTest::gtest_main)

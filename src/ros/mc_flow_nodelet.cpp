@@ -6,7 +6,6 @@
 #include <sstream>
 #include <utility>
 
-#include <image_transport/exception.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <tf2_eigen/tf2_eigen.h>
 
@@ -16,25 +15,11 @@
 
 namespace mc_flow_ros {
 
-namespace {
-
-/// Hints that select `transport` whatever the parameters say. image_transport::TransportHints reads its transport
-/// from a parameter, `~image_transport` unless told otherwise; in a standalone nodelet `~` is this nodelet's private
-/// namespace, so hints for the raw fallback would read the missing transport again. An empty parameter name resolves
-/// to `nh`'s namespace itself, which is a dictionary or absent, never a string, so the default given here is used.
-image_transport::TransportHints transportHintsFor(const std::string& transport, const ros::NodeHandle& nh) {
-  return image_transport::TransportHints(transport, ros::TransportHints(), nh, "");
-}
-
-}  // namespace
-
 MCFlowNodelet::~MCFlowNodelet() {
   timer_.stop();
   {
     std::lock_guard<std::mutex> lock(connect_mutex_);
-    rgb_sub_.unsubscribe();
-    depth_sub_.unsubscribe();
-    info_sub_.unsubscribe();
+    if (inputs_) inputs_->unsubscribe();
   }
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
@@ -59,22 +44,20 @@ void MCFlowNodelet::onInit() {
     }
   }
 
-  it_in_ = std::make_unique<image_transport::ImageTransport>(nh_);
+  inputs_ = std::make_unique<InputSubscription>(nh_, pnh_);
   it_out_ = std::make_unique<image_transport::ImageTransport>(pnh_);
-  gate_ = std::make_unique<InputGate>(std::array<std::string, 3>{nh_.resolveName("rgb/image_rect_color"),
-                                                                 nh_.resolveName("depth_registered/image_rect"),
-                                                                 nh_.resolveName("rgb/camera_info")});
+  gate_ = std::make_unique<InputGate>(inputs_->topics());
   createSynchroniser();
   // Every message passes the gate on its way to the synchroniser.
-  rgb_sub_.registerCallback(
+  inputs_->rgb().registerCallback(
       boost::function<void(const sensor_msgs::ImageConstPtr&)>([this](const sensor_msgs::ImageConstPtr& m) {
         if (admit(InputGate::kRgb, m->header)) rgb_pass_.add(m);
       }));
-  depth_sub_.registerCallback(
+  inputs_->depth().registerCallback(
       boost::function<void(const sensor_msgs::ImageConstPtr&)>([this](const sensor_msgs::ImageConstPtr& m) {
         if (admit(InputGate::kDepth, m->header)) depth_pass_.add(m);
       }));
-  info_sub_.registerCallback(
+  inputs_->info().registerCallback(
       boost::function<void(const sensor_msgs::CameraInfoConstPtr&)>([this](const sensor_msgs::CameraInfoConstPtr& m) {
         if (admit(InputGate::kCameraInfo, m->header)) info_pass_.add(m);
       }));
@@ -154,44 +137,16 @@ void MCFlowNodelet::connectCb() {
   const bool needed = outputs_->anyListener() || params_.print_summary || !params_.save_dir.empty() ||
                       params_.publish_tf || params_.publish_odom_tf;
   if (needed && !subscribed_) {
-    // The transport comes from ~image_transport. One whose plug-in is not installed would throw inside
-    // image_transport and take the manager (and the camera) down: check first, fall back to raw.
-    image_transport::TransportHints hints("raw", ros::TransportHints(), pnh_);
-    const std::vector<std::string> loadable = it_in_->getLoadableTransports();
-    if (std::find(loadable.begin(), loadable.end(), "image_transport/" + hints.getTransport()) == loadable.end()) {
-      std::string available;
-      for (const std::string& name : loadable) available += " " + name.substr(name.find('/') + 1);
-      NODELET_ERROR(
-          "image_transport '%s' is not installed (installed:%s): install its plug-in package or set "
-          "~image_transport to one of those; subscribing with 'raw' instead",
-          hints.getTransport().c_str(), available.c_str());
-      hints = transportHintsFor("raw", pnh_);
-    }
     // One queue length for the subscribers and the synchroniser: a burst the synchroniser could hold must not be
-    // dropped before it (the losses that remain show in diagnostics).
-    const auto queue = std::uint32_t(params_.queue_size);
-    try {
-      rgb_sub_.subscribe(*it_in_, "rgb/image_rect_color", queue, hints);
-      depth_sub_.subscribe(*it_in_, "depth_registered/image_rect", queue, hints);
-    } catch (const image_transport::Exception& e) {
-      // A plug-in that is declared and loads but cannot subscribe. An exception out of onInit would make nodelet's
-      // loader destroy this nodelet after its callback queues (a crash): keep a plug-in's inside.
-      rgb_sub_.unsubscribe();
-      depth_sub_.unsubscribe();
-      NODELET_ERROR("image_transport '%s' cannot subscribe (%s); subscribing with 'raw' instead",
-                    hints.getTransport().c_str(), e.what());
-      hints = transportHintsFor("raw", pnh_);
-      rgb_sub_.subscribe(*it_in_, "rgb/image_rect_color", queue, hints);
-      depth_sub_.subscribe(*it_in_, "depth_registered/image_rect", queue, hints);
-    }
-    info_sub_.subscribe(nh_, "rgb/camera_info", queue);
+    // dropped before it (the losses that remain show in diagnostics). A transport whose plug-in is missing or cannot
+    // subscribe is an error here, and raw is used instead.
+    for (const std::string& error : inputs_->subscribe(std::uint32_t(params_.queue_size)))
+      NODELET_ERROR("%s", error.c_str());
     subscribed_ = true;
     gate_->subscribed(ros::WallTime::now());
     NODELET_DEBUG("an output has a listener: subscribed to the inputs");
   } else if (!needed && subscribed_) {
-    rgb_sub_.unsubscribe();
-    depth_sub_.unsubscribe();
-    info_sub_.unsubscribe();
+    inputs_->unsubscribe();
     subscribed_ = false;
     NODELET_DEBUG("no output has a listener: unsubscribed from the inputs");
     // The next frame after a pause must not be paired with one from before it: the worker starts a new sequence

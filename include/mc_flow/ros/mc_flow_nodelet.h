@@ -3,11 +3,12 @@
  * @brief mc_flow/MCFlowNodelet: synchronised RGB-D in; segments, soft labels, occlusion, scene flow, odometry out.
  *
  * A thin shell around mc_flow::SequencePipeline (pairing, resets, warm starts, persistent segment ids, tracks and
- * odometry live there, shared with `mcflow run-seq`). Its parts: the parameters (node_parameters.def), the inputs'
- * gate and watch (input_gate.h), the outputs (output_publishers.h), the counters and throttled warnings
- * (node_status.h). The synchroniser callback only hands the newest frame to a worker thread (frames arriving while a
- * pair is being solved replace the waiting one and are counted as dropped), so the camera's nodelet manager is never
- * blocked by a solve. Inputs are subscribed only while an output has a listener.
+ * odometry live there, shared with `mcflow run-seq`). Its parts: the parameters (node_parameters.def), the input
+ * subscribers and their transport (input_subscription.h), the inputs' gate and watch (input_gate.h), the outputs
+ * (output_publishers.h), the counters and throttled warnings (node_status.h). The
+ * synchroniser callback only hands the newest frame to a worker thread (frames arriving while a pair is being solved
+ * replace the waiting one and are counted as dropped), so the camera's nodelet manager is never blocked by a solve.
+ * Inputs are subscribed only while an output has a listener.
  */
 #pragma once
 
@@ -22,9 +23,7 @@
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
-#include <image_transport/subscriber_filter.h>
 #include <message_filters/pass_through.h>
-#include <message_filters/subscriber.h>
 #include <message_filters/sync_policies/approximate_time.h>
 #include <message_filters/sync_policies/exact_time.h>
 #include <message_filters/synchronizer.h>
@@ -38,6 +37,7 @@
 #include "mc_flow/McFlowConfig.h"
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/ros/input_gate.h"
+#include "mc_flow/ros/input_subscription.h"
 #include "mc_flow/ros/node_parameters.h"
 #include "mc_flow/ros/node_status.h"
 #include "mc_flow/ros/output_publishers.h"
@@ -90,9 +90,8 @@ class MCFlowNodelet : public nodelet::Nodelet {
 
   // ---- ROS interfaces ----
   ros::NodeHandle nh_, pnh_;
-  std::unique_ptr<image_transport::ImageTransport> it_in_, it_out_;
-  image_transport::SubscriberFilter rgb_sub_, depth_sub_;
-  message_filters::Subscriber<CameraInfo> info_sub_;
+  std::unique_ptr<InputSubscription> inputs_;
+  std::unique_ptr<image_transport::ImageTransport> it_out_;
   // Between the subscribers and the synchroniser: pass only what the gate lets through.
   message_filters::PassThrough<Image> rgb_pass_, depth_pass_;
   message_filters::PassThrough<CameraInfo> info_pass_;
