@@ -10,6 +10,7 @@ add_library(mc_flow_nodelet SHARED
   src/ros/node_status.cpp
   src/ros/output_publishers.cpp
   src/ros/reconfigure.cpp
+  src/ros/startup_report.cpp
   src/ros/mc_flow_nodelet.cpp)
 target_include_directories(mc_flow_nodelet PUBLIC
   ${CMAKE_CURRENT_SOURCE_DIR}/include ${catkin_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
@@ -70,7 +71,8 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     test/ros/test_input_gate.cpp
     test/ros/test_input_subscription.cpp
     test/ros/test_node_status.cpp
-    test/ros/test_node_parameters.cpp)
+    test/ros/test_node_parameters.cpp
+    test/ros/test_startup_report.cpp)
   target_link_libraries(test_ros_units PRIVATE mc_flow_nodelet GTest::gtest GTest::gtest_main)
   target_compile_definitions(test_ros_units PRIVATE MCFLOW_LAUNCH_DIR="${CMAKE_CURRENT_SOURCE_DIR}/launch")
   gtest_discover_tests(test_ros_units DISCOVERY_MODE PRE_TEST TEST_PREFIX "ros." PROPERTIES LABELS test_ros_units)

@@ -2,8 +2,6 @@
 
 #include <algorithm>
 #include <cctype>
-#include <filesystem>
-#include <sstream>
 #include <utility>
 
 #include <pluginlib/class_list_macros.hpp>
@@ -12,6 +10,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/ros/node_parameter_reading.h"
 #include "mc_flow/ros/reconfigure.h"
+#include "mc_flow/ros/startup_report.h"
 
 namespace mc_flow_ros {
 
@@ -34,14 +33,9 @@ void MCFlowNodelet::onInit() {
   pnh_ = getPrivateNodeHandle();
   params_ = readNodeParameters(pnh_);
   for (const std::string& problem : params_.sanitise()) NODELET_WARN("%s", problem.c_str());
-  if (!params_.save_dir.empty()) {
-    std::error_code error;
-    std::filesystem::create_directories(params_.save_dir, error);
-    if (error || !std::filesystem::is_directory(params_.save_dir, error)) {
-      NODELET_ERROR("save_dir '%s' cannot be created (%s); pictures will not be saved", params_.save_dir.c_str(),
-                    error ? error.message().c_str() : "it exists and is not a folder");
-      params_.save_dir.clear();
-    }
+  if (const std::optional<std::string> problem = makeSaveDir(params_.save_dir)) {
+    NODELET_ERROR("%s", problem->c_str());
+    params_.save_dir.clear();
   }
 
   inputs_ = std::make_unique<InputSubscription>(nh_, pnh_);
@@ -85,18 +79,12 @@ void MCFlowNodelet::onInit() {
     outputs_ = std::make_unique<OutputPublishers>(
         pnh_, *it_out_, params_, [this] { connectCb(); }, tf_buffer_.get(), getName());
   }
-  std::ostringstream s;
-  s << "MC-Flow nodelet " << getName() << " started.\n  inputs (synchronised, "
-    << (params_.approximate_sync ? "approximate" : "exact") << " time): " << gate_->topic(0) << ", " << gate_->topic(1)
-    << ", " << gate_->topic(2)
-    << " (image_transport, parameter image_transport selects the transport)\n  outputs: " << outputs_->topics()
-    << "\n  node parameters: " << params_.describe() << "\n  solver parameters (dynamic_reconfigure):";
+  mc_flow::Config solver;
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
-    const mc_flow::Config config = pending_config_ ? *pending_config_ : mc_flow::Config();
-    for (const auto& [name, value] : config.fields()) s << " " << name << "=" << value;
+    if (pending_config_) solver = *pending_config_;
   }
-  NODELET_INFO_STREAM(s.str());
+  NODELET_INFO_STREAM(startupText(getName(), params_, inputs_->topics(), outputs_->topics(), solver));
   connectCb();  // demo options (print_summary, save_dir, publish_tf) need results without listeners
   timer_ = nh_.createWallTimer(ros::WallDuration(1.0), &MCFlowNodelet::timerCb, this);
 }
@@ -299,24 +287,12 @@ std::optional<Eigen::Matrix4d> MCFlowNodelet::cameraPosePrior(const std_msgs::He
 void MCFlowNodelet::reportBackend(const mc_flow::Result& result) {
   if (backend_reported_) return;
   backend_reported_ = true;
-  const mc_flow::Backend requested = solver_config_.backend;
-  if (result.backend_kind == mc_flow::Backend::Cuda || requested == mc_flow::Backend::Cpu) {
-    NODELET_INFO("solver backend: %s (%s)", result.backend.c_str(), result.backend_note.c_str());
-  } else if (requested == mc_flow::Backend::Auto && solver_config_.cuda_device != 0) {
-    // A GPU other than the first was asked for: its absence is a configuration problem, said with its reason.
-    NODELET_WARN("cuda_device %d cannot be used: running on the CPU (%s)", solver_config_.cuda_device,
-                 result.backend_note.c_str());
-  } else if (requested == mc_flow::Backend::Auto) {
-    // The usual case on a machine without an NVIDIA GPU: the CUDA runtime's own words ("driver version is
-    // insufficient") read as a request to upgrade a driver, so they go to debug level.
-    NODELET_INFO("no usable NVIDIA GPU/driver found: running on the CPU");
-    NODELET_DEBUG("CUDA detail: %s", result.backend_note.c_str());
-  } else {
-    // The pipeline could not make the CUDA backend and solves on the CPU (SequencePipeline's fallback): one warning
-    // with the reason, which names the device and the device count when cuda_device does not exist.
-    NODELET_WARN("backend 'cuda' was requested but cannot be used: running on the CPU (%s)",
-                 result.backend_note.c_str());
-  }
+  const BackendReport report = backendReport(result, solver_config_);
+  if (report.warning)
+    NODELET_WARN("%s", report.text.c_str());
+  else
+    NODELET_INFO("%s", report.text.c_str());
+  if (!report.debug.empty()) NODELET_DEBUG("%s", report.debug.c_str());
 }
 
 void MCFlowNodelet::warn(const std::string& key, const std::string& text, double period) {

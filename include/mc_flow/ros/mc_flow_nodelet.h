@@ -5,7 +5,7 @@
  * A thin shell around mc_flow::SequencePipeline (pairing, resets, warm starts, persistent segment ids, tracks and
  * odometry live there, shared with `mcflow run-seq`). Its parts: the parameters (node_parameters.def), the input
  * subscribers and their transport (input_subscription.h), the inputs' gate and watch (input_gate.h), the outputs
- * (output_publishers.h), the counters and throttled warnings (node_status.h). The
+ * (output_publishers.h), the counters and throttled warnings (node_status.h), what is said once (startup_report.h). The
  * synchroniser callback only hands the newest frame to a worker thread (frames arriving while a pair is being solved
  * replace the waiting one and are counted as dropped), so the camera's nodelet manager is never blocked by a solve.
  * Inputs are subscribed only while an output has a listener.
