@@ -3,11 +3,13 @@
 #include "mc_flow/core/sequence.h"
 
 #include <algorithm>
+#include <any>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <optional>
 #include <sstream>
+#include <utility>
 
 #include <boost/make_shared.hpp>
 #include <cv_bridge/cv_bridge.h>
@@ -234,6 +236,27 @@ sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input) {
   info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
   info.P = {input.K.fx, 0, input.K.cx, 0, 0, input.K.fy, input.K.cy, 0, 0, 0, 1, 0};
   return info;
+}
+
+mc_flow::StreamFrame toStreamFrame(FrameInput input) {
+  mc_flow::StreamFrame frame;
+  frame.frame = input.frame;
+  frame.K = input.K;
+  frame.stamp = input.header.stamp.toSec();
+  frame.source = input.header.frame_id;
+  frame.extra = std::move(input);
+  return frame;
+}
+
+PairContext pairContext(const mc_flow::SequenceStep& step, double solve_ms) {
+  PairContext pair;
+  pair.previous = &std::any_cast<const FrameInput&>(step.first->extra);
+  pair.current = &std::any_cast<const FrameInput&>(step.second->extra);
+  pair.header = pair.current->header;
+  pair.previous_stamp = pair.previous->header.stamp;
+  pair.solve_time_ms = solve_ms;
+  pair.world = &step.world_velocities;
+  return pair;
 }
 
 Eigen::Vector3d centroidVelocity(const mc_flow::Segment& segment, double interval) {

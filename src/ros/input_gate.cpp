@@ -1,6 +1,7 @@
 #include "mc_flow/ros/input_gate.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 namespace mc_flow_ros {
@@ -14,6 +15,14 @@ std::string stampText(const ros::Time& t) {
   char buffer[48];
   std::snprintf(buffer, sizeof(buffer), "%u.%09u", t.sec, t.nsec);
   return buffer;
+}
+
+std::optional<std::string> stampDifferenceWarning(const ros::Time& rgb, const ros::Time& depth, double max_difference) {
+  const double difference = std::abs((rgb - depth).toSec());
+  if (!(difference > max_difference)) return std::nullopt;
+  return "RGB stamp " + stampText(rgb) + " and depth stamp " + stampText(depth) + " differ by " +
+         std::to_string(difference) + " s (> max_stamp_difference " + std::to_string(max_difference) +
+         " s): motion between them biases the result; check the camera's sync settings";
 }
 
 InputGate::InputGate(std::array<std::string, 3> topics) : topics_(std::move(topics)) {}

@@ -1,7 +1,6 @@
 #include "mc_flow/ros/mc_flow_nodelet.h"
 
 #include <algorithm>
-#include <cctype>
 #include <utility>
 
 #include <pluginlib/class_list_macros.hpp>
@@ -148,13 +147,9 @@ void MCFlowNodelet::connectCb() {
 void MCFlowNodelet::syncCb(const sensor_msgs::ImageConstPtr& rgb, const sensor_msgs::ImageConstPtr& depth,
                            const sensor_msgs::CameraInfoConstPtr& info) {
   gate_->synchronised(ros::WallTime::now());
-  const double stamp_difference = std::abs((rgb->header.stamp - depth->header.stamp).toSec());
-  if (stamp_difference > params_.max_stamp_difference) {
-    warn("stamps", "RGB stamp " + stampText(rgb->header.stamp) + " and depth stamp " + stampText(depth->header.stamp) +
-                       " differ by " + std::to_string(stamp_difference) + " s (> max_stamp_difference " +
-                       std::to_string(params_.max_stamp_difference) +
-                       " s): motion between them biases the result; check the camera's sync settings");
-  }
+  if (const std::optional<std::string> skew =
+          stampDifferenceWarning(rgb->header.stamp, depth->header.stamp, params_.max_stamp_difference))
+    warn("stamps", *skew);
   bool dropped = false;
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
@@ -224,26 +219,17 @@ void MCFlowNodelet::process(const SyncedInput& input) {
     current = toFrameInput(*input.rgb, *input.depth, *input.info, params_.downsample,
                            std::uint64_t(params_.max_input_pixels), solver_config_.depth_downsample_range);
   } catch (const FrameInputError& e) {
-    // Throttled per distinct problem (digits removed: the same fault in every frame is one key).
-    std::string key = std::string(inputProblemName(e.problem)) + ":" + e.what();
-    key.erase(
-        std::remove_if(key.begin(), key.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); }),
-        key.end());
-    warn(key, std::string("frame ") + stampText(input.rgb->header.stamp) + " skipped: " + e.what());
+    warn(inputWarningKey(e), std::string("frame ") + stampText(input.rgb->header.stamp) + " skipped: " + e.what());
     status_.frameSkipped();
     return;
   }
 
   // The frame is already at the processing resolution (toFrameInput applies the core's downsampling rule): the
   // pipeline pairs, solves and tracks. The display data travel with the frame.
-  mc_flow::StreamFrame frame;
-  frame.frame = current.frame;
-  frame.K = current.K;
-  frame.stamp = current.header.stamp.toSec();
-  frame.source = current.header.frame_id;
-  frame.camera_pose_prior = cameraPosePrior(current.header);
   const ros::Time stamp = current.header.stamp;
-  frame.extra = std::move(current);
+  std::optional<Eigen::Matrix4d> prior = cameraPosePrior(current.header);
+  mc_flow::StreamFrame frame = toStreamFrame(std::move(current));
+  frame.camera_pose_prior = std::move(prior);
   const ros::WallTime start = ros::WallTime::now();
   mc_flow::SequenceStep step;
   try {
@@ -259,14 +245,7 @@ void MCFlowNodelet::process(const SyncedInput& input) {
 
   const mc_flow::Result& result = *step.result;
   reportBackend(result);
-  PairContext pair;
-  pair.previous = &std::any_cast<const FrameInput&>(step.first->extra);
-  pair.current = &std::any_cast<const FrameInput&>(step.second->extra);
-  pair.header = pair.current->header;
-  pair.previous_stamp = pair.previous->header.stamp;
-  pair.solve_time_ms = solve_ms;
-  pair.world = &step.world_velocities;
-  outputs_->publish(result, pair, *pipeline_, step.pair_index, status_.framesDropped(),
+  outputs_->publish(result, pairContext(step, solve_ms), *pipeline_, step.pair_index, status_.framesDropped(),
                     [this](const std::string& key, const std::string& text) { warn(key, text); });
 }
 

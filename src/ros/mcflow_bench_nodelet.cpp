@@ -228,15 +228,9 @@ int run(int argc, char** argv) {
     // processing resolution), the FrameInput carried as the frame's extra.
     mc_flow::SequencePipeline pipeline(config, 1, defaults.max_pair_interval);
     auto push = [&](const InputMessages& m) {
-      mc_flow_ros::FrameInput input = mc_flow_ros::toFrameInput(
-          m.rgb, m.depth, m.info, downsample, std::uint64_t(defaults.max_input_pixels), config.depth_downsample_range);
-      mc_flow::StreamFrame frame;
-      frame.frame = input.frame;
-      frame.K = input.K;
-      frame.stamp = input.header.stamp.toSec();
-      frame.source = input.header.frame_id;
-      frame.extra = std::move(input);
-      return pipeline.push(std::move(frame));
+      return pipeline.push(mc_flow_ros::toStreamFrame(
+          mc_flow_ros::toFrameInput(m.rgb, m.depth, m.info, downsample, std::uint64_t(defaults.max_input_pixels),
+                                    config.depth_downsample_range)));
     };
     push(m0);
     const auto solve_start = Clock::now();
@@ -271,13 +265,8 @@ int run(int argc, char** argv) {
                                           std::uint64_t(defaults.max_input_pixels), config.depth_downsample_range);
       });
       mc_flow::StreamFrame frame;
-      own.time("StreamFrame (frame copy, FrameInput moved)", [&] {
-        frame.frame = input.frame;
-        frame.K = input.K;
-        frame.stamp = input.header.stamp.toSec();
-        frame.source = input.header.frame_id;
-        frame.extra = std::move(input);
-      });
+      own.time("StreamFrame (frame copy, FrameInput moved)",
+               [&] { frame = mc_flow_ros::toStreamFrame(std::move(input)); });
       sink += frame.frame.depth.data.size();
       // ---- outputs: publish() with a listener on every topic, then publishTf
       mc_flow::SegmentArray segments;

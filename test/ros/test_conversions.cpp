@@ -1,6 +1,7 @@
 // Message conversions without a running node: input frames, intrinsics, and every output message.
 #include <gtest/gtest.h>
 
+#include <any>
 #include <cmath>
 #include <cstring>
 
@@ -152,6 +153,40 @@ TEST(Conversions, DownsamplingScalesSizeAndIntrinsics) {
   EXPECT_EQ(input.downsample, 2);
   // Block (2x2) averaging of r = x: pixels 26, 27 -> 26.5.
   EXPECT_NEAR(input.colour.at<cv::Vec3b>(3, 13)[0], 26.5, 0.6);
+}
+
+TEST(Conversions, AStreamFrameCarriesTheFrameInputAndAPairContextFindsItAgain) {
+  auto previous = mc_flow_ros::toFrameInput(colourImage(64, 48, "rgb8"), depthImage(64, 48, "32FC1", 1.0f),
+                                            cameraInfo(64, 48, 100.0), 2);
+  previous.header.stamp = ros::Time(12.5);
+  previous.header.frame_id = "camera_rgb_optical_frame";
+  const mc_flow::StreamFrame frame = mc_flow_ros::toStreamFrame(previous);
+  EXPECT_EQ(frame.frame.width(), 32);
+  EXPECT_EQ(frame.frame.depth.data, previous.frame.depth.data);
+  EXPECT_DOUBLE_EQ(frame.K.fx, previous.K.fx);
+  EXPECT_DOUBLE_EQ(frame.stamp, 12.5);
+  EXPECT_EQ(frame.source, "camera_rgb_optical_frame");
+  EXPECT_FALSE(frame.camera_pose_prior);
+  EXPECT_EQ(std::any_cast<const mc_flow_ros::FrameInput&>(frame.extra).colour.cols, 32);
+
+  mc_flow_ros::FrameInput current = previous;
+  current.header.stamp = ros::Time(12.6);
+  mc_flow::PreparedFrame first, second;
+  first.extra = previous;
+  second.extra = current;
+  mc_flow::SequenceStep step;
+  step.first = &first;
+  step.second = &second;
+  step.world_velocities.resize(2);
+  const mc_flow_ros::PairContext pair = mc_flow_ros::pairContext(step, 4.5);
+  EXPECT_EQ(pair.previous, &std::any_cast<const mc_flow_ros::FrameInput&>(first.extra));
+  EXPECT_EQ(pair.current, &std::any_cast<const mc_flow_ros::FrameInput&>(second.extra));
+  EXPECT_EQ(pair.header.stamp, ros::Time(12.6));
+  EXPECT_EQ(pair.header.frame_id, "camera_rgb_optical_frame");
+  EXPECT_EQ(pair.previous_stamp, ros::Time(12.5));
+  EXPECT_NEAR(pair.interval(), 0.1, 1e-9);
+  EXPECT_DOUBLE_EQ(pair.solve_time_ms, 4.5);
+  EXPECT_EQ(pair.world, &step.world_velocities);
 }
 
 TEST(Conversions, DepthDownsamplingDoesNotAverageAcrossEdges) {

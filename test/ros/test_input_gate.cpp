@@ -127,5 +127,16 @@ TEST(InputGate, TheRateCountsTheLastTenSecondsOfSynchronisedFrames) {
   EXPECT_EQ(diagnostic(status, "frames synchronised"), "41");
 }
 
+TEST(InputGate, RgbAndDepthStampsFurtherApartThanAllowedAreNamed) {
+  EXPECT_FALSE(stampDifferenceWarning(ros::Time(3000.6), ros::Time(3000.62), 0.03));
+  EXPECT_FALSE(stampDifferenceWarning(ros::Time(3000.6), ros::Time(3000.6), 0.0));
+  EXPECT_EQ(stampDifferenceWarning(ros::Time(3000.6), ros::Time(3000.65), 0.03).value_or("(none)"),
+            "RGB stamp 3000.600000000 and depth stamp 3000.650000000 differ by 0.050000 s (> max_stamp_difference "
+            "0.030000 s): motion between them biases the result; check the camera's sync settings");
+  // Depth first: the same difference.
+  EXPECT_NE(stampDifferenceWarning(ros::Time(10.0), ros::Time(9.9), 0.03).value_or("").find("differ by 0.100000 s"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace mc_flow_ros

@@ -99,6 +99,16 @@ void checkOne(const sensor_msgs::Image& m, const EncodingCase& e) {
 
 }  // namespace
 
+TEST(MessageValidation, TheWarningKeyOfAProblemIgnoresItsNumbers) {
+  const FrameInputError small(InputProblem::Size, "image 8x6 is smaller than 16x12");
+  const FrameInputError smaller(InputProblem::Size, "image 4x3 is smaller than 16x12");
+  EXPECT_EQ(mc_flow_ros::inputWarningKey(small), "size:image x is smaller than x");
+  EXPECT_EQ(mc_flow_ros::inputWarningKey(small), mc_flow_ros::inputWarningKey(smaller));
+  // Another problem with the same words is another key.
+  EXPECT_NE(mc_flow_ros::inputWarningKey(FrameInputError(InputProblem::Layout, "image 8x6 is smaller than 16x12")),
+            mc_flow_ros::inputWarningKey(small));
+}
+
 TEST(MessageValidation, TheReportedCrashIsRefusedByName) {
   // 16UC1 5461x4096, step 1048578: 4096 * 1048578 = 2^32 + 8192, and 8192 bytes of data.
   const sensor_msgs::Image depth = header(kEncodings[6], 5461, 4096, 1048578, 8192);

@@ -67,6 +67,10 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb, const sensor_msgs::Image&
 /// @brief Camera info of the processing resolution (outputs can be projected with it).
 sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input);
 
+/// @brief The frame for a mc_flow::SequencePipeline at factor 1 (`input` is already at the processing resolution): its
+/// intensity, depth and intrinsics, its stamp [s] and frame_id (the source), and `input` itself as the frame's extra.
+mc_flow::StreamFrame toStreamFrame(FrameInput input);
+
 /// @brief Everything the output builders need besides the Result.
 struct PairContext {
   std_msgs::Header header;               ///< stamp of the current frame, input frame_id
@@ -79,6 +83,10 @@ struct PairContext {
   /// @brief Seconds between the frames (> 0).
   double interval() const { return (header.stamp - previous_stamp).toSec(); }
 };
+
+/// @brief The context of a solved `step` whose frames carry their FrameInput as the extra (toStreamFrame): the current
+/// frame's header, both frames, the world's velocities (valid while the step's are) and `solve_ms`.
+PairContext pairContext(const mc_flow::SequenceStep& step, double solve_ms);
 
 /// @brief ~segments: ids, twists [m/s, rad/s], interval transforms, support, centroid, colour.
 mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const PairContext& pair);

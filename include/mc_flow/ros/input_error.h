@@ -4,6 +4,8 @@
  */
 #pragma once
 
+#include <algorithm>
+#include <cctype>
 #include <string>
 
 #include "mc_flow/core/error.h"
@@ -36,5 +38,14 @@ struct FrameInputError : mc_flow::InputError {
   FrameInputError(InputProblem kind, const std::string& message) : mc_flow::InputError(message), problem(kind) {}
   InputProblem problem;
 };
+
+/// @brief The key that throttles warnings about `e`: its problem's name and its text without digits, so that the same
+/// fault in every frame (sizes, stamps and counts differ) is one key.
+inline std::string inputWarningKey(const FrameInputError& e) {
+  std::string key = std::string(inputProblemName(e.problem)) + ":" + e.what();
+  key.erase(std::remove_if(key.begin(), key.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); }),
+            key.end());
+  return key;
+}
 
 }  // namespace mc_flow_ros

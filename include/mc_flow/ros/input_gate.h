@@ -86,4 +86,8 @@ class InputGate {
 /// "1234.500000000" (seconds and nanoseconds of a stamp).
 std::string stampText(const ros::Time& t);
 
+/// @brief The warning for a synchronised pair whose RGB and depth stamps differ by more than `max_difference` [s]
+/// (max_stamp_difference), naming both stamps; nothing when they are closer.
+std::optional<std::string> stampDifferenceWarning(const ros::Time& rgb, const ros::Time& depth, double max_difference);
+
 }  // namespace mc_flow_ros
