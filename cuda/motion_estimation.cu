@@ -41,6 +41,7 @@
 #include "mc_flow/core/motion_estimation_pixel.h"
 #include "mc_flow/core/motion_step_control.h"
 #include "mc_flow/core/solve_backend.h"
+#include "mc_flow/core/union_refit_step.h"
 #include "device_stages.h"
 #include "sampling_device.cuh"
 
@@ -874,6 +875,133 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
   }
 }
 
+// ----------------------------------------------------------------- refitUnions on the device
+// One motion per group of labels, refitted on their union's pixels (label_adaptation.cpp's refitUnions, the host loop,
+// step for step: the same passes and the step control of union_refit_step.h; the 6x6 solves by Cholesky in double
+// here, Eigen's LDLT there). One thread per group; the state stays on the device between the passes.
+
+/// @brief A group's fit between the passes (read by the host once, after the last pass).
+struct UnionRefitState {
+  double twist[6];           ///< the last accepted twist
+  double proposed[6];        ///< the twist of the pass in flight
+  double curvature[kUpper];  // H at `twist`, upper triangle (row-major, r <= c)
+  double gradient[6];
+  double cost, pixels, damping;
+  int iterations;       ///< accepted steps
+  int proposed_finite;  ///< 0: the step was not finite; the pass ran at `twist` and is rejected after it
+};
+
+struct UnionRefitParams {
+  const double* sums = nullptr;         // the pass's per-label sums (kLabelStride values per label)
+  const int* group_of_label = nullptr;  // per motion label: its group, or -1
+  int n = 0, groups = 0;
+  bool first = false;    // the pass at the starts: take its sums, no acceptance test
+  bool propose = false;  // a further pass follows: propose its step and write the members' motions
+  double min_damping = 0;
+  UnionRefitState* state = nullptr;
+  double* member_cost = nullptr;  // per motion label: its cost at its group's accepted twist
+  LabelMotion* motions = nullptr;
+};
+
+// x = A^-1 b for a symmetric positive definite 6x6 A (row-major); false when the factorisation fails.
+__device__ bool solveSpd6(double A[36], const double b[6], double x[6]) {
+  for (int j = 0; j < 6; ++j) {
+    double d = A[j * 6 + j];
+    for (int k = 0; k < j; ++k) d -= A[j * 6 + k] * A[j * 6 + k];
+    if (!(d > 0.0)) return false;
+    const double l = sqrt(d);
+    A[j * 6 + j] = l;
+    for (int i = j + 1; i < 6; ++i) {
+      double v = A[i * 6 + j];
+      for (int k = 0; k < j; ++k) v -= A[i * 6 + k] * A[j * 6 + k];
+      A[i * 6 + j] = v / l;
+    }
+  }
+  double y[6];
+  for (int i = 0; i < 6; ++i) {
+    double v = b[i];
+    for (int k = 0; k < i; ++k) v -= A[i * 6 + k] * y[k];
+    y[i] = v / A[i * 6 + i];
+  }
+  for (int i = 5; i >= 0; --i) {
+    double v = y[i];
+    for (int k = i + 1; k < 6; ++k) v -= A[k * 6 + i] * x[k];
+    x[i] = v / A[i * 6 + i];
+  }
+  return true;
+}
+
+__global__ void unionRefitStep(const UnionRefitParams q) {
+  const int g = int(blockIdx.x * blockDim.x + threadIdx.x);
+  if (g >= q.groups) return;
+  UnionRefitState& st = q.state[g];
+  // The union's model at the pass's twist: its members' sums, in ascending label order.
+  double H[kUpper], grad[6], cost = 0.0, pixels = 0.0;
+  for (int k = 0; k < kUpper; ++k) H[k] = 0.0;
+  for (int k = 0; k < 6; ++k) grad[k] = 0.0;
+  for (int i = 0; i < q.n; ++i) {
+    if (q.group_of_label[i] != g) continue;
+    const double* label = q.sums + std::size_t(i) * kLabelStride;
+    for (int k = 0; k < kUpper; ++k) H[k] += label[k];
+    for (int k = 0; k < 6; ++k) grad[k] += label[kUpper + k];
+    cost += label[kLabelCost];
+    pixels += label[kLabelPixels];
+  }
+  bool take = q.first;
+  if (!q.first) {
+    take = st.proposed_finite && cost <= st.cost;
+    st.damping =
+        take ? union_refit::dampingAfterAccept(st.damping, q.min_damping) : union_refit::dampingAfterReject(st.damping);
+    if (take) {
+      for (int k = 0; k < 6; ++k) st.twist[k] = st.proposed[k];
+      ++st.iterations;
+    }
+  }
+  if (take) {
+    for (int k = 0; k < kUpper; ++k) st.curvature[k] = H[k];
+    for (int k = 0; k < 6; ++k) st.gradient[k] = grad[k];
+    st.cost = cost;
+    st.pixels = pixels;
+    for (int i = 0; i < q.n; ++i)
+      if (q.group_of_label[i] == g) q.member_cost[i] = q.sums[std::size_t(i) * kLabelStride + kLabelCost];
+  }
+  if (!q.propose) return;
+  // The next step from the accepted model: (H + (damping + ridge) s I) d = -g, s the largest diagonal entry.
+  double A[36];
+  double scale = 1e-12;
+  {
+    int k = 0;
+    for (int r = 0; r < 6; ++r)
+      for (int c = r; c < 6; ++c, ++k) {
+        A[r * 6 + c] = st.curvature[k];
+        A[c * 6 + r] = st.curvature[k];
+      }
+    for (int r = 0; r < 6; ++r) scale = fmax(scale, A[r * 6 + r]);
+  }
+  for (int r = 0; r < 6; ++r) A[r * 6 + r] += (st.damping + union_refit::kRidge) * scale;
+  double minus_g[6], d[6];
+  for (int k = 0; k < 6; ++k) minus_g[k] = -st.gradient[k];
+  bool finite = solveSpd6(A, minus_g, d);
+  if (finite) {
+    const double t = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    const double r = sqrt(d[3] * d[3] + d[4] * d[4] + d[5] * d[5]);
+    const double limit = fmax(1.0, fmax(t / union_refit::kMaxTranslation, r / union_refit::kMaxRotation));
+    for (int k = 0; k < 6; ++k) {
+      d[k] /= limit;
+      finite = finite && isfinite(d[k]);
+    }
+  }
+  st.proposed_finite = finite ? 1 : 0;
+  for (int k = 0; k < 6; ++k) st.proposed[k] = finite ? st.twist[k] + d[k] : st.twist[k];
+  // The members' linearisation points for the next pass.
+  LabelMotion m;
+  se3ExpDevice(st.proposed, m.transform);
+  se3LeftJacobianDevice(st.proposed, m.left_jacobian);
+  for (int k = 0; k < 6; ++k) m.twist[k] = st.proposed[k];
+  for (int i = 0; i < q.n; ++i)
+    if (q.group_of_label[i] == g) q.motions[i] = m;
+}
+
 // ----------------------------------------------------------------- host side
 
 void requireImage(const char* name, const ImageF& image, int width, int height, int channels) {
@@ -1021,6 +1149,84 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
                                       cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_WAIT(s);
     unpack(layout, out, false);
+  }
+
+  void refitUnions(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
+                   const std::vector<Vector6d>& starts, int iterations, const Config& config,
+                   std::vector<UnionFit>& fits) override {
+    if (level_.width <= 0) throw InputError("CUDA motion step: refitUnions() called before setLevel() or bind()");
+    const int n = motion_labels_, group_count = int(groups.size());
+    if (int(twists.size()) != n || starts.size() != groups.size())
+      throw InputError("CUDA refitUnions: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
+                       " motion labels, " + std::to_string(starts.size()) + " starts for " +
+                       std::to_string(group_count) + " groups");
+    fits.assign(groups.size(), UnionFit());
+    if (n == 0 || group_count == 0) return;
+    cudaStream_t s = stream_;
+    const Layout layout = reserve();
+    // Up, in one staging buffer: the motions at the starts (the other labels at their own twists), each label's
+    // group, and the groups' states.
+    std::vector<int> owner(std::size_t(n), -1);
+    for (int g = 0; g < group_count; ++g)
+      for (const int i : groups[std::size_t(g)]) owner[std::size_t(i)] = g;
+    const std::size_t motion_bytes = std::size_t(n) * sizeof(LabelMotion);
+    const std::size_t owner_bytes = (std::size_t(n) * sizeof(int) + 15) / 16 * 16;
+    const std::size_t state_bytes = std::size_t(group_count) * sizeof(UnionRefitState);
+    const std::size_t cost_bytes = std::size_t(n) * sizeof(double);
+    const std::size_t staging_bytes = motion_bytes + owner_bytes + state_bytes + cost_bytes;
+    level_staging_.reserve(staging_bytes);
+    level_device_.reserve(staging_bytes);
+    unsigned char* host = level_staging_.get();
+    auto* motions = reinterpret_cast<LabelMotion*>(host);
+    auto* group_of_label = reinterpret_cast<int*>(host + motion_bytes);
+    auto* state = reinterpret_cast<UnionRefitState*>(host + motion_bytes + owner_bytes);
+    auto* member_cost = reinterpret_cast<double*>(host + motion_bytes + owner_bytes + state_bytes);
+    for (int i = 0; i < n; ++i) {
+      const int g = owner[std::size_t(i)];
+      motions[i] = labelMotion(g >= 0 ? starts[std::size_t(g)] : twists[std::size_t(i)]);
+      group_of_label[i] = g;
+      member_cost[i] = 0.0;
+    }
+    for (int g = 0; g < group_count; ++g) {
+      UnionRefitState& st = state[g];
+      st = UnionRefitState{};
+      for (int k = 0; k < 6; ++k) st.twist[k] = st.proposed[k] = starts[std::size_t(g)](k);
+      st.damping = config.motion_damping;
+    }
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(level_device_.get(), host, staging_bytes, cudaMemcpyHostToDevice, s));
+    unsigned char* device = level_device_.get();
+    UnionRefitParams q;
+    q.sums = sums_.get();
+    q.group_of_label = reinterpret_cast<const int*>(device + motion_bytes);
+    q.n = n;
+    q.groups = group_count;
+    q.min_damping = config.motion_damping;
+    q.state = reinterpret_cast<UnionRefitState*>(device + motion_bytes + owner_bytes);
+    q.member_cost = reinterpret_cast<double*>(device + motion_bytes + owner_bytes + state_bytes);
+    q.motions = reinterpret_cast<LabelMotion*>(device);
+    const unsigned blocks = unsigned((group_count + 63) / 64);
+    for (int pass = 0; pass <= iterations; ++pass) {
+      enqueueSums(layout, nullptr, q.motions, false);
+      q.first = pass == 0;
+      q.propose = pass < iterations;
+      unionRefitStep<<<blocks, 64, 0, s>>>(q);
+      MCFLOW_CUDA_CHECK_LAUNCH("unionRefitStep");
+    }
+    // Down: the states and the members' costs (adjacent), one wait.
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(state, q.state, state_bytes + cost_bytes, cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_WAIT(s);
+    for (int g = 0; g < group_count; ++g) {
+      const UnionRefitState& st = state[g];
+      UnionFit& f = fits[std::size_t(g)];
+      for (int k = 0; k < 6; ++k) f.twist(k) = st.twist[k];
+      int k = 0;
+      for (int r = 0; r < 6; ++r)
+        for (int c = r; c < 6; ++c, ++k) f.curvature(r, c) = f.curvature(c, r) = st.curvature[k];
+      f.cost = st.cost;
+      f.pixels = st.pixels;
+      f.iterations = st.iterations;
+      for (const int i : groups[std::size_t(g)]) f.member_cost.push_back(member_cost[i]);
+    }
   }
 
   bool iterateLevel(std::vector<Vector6d>& twists, const Config& config, MotionLevelStats& stats) override {

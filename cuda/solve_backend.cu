@@ -515,6 +515,15 @@ class CudaSolveBackend final : public SolveBackend {
     zeroDual(plane(), count_);
   }
 
+  bool refitUnionsWhereTheSumsAre(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
+                                  const std::vector<Vector6d>& starts, int iterations, bool use_occlusion,
+                                  const Config& config, std::vector<UnionFit>& fits) override {
+    requireTwists("refitUnions", twists);
+    motionAccumulator(level_, MotionLabels::Current, use_occlusion, config);  // binds accumulator_ to the labels
+    accumulator_->refitUnions(twists, groups, starts, iterations, config, fits);
+    return true;
+  }
+
   LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
     requireTwists("costModel", twists);
     MotionAccumulator& accumulator = motionAccumulator(level_, MotionLabels::Current, use_occlusion, config);

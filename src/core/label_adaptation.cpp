@@ -12,13 +12,13 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/solve_backend.h"
+#include "mc_flow/core/union_refit_step.h"
 
 namespace mc_flow {
 
 namespace {
 
-// Relative ridge on the 6x6 solves: a planar or textureless segment leaves directions unconstrained.
-constexpr double kRidge = 1e-6;
+using union_refit::kRidge;
 
 // mergeWhereOneMotionExplains refits a pair only where the quadratic model predicts an increase below this many times
 // what the pair may pay: the model is exact near the optima and errs by a small factor away from them (measured on
@@ -396,6 +396,8 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
       owner[std::size_t(i)] = int(g);
     }
   std::vector<UnionFit> fits(groups.size());
+  if (groups.empty()) return fits;
+  if (labels.refitUnionsWhereTheSumsAre(twists, groups, starts, iterations, use_occlusion, config, fits)) return fits;
   std::vector<Vector6d> gradient(groups.size(), Vector6d::Zero());
   std::vector<double> damping(groups.size(), config.motion_damping);
   std::vector<Vector6d> trial = twists;
@@ -435,7 +437,8 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
       const double scale = std::max(H.diagonal().maxCoeff(), 1e-12);
       const Matrix6d damped = H + (damping[g] + kRidge) * scale * Matrix6d::Identity();
       Vector6d d = -damped.ldlt().solve(gradient[g]);
-      d /= std::max({1.0, d.head<3>().norm() / 0.1, d.tail<3>().norm() / 0.1});
+      d /= std::max(
+          {1.0, d.head<3>().norm() / union_refit::kMaxTranslation, d.tail<3>().norm() / union_refit::kMaxRotation});
       // A non-finite step is no step: an infinite trial cost below rejects it and damps harder.
       proposed[g] =
           d.allFinite() ? Vector6d(proposed[g] + d) : Vector6d::Constant(std::numeric_limits<double>::infinity());
@@ -457,9 +460,9 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
         fits[g].iterations = accepted;
         gradient[g] = next_gradient[g];
         fits[g].twist = current[g];
-        damping[g] = std::max(config.motion_damping, damping[g] / 3.0);
+        damping[g] = union_refit::dampingAfterAccept(damping[g], config.motion_damping);
       } else {  // rejected: keep the last accepted twist and its model, damp harder
-        damping[g] = std::max(1e-3, damping[g] * 4.0);
+        damping[g] = union_refit::dampingAfterReject(damping[g]);
       }
     }
   }

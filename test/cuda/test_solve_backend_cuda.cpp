@@ -22,6 +22,7 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/kmeans.h"
+#include "mc_flow/core/label_adaptation.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/eval/metrics.h"
 #include "mc_flow/core/pyramid.h"
@@ -133,6 +134,28 @@ void expectSameEquations(SolveBackend& cpu, SolveBackend& gpu, int level, Motion
   expectRelativelyClose(a.label_cost, b.label_cost, 1e-6, what + " label costs");
 }
 
+// A label store that forwards to a backend but for refitUnionsWhereTheSumsAre: refitUnions then runs its host loop over
+// the backend's passes.
+class HostLoopOf final : public LabelStore {
+ public:
+  explicit HostLoopOf(LabelStore& store) : store_(store) {}
+  int labelCount() const override { return store_.labelCount(); }
+  std::vector<double> supports() override { return store_.supports(); }
+  void remap(const std::vector<int>& target, int new_count) override { store_.remap(target, new_count); }
+  std::vector<LabelMoments> ownedMoments() override { return store_.ownedMoments(); }
+  CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
+                     const Config& config) override {
+    return store_.trialCuts(cuts, twists, use_occlusion, config);
+  }
+  void applyCuts(const std::vector<LabelCut>& cuts) override { store_.applyCuts(cuts); }
+  LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
+    return store_.costModel(twists, use_occlusion, config);
+  }
+
+ private:
+  LabelStore& store_;
+};
+
 // The whole sequence of stage calls a solve makes, on both backends, compared after each.
 // With `carried_labels` > 0 the first labels are held as carried from a previous pair (a warm start): every label step
 // adds the switching cost, and the carried labels follow the remap and the moves between levels.
@@ -213,6 +236,36 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
   for (int i = 0; i < n; ++i)
     expectRelativelyClose(ca.curvature[std::size_t(i)].reshaped(), cb.curvature[std::size_t(i)].reshaped(), 1e-3,
                           "curvature of label " + std::to_string(i));
+
+  // refitUnions: the device's loop (one wait) against the host's loop over the same backend's passes (a store that
+  // forwards everything but refitUnionsWhereTheSumsAre; they differ by the 6x6 solve's rounding and the left
+  // Jacobian's float rounding), and against the CPU backend.
+  if (n >= 3) {
+    const std::vector<std::vector<int>> groups = {{0, 1}, {2}};
+    const std::vector<Vector6d> starts = {twists[1], twists[2] + Vector6d::Constant(0.002)};
+    const std::vector<UnionFit> host_loop = [&] {
+      HostLoopOf forward(*gpu);
+      return refitUnions(forward, twists, groups, starts, 3, true, config);
+    }();
+    const std::vector<UnionFit> device = refitUnions(*gpu, twists, groups, starts, 3, true, config);
+    const std::vector<UnionFit> cpu_fits = refitUnions(*cpu, twists, groups, starts, 3, true, config);
+    ASSERT_EQ(device.size(), 2u);
+    for (std::size_t g = 0; g < groups.size(); ++g) {
+      SCOPED_TRACE("group " + std::to_string(g));
+      EXPECT_EQ(device[g].iterations, host_loop[g].iterations);
+      EXPECT_LT((device[g].twist - host_loop[g].twist).cwiseAbs().maxCoeff(), 1e-7) << device[g].twist.transpose();
+      EXPECT_NEAR(device[g].cost, host_loop[g].cost, 1e-6 * std::fabs(host_loop[g].cost));
+      EXPECT_NEAR(device[g].pixels, host_loop[g].pixels, 1e-6 * host_loop[g].pixels);
+      ASSERT_EQ(device[g].member_cost.size(), groups[g].size());
+      for (std::size_t m = 0; m < groups[g].size(); ++m)
+        EXPECT_NEAR(device[g].member_cost[m], host_loop[g].member_cost[m], 1e-6 * std::fabs(host_loop[g].cost));
+      expectRelativelyClose(device[g].curvature.reshaped(), host_loop[g].curvature.reshaped(), 1e-6, "curvature");
+      EXPECT_EQ(device[g].iterations, cpu_fits[g].iterations);
+      EXPECT_LT((device[g].twist - cpu_fits[g].twist).cwiseAbs().maxCoeff(), 1e-5) << cpu_fits[g].twist.transpose();
+      EXPECT_NEAR(device[g].cost, cpu_fits[g].cost, 1e-4 * std::fabs(cpu_fits[g].cost));
+    }
+    EXPECT_GT(device[0].iterations, 0) << "the union's fit took no step: the test shows little";
+  }
 
   // Remap: labels 0 and 1 merge, label 2 goes to the outlier label, the others shift down.
   std::vector<int> target(std::size_t(n) + 1);

@@ -123,6 +123,16 @@ class LabelStore {
   /// @brief One pass over the pixels: the cost model of every motion label at `twists`, with the occlusion
   /// mask of the labels' level when `use_occlusion`.
   virtual LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) = 0;
+  /// @brief refitUnions (below; its arguments checked there) where the sums are, when the store can do it without the
+  /// host: the CUDA backend runs the passes and the steps on the device and waits once. False (the default): the store
+  /// cannot, and refitUnions runs its host loop over costModel.
+  virtual bool refitUnionsWhereTheSumsAre(const std::vector<Vector6d>& twists,
+                                          const std::vector<std::vector<int>>& groups,
+                                          const std::vector<Vector6d>& starts, int iterations, bool use_occlusion,
+                                          const Config& config, std::vector<UnionFit>& fits) {
+    (void)twists, (void)groups, (void)starts, (void)iterations, (void)use_occlusion, (void)config, (void)fits;
+    return false;
+  }
 };
 
 /// @brief H with the label-count update's relative ridge (1e-6 of its largest diagonal entry): the 6x6 solves stay
