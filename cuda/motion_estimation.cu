@@ -1111,44 +1111,11 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   }
 
   void accumulate(const std::vector<Vector6d>& twists, MotionNormalEquations& out) override {
-    if (level_.width <= 0) throw InputError("CUDA motion step: accumulate() called before setLevel() or bind()");
-    const int n = motion_labels_;
-    if (int(twists.size()) != n)
-      throw InputError("CUDA motion step: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
-                       " motion labels");
-    out.reset(n);
-    if (n == 0) return;
-    cudaStream_t s = stream_;
-    const Layout layout = reserve();
-    host_motions_.reserve(std::size_t(n));
-    for (int i = 0; i < n; ++i) host_motions_.get()[i] = labelMotion(twists[std::size_t(i)]);
-    upload(motions_.get(), host_motions_.get(), std::size_t(n));
-    enqueueSums(layout, nullptr);
-    MCFLOW_CUDA_CHECK(
-        cudaMemcpyAsync(host_sums_.get(), sums_.get(), layout.sum_values * sizeof(double), cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_WAIT(s);
-    unpack(layout, out, true);
+    accumulateSums(twists, out, true);
   }
 
   void accumulateLabelBlocks(const std::vector<Vector6d>& twists, MotionNormalEquations& out) override {
-    if (level_.width <= 0)
-      throw InputError("CUDA motion step: accumulateLabelBlocks() called before setLevel() or bind()");
-    const int n = motion_labels_;
-    if (int(twists.size()) != n)
-      throw InputError("CUDA motion step: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
-                       " motion labels");
-    out.reset(n);
-    if (n == 0) return;
-    cudaStream_t s = stream_;
-    const Layout layout = reserve();
-    host_motions_.reserve(std::size_t(n));
-    for (int i = 0; i < n; ++i) host_motions_.get()[i] = labelMotion(twists[std::size_t(i)]);
-    upload(motions_.get(), host_motions_.get(), std::size_t(n));
-    enqueueSums(layout, nullptr, nullptr, false);
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(host_sums_.get(), sums_.get(), layout.block_values * sizeof(double),
-                                      cudaMemcpyDeviceToHost, s));
-    MCFLOW_CUDA_WAIT(s);
-    unpack(layout, out, false);
+    accumulateSums(twists, out, false);
   }
 
   void refitUnions(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
@@ -1332,6 +1299,28 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     chunk_labels_.reserve(l.pair_chunks * kLabelMaskWords);
     if (l.pairs > 0) pair_partials_.reserve(l.pair_chunks * l.pairs * kUpper);
     return l;
+  }
+
+  // One pass at `twists` into `out`: with the label pairs' blocks (accumulate) or without (accumulateLabelBlocks).
+  void accumulateSums(const std::vector<Vector6d>& twists, MotionNormalEquations& out, bool label_pairs) {
+    if (level_.width <= 0) throw InputError("CUDA motion step: a pass requested before setLevel() or bind()");
+    const int n = motion_labels_;
+    if (int(twists.size()) != n)
+      throw InputError("CUDA motion step: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
+                       " motion labels");
+    out.reset(n);
+    if (n == 0) return;
+    cudaStream_t s = stream_;
+    const Layout layout = reserve();
+    host_motions_.reserve(std::size_t(n));
+    for (int i = 0; i < n; ++i) host_motions_.get()[i] = labelMotion(twists[std::size_t(i)]);
+    upload(motions_.get(), host_motions_.get(), std::size_t(n));
+    enqueueSums(layout, nullptr, nullptr, label_pairs);
+    const std::size_t values = label_pairs ? layout.sum_values : layout.block_values;
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(host_sums_.get(), sums_.get(), values * sizeof(double), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_WAIT(s);
+    unpack(layout, out, label_pairs);
   }
 
   // A label's linearisation point in float, as the CPU computes it.
