@@ -32,6 +32,7 @@ InputGate::Admission InputGate::admit(int topic, const std_msgs::Header& header,
   ros::Time last;
   Admission admission;
   long held = 0;
+  bool straggler = false;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++received_[topic];
@@ -43,16 +44,31 @@ InputGate::Admission InputGate::admit(int topic, const std_msgs::Header& header,
     }
     last_seq_[topic] = header.seq;
     last = last_stamp_[topic];
-    if (last.isZero() || stamp > last) {
+    if (last.isZero() && !before_restart_[topic].isZero()) {
+      // The first message on this topic since another topic restarted the stream. At or beyond where this topic had
+      // got to, and soon after the restart, it was sent before the restart: admitting it would make it the topic's
+      // start and hold back the new stream, whose stamps are lower, until the next restart is allowed.
+      straggler = stamp >= before_restart_[topic] && (now - last_restart_).toSec() < kStragglerSeconds;
+      if (straggler) {
+        last = before_restart_[topic];
+      } else {
+        before_restart_[topic] = ros::Time();
+      }
+    }
+    if (!straggler && (last.isZero() || stamp > last)) {
       last_stamp_[topic] = stamp;
       return admission;
     }
     admission.restart_synchroniser =
-        stamp < last && (last_restart_.isZero() || (now - last_restart_).toSec() >= kMinSecondsBetweenRestarts);
+        !straggler && stamp < last &&
+        (last_restart_.isZero() || (now - last_restart_).toSec() >= kMinSecondsBetweenRestarts);
     if (admission.restart_synchroniser) {
       last_restart_ = now;
       ++restarts_;
-      for (ros::Time& t : last_stamp_) t = ros::Time();
+      for (int i = 0; i < 3; ++i) {
+        before_restart_[i] = i == topic ? ros::Time() : last_stamp_[i];
+        last_stamp_[i] = ros::Time();
+      }
       last_stamp_[topic] = stamp;
     } else {
       held = ++held_back_[topic];
@@ -60,8 +76,11 @@ InputGate::Admission InputGate::admit(int topic, const std_msgs::Header& header,
     }
   }
   const std::string& name = topics_[topic];
-  const std::string what = name + ": stamp " + stampText(stamp) +
-                           (stamp == last ? " repeats the previous message's" : " went back from " + stampText(last));
+  const std::string what =
+      name + ": stamp " + stampText(stamp) +
+      (straggler       ? " was sent before the stream restarted (this topic had reached " + stampText(last) + ")"
+       : stamp == last ? " repeats the previous message's"
+                       : " went back from " + stampText(last));
   if (admission.restart_synchroniser) {
     // A driver restart or a bag replayed without /clock: the synchroniser's queues hold the old stream.
     admission.warning_key = "input_stamp:restart " + name;

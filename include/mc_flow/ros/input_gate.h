@@ -28,6 +28,10 @@ class InputGate {
   /// A jump back restarts the synchroniser at most this often; backward stamps in between are held back, so a storm
   /// of them cannot keep re-arming message_filters' warnings.
   static constexpr double kMinSecondsBetweenRestarts = 5.0;
+  /// For this long after a restart, a message on another topic at or beyond the stamp that topic had reached is a
+  /// straggler of the old stream (each topic has its own connection, so the new stream's first message on one topic
+  /// can overtake the old stream's last on another) and is held back instead of becoming the topic's new start.
+  static constexpr double kStragglerSeconds = 1.0;
 
   /// What to do with one message.
   struct Admission {
@@ -49,7 +53,8 @@ class InputGate {
 
   /// @brief Counts the arrival (and header.seq gaps: messages lost before the callback) and decides whether the
   /// message reaches the synchroniser: stamps that repeat or go back are held back, except that a jump back restarts
-  /// the stream (at most every kMinSecondsBetweenRestarts), so the synchroniser only ever sees increasing stamps.
+  /// the stream (at most every kMinSecondsBetweenRestarts), so the synchroniser only ever sees increasing stamps. After
+  /// a restart, the old stream's stragglers on the other topics are held back too (kStragglerSeconds).
   Admission admit(int topic, const std_msgs::Header& header, ros::WallTime now);
   /// @brief The inputs were (re)subscribed at `now`: silence is measured from here.
   void subscribed(ros::WallTime now);
@@ -73,7 +78,8 @@ class InputGate {
   ros::WallTime last_sync_time_, subscribed_since_, last_restart_;
   long frames_synced_ = 0;
   long received_[3] = {0, 0, 0};
-  ros::Time last_stamp_[3];  // last stamp admitted per topic (zero after a restart)
+  ros::Time last_stamp_[3];      // last stamp admitted per topic (zero after a restart)
+  ros::Time before_restart_[3];  // the stamp each topic had reached at the last restart (zero once it rejoined)
   std::uint32_t last_seq_[3] = {0, 0, 0};
   long lost_before_callback_[3] = {0, 0, 0};  // header.seq gaps
   long held_back_[3] = {0, 0, 0};             // repeated or backward stamps not passed to the synchroniser
