@@ -124,7 +124,7 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
 
   # Node-level tests: rostest starts its own master on a free port, so ctest -j is safe.
   find_package(rostest REQUIRED)
-  set(MCFLOW_ROSTEST_NODES synthetic bad_input lazy_and_drops storm backend_fault stream)
+  set(MCFLOW_ROSTEST_NODES synthetic bad_input lazy_and_drops storm backend_fault stream prior_frame)
   foreach(name ${MCFLOW_ROSTEST_NODES})
     add_rostest_gtest(rostest_${name} test/ros/${name}.test test/ros/rostest_${name}.cpp test/ros/rostest_common.cpp)
     target_include_directories(rostest_${name} PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/test/ros)

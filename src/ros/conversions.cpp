@@ -275,6 +275,7 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
   msg.solve_time_ms = pair.solve_time_ms;
   msg.start = mc_flow::toString(result.start);
   msg.start_note = result.start_note;
+  msg.world_chosen_by = result.world.found ? result.world.chosen_by : std::string();
   const double dt = pair.interval();
   for (std::size_t i = 0; i < result.segments.size(); ++i) {
     const mc_flow::Segment& s = result.segments[i];

@@ -1,5 +1,6 @@
 #include "rostest_common.h"
 
+#include <algorithm>
 #include <cstring>
 
 #include <sensor_msgs/image_encodings.h>
@@ -110,6 +111,42 @@ bool RosoutWatcher::seen(const std::string& text) const {
 std::vector<std::string> RosoutWatcher::all() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return messages_;
+}
+
+int RosoutWatcher::count(const std::string& text) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return int(std::count_if(messages_.begin(), messages_.end(),
+                           [&](const std::string& m) { return m.find(text) != std::string::npos; }));
+}
+
+std::string RosoutWatcher::dump() const {
+  std::string text;
+  for (const auto& m : all()) text += "\n  " + m;
+  return text;
+}
+
+mc_flow::SegmentArray::ConstPtr pairEndingAt(const Collector<mc_flow::SegmentArray>& segments, const ros::Time& stamp) {
+  for (const auto& m : segments.messages())
+    if (m->header.stamp == stamp) return m;
+  return nullptr;
+}
+
+mc_flow::SegmentArray::ConstPtr solvePair(SyntheticCamera& camera, const Collector<mc_flow::SegmentArray>& segments,
+                                          int t, const ros::Time& stamp) {
+  camera.publish(t, stamp);
+  waitFor([&] { return pairEndingAt(segments, stamp) != nullptr; }, 60.0);
+  return pairEndingAt(segments, stamp);
+}
+
+void startSequence(SyntheticCamera& camera, int t, const ros::Time& stamp) {
+  camera.publish(t, stamp);
+  ros::WallDuration(0.5).sleep();
+}
+
+std::uint32_t largestId(const mc_flow::SegmentArray& pair) {
+  const auto it = std::max_element(pair.segments.begin(), pair.segments.end(),
+                                   [](const auto& a, const auto& b) { return a.support < b.support; });
+  return it == pair.segments.end() ? 0 : it->id;
 }
 
 std::string diagnosticValue(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key) {

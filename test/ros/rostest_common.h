@@ -17,6 +17,7 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 
+#include "mc_flow/SegmentArray.h"
 #include "mc_flow/eval/synthetic_scene.h"
 
 namespace mcflow_test {
@@ -82,12 +83,30 @@ class RosoutWatcher {
   /// @brief True when a WARN/ERROR containing `text` has been seen.
   bool seen(const std::string& text) const;
   std::vector<std::string> all() const;
+  /// @brief How many WARN/ERROR lines contain `text` (a throttled warning's shown lines).
+  int count(const std::string& text) const;
+  /// @brief Every line seen, each on a line of its own: for a failure's message.
+  std::string dump() const;
+  /// @brief Nodes whose /rosout this watcher is connected to (a warning logged before the connection is not seen).
+  int publishers() const { return int(sub_.getNumPublishers()); }
 
  private:
   ros::Subscriber sub_;
   mutable std::mutex mutex_;
   std::vector<std::string> messages_;
 };
+
+/// @brief The ~segments message of the pair ending at `stamp` among those collected, or null.
+mc_flow::SegmentArray::ConstPtr pairEndingAt(const Collector<mc_flow::SegmentArray>& segments, const ros::Time& stamp);
+/// @brief Frames in lockstep: publishes frame `t` at `stamp` and waits (up to 60 s) for the pair ending at it; null
+/// when none came.
+mc_flow::SegmentArray::ConstPtr solvePair(SyntheticCamera& camera, const Collector<mc_flow::SegmentArray>& segments,
+                                          int t, const ros::Time& stamp);
+/// @brief Publishes a frame that starts a sequence (no pair, no output) and gives the nodelet's worker 0.5 s to take
+/// it.
+void startSequence(SyntheticCamera& camera, int t, const ros::Time& stamp);
+/// @brief The id of the segment with the most support (the background in the synthetic scene); 0 when none.
+std::uint32_t largestId(const mc_flow::SegmentArray& pair);
 
 /// @brief Value of `key` in the last MC-Flow diagnostic status seen (empty when none).
 std::string diagnosticValue(const Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, const std::string& key);

@@ -111,12 +111,6 @@ void fillDepth(sensor_msgs::Image& depth32, float value) {
   for (std::size_t i = 0; i + 4 <= depth32.data.size(); i += 4) std::memcpy(&depth32.data[i], &value, 4);
 }
 
-std::string dump(const RosoutWatcher& watcher) {
-  std::string all;
-  for (const auto& m : watcher.all()) all += "\n  " + m;
-  return all;
-}
-
 }  // namespace
 
 class Storm : public ::testing::Test {
@@ -163,7 +157,7 @@ class Storm : public ::testing::Test {
   void expectSolved(const Triple& f, const std::string& what) {
     publish(f);
     EXPECT_TRUE(waitFor([&] { return solvedAt(f.stamp); }, 60.0))
-        << what << ": no pair solved ending at " << f.stamp << dump(*watcher_);
+        << what << ": no pair solved ending at " << f.stamp << watcher_->dump();
   }
 
   long warnings(const std::string& kind) const {
@@ -176,15 +170,9 @@ class Storm : public ::testing::Test {
     const long before = warnings(kind);
     publish(f);
     EXPECT_TRUE(waitFor([&] { return warnings(kind) > before; }, 20.0))
-        << "no '" << kind << "' warning counted for \"" << text << "\" (still " << before << ")" << dump(*watcher_);
+        << "no '" << kind << "' warning counted for \"" << text << "\" (still " << before << ")" << watcher_->dump();
     EXPECT_TRUE(waitFor([&] { return watcher_->seen(text); }, 5.0))
-        << "no warning containing \"" << text << "\" on /rosout" << dump(*watcher_);
-  }
-
-  int rosoutLines(const std::string& text) const {
-    int n = 0;
-    for (const auto& m : watcher_->all()) n += m.find(text) != std::string::npos ? 1 : 0;
-    return n;
+        << "no warning containing \"" << text << "\" on /rosout" << watcher_->dump();
   }
 
   ros::NodeHandle nh_;
@@ -243,7 +231,7 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
     expectSolved(f, "depth with NaN, inf, -inf and negative pixels");
     const std::string no_valid = "(32FC1, 160x120) has no valid pixel";
     const long before = warnings("depth");
-    const int shown_before = rosoutLines(no_valid);
+    const int shown_before = watcher_->count(no_valid);
     const ros::WallTime cases_start = ros::WallTime::now();
     for (float v : {values[0], values[1], values[2], values[3], 0.f}) {
       f = valid();
@@ -253,7 +241,7 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
     EXPECT_EQ(warnings("depth"), before + 5);
     // Shown at most once per 5 s: one line, and one more per 5 s the five cases took (about 1 s each).
     const int allowed = 1 + int((ros::WallTime::now() - cases_start).toSec() / 5.0);
-    EXPECT_LE(rosoutLines(no_valid) - shown_before, allowed) << "not throttled:" << dump(*watcher_);
+    EXPECT_LE(watcher_->count(no_valid) - shown_before, allowed) << "not throttled:" << watcher_->dump();
     f = valid();
     f.depth = camera_->depth(f.t, f.stamp, "16UC1");
     std::fill(f.depth->data.begin(), f.depth->data.end(), 0);
@@ -334,10 +322,10 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
         repeat, "input_stamp",
         "stamp " + stampText(f.stamp) + " repeats the previous message's: message held back from the synchroniser");
     EXPECT_TRUE(waitFor([&] { return warnings("input_stamp") >= held_before + 3; }, 10.0))
-        << "not every topic's repeated stamp was counted" << dump(*watcher_);
+        << "not every topic's repeated stamp was counted" << watcher_->dump();
     stamp_ = f.stamp - ros::Duration(5.0);
     expectWarned(valid(), "reset", "the stamp went back by 4.9");
-    EXPECT_TRUE(watcher_->seen(": restarting the synchroniser")) << dump(*watcher_);
+    EXPECT_TRUE(watcher_->seen(": restarting the synchroniser")) << watcher_->dump();
     expectSolved(valid(), "the pair after the stamps went back");
   }
 
@@ -359,7 +347,7 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
       }
       return false;
     };
-    EXPECT_TRUE(waitFor(solvedInBurst, 60.0)) << "nothing solved during the burst" << dump(*watcher_);
+    EXPECT_TRUE(waitFor(solvedInBurst, 60.0)) << "nothing solved during the burst" << watcher_->dump();
     // Most of the burst reaches the synchroniser (a loaded machine may lose a few before the callbacks),
     // and what arrived during a solve is counted as dropped.
     EXPECT_TRUE(
@@ -407,7 +395,7 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
     fillDepth(*f.depth, std::numeric_limits<float>::quiet_NaN());
     expectWarned(f, "depth", "(32FC1, 160x120) has no valid pixel");
     EXPECT_TRUE(waitFor([&] { return watcher_->seen("more like this since the last such warning"); }, 10.0))
-        << dump(*watcher_);
+        << watcher_->dump();
   }
 
   // ---- Valid pairs again: output within two pairs (the first frame starts a sequence after the 320x240 ones).
@@ -419,7 +407,7 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
     const Triple third = valid();
     publish(third);
     EXPECT_TRUE(waitFor([&] { return solvedAt(second.stamp) || solvedAt(third.stamp); }, 60.0))
-        << "no output within two valid pairs after the storm" << dump(*watcher_);
+        << "no output within two valid pairs after the storm" << watcher_->dump();
     EXPECT_TRUE(waitFor([&] { return solvedAt(third.stamp); }, 60.0)) << "valid output did not continue";
   }
 
@@ -428,7 +416,7 @@ TEST_F(Storm, EveryBadCaseWarnsAndValidOutputResumes) {
   ASSERT_TRUE(ros::service::call("/manager/list", list)) << "the nodelet manager does not answer";
   EXPECT_NE(std::find(list.response.nodelets.begin(), list.response.nodelets.end(), "/mc_flow"),
             list.response.nodelets.end());
-  EXPECT_FALSE(watcher_->seen("unexpected error")) << dump(*watcher_);
+  EXPECT_FALSE(watcher_->seen("unexpected error")) << watcher_->dump();
   std::printf("storm: %.0f s wall; pairs solved %s, frames skipped %s, dropped %s, warnings shown %zu\n",
               (ros::WallTime::now() - started).toSec(), diagnosticValue(*diagnostics_, "pairs solved").c_str(),
               diagnosticValue(*diagnostics_, "frames skipped (bad input)").c_str(),

@@ -17,7 +17,10 @@
 using mcflow_test::Collector;
 using mcflow_test::diagnosticCount;
 using mcflow_test::diagnosticValue;
+using mcflow_test::largestId;
 using mcflow_test::RosoutWatcher;
+using mcflow_test::solvePair;
+using mcflow_test::startSequence;
 using mcflow_test::SyntheticCamera;
 using mcflow_test::waitFor;
 
@@ -27,19 +30,6 @@ constexpr int kWidth = 160, kHeight = 120;  // processed as they are (automatic 
 constexpr int kFrames = 5;                  // pairs 1..4 before the reset
 const ros::Time kStart(7000.0);
 const ros::Duration kInterval(0.1);
-
-std::string dump(const RosoutWatcher& watcher) {
-  std::string all;
-  for (const auto& m : watcher.all()) all += "\n  " + m;
-  return all;
-}
-
-/// The id of the segment with the most support (the background in the synthetic scene).
-std::uint32_t largestId(const mc_flow::SegmentArray& m) {
-  const auto it = std::max_element(m.segments.begin(), m.segments.end(),
-                                   [](const auto& a, const auto& b) { return a.support < b.support; });
-  return it == m.segments.end() ? 0 : it->id;
-}
 
 }  // namespace
 
@@ -56,25 +46,10 @@ class Stream : public ::testing::Test {
     ros::WallDuration(1.0).sleep();  // let the /rosout subscription connect too
   }
 
-  /// The ~segments message of the pair ending at `stamp`, or null.
-  mc_flow::SegmentArray::ConstPtr pairEndingAt(const ros::Time& stamp) const {
-    for (const auto& m : segments_->messages())
-      if (m->header.stamp == stamp) return m;
-    return nullptr;
-  }
-
-  /// Publishes scene frame `t` at `stamp` and waits for the pair ending at it.
   mc_flow::SegmentArray::ConstPtr solve(int t, const ros::Time& stamp) {
-    camera_->publish(t, stamp);
-    waitFor([&] { return pairEndingAt(stamp) != nullptr; }, 60.0);
-    return pairEndingAt(stamp);
+    return solvePair(*camera_, *segments_, t, stamp);
   }
-
-  /// Publishes a frame that starts a sequence (no pair, no output) and gives the worker time to take it.
-  void start(int t, const ros::Time& stamp) {
-    camera_->publish(t, stamp);
-    ros::WallDuration(0.5).sleep();
-  }
+  void start(int t, const ros::Time& stamp) { startSequence(*camera_, t, stamp); }
 
   ros::NodeHandle nh_;
   std::unique_ptr<SyntheticCamera> camera_;
@@ -89,7 +64,7 @@ TEST_F(Stream, PairsAfterTheFirstStartWarmIdsPersistAndAResetStartsCold) {
   std::vector<mc_flow::SegmentArray::ConstPtr> pairs;
   for (int t = 1; t < kFrames; ++t) {
     pairs.push_back(solve(t, kStart + kInterval * t));
-    ASSERT_TRUE(pairs.back()) << "no ~segments for pair " << t << dump(*watcher_);
+    ASSERT_TRUE(pairs.back()) << "no ~segments for pair " << t << watcher_->dump();
   }
   EXPECT_EQ(pairs[0]->start, "cold");
   for (std::size_t k = 1; k < pairs.size(); ++k) {
@@ -116,10 +91,10 @@ TEST_F(Stream, PairsAfterTheFirstStartWarmIdsPersistAndAResetStartsCold) {
   const ros::Time loop = kStart + kInterval * (kFrames - 1) - ros::Duration(5.0);
   start(0, loop);
   EXPECT_TRUE(waitFor([&] { return watcher_->seen("(stream reset or bag loop): starting a new sequence"); }, 10.0))
-      << dump(*watcher_);
-  EXPECT_TRUE(watcher_->seen("the stamp went back by ")) << dump(*watcher_);
+      << watcher_->dump();
+  EXPECT_TRUE(watcher_->seen("the stamp went back by ")) << watcher_->dump();
   const auto after_reset = solve(1, loop + kInterval);
-  ASSERT_TRUE(after_reset) << "no pair solved after the reset" << dump(*watcher_);
+  ASSERT_TRUE(after_reset) << "no pair solved after the reset" << watcher_->dump();
   EXPECT_EQ(after_reset->start, "cold") << "the reset left a prior: " << after_reset->start_note;
   // A new sequence takes no earlier id (its TF frames would be those of unrelated segments).
   std::uint32_t highest_before = 0;
@@ -128,7 +103,7 @@ TEST_F(Stream, PairsAfterTheFirstStartWarmIdsPersistAndAResetStartsCold) {
   for (const auto& s : after_reset->segments)
     EXPECT_GT(s.id, highest_before) << "id " << s.id << " after the reset was handed out before it";
   const auto next = solve(2, loop + kInterval * 2);
-  ASSERT_TRUE(next) << "no second pair after the reset" << dump(*watcher_);
+  ASSERT_TRUE(next) << "no second pair after the reset" << watcher_->dump();
   EXPECT_EQ(next->start, "warm") << next->start_note;
 
   // ---- /diagnostics count the same: 3 + 1 warm starts, no fallback, one reset.

@@ -344,6 +344,16 @@ TEST(Conversions, SegmentArrayCarriesTheStartKind) {
   EXPECT_EQ(msg.start_note, f.result.start_note);
 }
 
+TEST(Conversions, SegmentArraySaysWhyTheWorldIsTheWorld) {
+  Fixture f = makeFixture();
+  EXPECT_EQ(mc_flow_ros::makeSegmentArray(f.result, f.pair).world_chosen_by, "");  // no world found
+  f.result.world.found = true;
+  f.result.world.ids = {7};
+  f.result.world.chosen_by = "prior";
+  const mc_flow::SegmentArray msg = mc_flow_ros::makeSegmentArray(f.result, f.pair);
+  EXPECT_EQ(msg.world_chosen_by, "prior");
+}
+
 TEST(Conversions, SoftLabelsImageIsLossless) {
   Fixture f = makeFixture();
   f.result.soft_labels.at(0, 1, 1) = 0.123456789f;
