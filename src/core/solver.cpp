@@ -290,8 +290,14 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   // on the labels the outputs came from.
   t = Clock::now();
   std::vector<Matrix6d> covariances;
+  // Which segment is in front of which, on frame 1's points at the label level (a stream's warm start has them on the
+  // host already).
+  DepthOrder depth_order;
+  if (!result.segments.empty() && config.world_front_share > 0)
+    depth_order = depthOrderOf(result.labels, result.segments, backend->framePoints(p.label_level),
+                               1 << (p.label_level - p.finest), config.world_depth_edge);
   result.world = estimateStaticWorld(*backend, result.segments, previous ? previous->world.ids : std::vector<int>(),
-                                     camera_motion_prior, config.detect_occlusions, config, covariances);
+                                     camera_motion_prior, config.detect_occlusions, config, covariances, &depth_order);
   for (std::size_t i = 0; i < result.segments.size(); ++i) result.segments[i].covariance = covariances[i];
   result.timings.adaptation += elapsedMs(t);
   result.timings.total = elapsedMs(start_time);

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include <Eigen/Cholesky>
 
@@ -25,9 +26,65 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
   return 0.5 * (covariance + covariance.transpose());
 }
 
+namespace {
+// Fewer depth edges than this between two candidates say nothing about which is in front (label-level pixels: a few
+// pixels of noise along a seam).
+constexpr double kMinDepthEdges = 20;
+}  // namespace
+
+double DepthOrder::frontShare(const std::vector<int>& a, const std::vector<int>& b, double& edges) const {
+  double nearer = 0;
+  edges = 0;
+  for (const int i : a)
+    for (const int j : b) {
+      if (i < 0 || j < 0 || i >= segments || j >= segments) continue;
+      nearer += front[std::size_t(i) * std::size_t(segments) + std::size_t(j)];
+      edges += front[std::size_t(i) * std::size_t(segments) + std::size_t(j)] +
+               front[std::size_t(j) * std::size_t(segments) + std::size_t(i)];
+    }
+  return edges > 0 ? nearer / edges : 0.0;
+}
+
+DepthOrder depthOrderOf(const ImageI32& segment_ids, const std::vector<Segment>& segments, const ImageF& points,
+                        int step, double depth_edge) {
+  if (points.channels != 3 || step < 1 || (points.width - 1) * step >= segment_ids.width ||
+      (points.height - 1) * step >= segment_ids.height)
+    throw InputError("depthOrderOf: points of " + std::to_string(points.width) + "x" + std::to_string(points.height) +
+                     "x" + std::to_string(points.channels) + " at step " + std::to_string(step) +
+                     " do not fit segment ids of " + std::to_string(segment_ids.width) + "x" +
+                     std::to_string(segment_ids.height));
+  DepthOrder order;
+  order.segments = int(segments.size());
+  order.front.assign(segments.size() * segments.size(), 0.0);
+  std::map<int, int> index_of;
+  for (std::size_t i = 0; i < segments.size(); ++i) index_of[segments[i].id] = int(i);
+  const int w = points.width, h = points.height;
+  std::vector<int> index(std::size_t(w) * std::size_t(h), -1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const auto it = index_of.find(segment_ids(x * step, y * step));
+      if (it != index_of.end() && std::isfinite(points(x, y, 2))) index[std::size_t(y) * w + x] = it->second;
+    }
+  auto edge = [&](int x0, int y0, int x1, int y1) {
+    const int a = index[std::size_t(y0) * w + x0], b = index[std::size_t(y1) * w + x1];
+    if (a < 0 || b < 0 || a == b) return;
+    const double za = points(x0, y0, 2), zb = points(x1, y1, 2);
+    if (std::abs(za - zb) <= depth_edge) return;
+    const int nearer = za < zb ? a : b, farther = za < zb ? b : a;
+    order.front[std::size_t(nearer) * segments.size() + std::size_t(farther)] += 1;
+  };
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (x + 1 < w) edge(x, y, x + 1, y);
+      if (y + 1 < h) edge(x, y, x, y + 1);
+    }
+  return order;
+}
+
 StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& segments,
                                 const std::vector<int>& previous_world_ids, const Eigen::Matrix4d* camera_motion_prior,
-                                bool use_occlusion, const Config& config, std::vector<Matrix6d>& segment_covariances) {
+                                bool use_occlusion, const Config& config, std::vector<Matrix6d>& segment_covariances,
+                                const DepthOrder* depth_order) {
   StaticWorld world;
   const int n = int(segments.size());
   if (n != labels.labelCount() - 1)
@@ -43,6 +100,13 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
         twistCovariance(own.curvature[std::size_t(i)], own.cost[std::size_t(i)], own.pixels[std::size_t(i)], config);
   const int widest = int(std::max_element(own.pixels.begin(), own.pixels.end()) - own.pixels.begin());
   const double noise = own.cost[std::size_t(widest)] / std::max(1.0, own.pixels[std::size_t(widest)]);
+  // Whether group a is in front of group b where they meet (a moving thing in front of the room it moves in).
+  auto inFront = [&](const std::vector<int>& a, const std::vector<int>& b) {
+    if (!depth_order || depth_order->segments != n || config.world_front_share <= 0) return false;
+    double edges = 0;
+    const double share = depth_order->frontShare(a, b, edges);
+    return edges >= kMinDepthEdges && share > config.world_front_share;
+  };
 
   // 1. A prior: the segments whose pixels the prior's world motion explains as well as their own motions do.
   if (camera_motion_prior) {
@@ -72,18 +136,34 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
         world.labels.push_back(i);
         remembered_pixels += own.pixels[std::size_t(i)];
       }
+    // A remembered world in front of the widest segment is a thing that moves in front of the room (ids follow
+    // labels, and a label can come to hold a box where it held the room); the room is behind it.
     const bool widest_remembered = std::find(world.labels.begin(), world.labels.end(), widest) != world.labels.end();
-    if (!world.labels.empty() && !widest_remembered &&
-        own.pixels[std::size_t(widest)] > config.world_outgrown_ratio * remembered_pixels) {
-      world.labels.clear();
-      world.chosen_by = "outgrown";  // the widest segment below, named for why the memory was left
+    if (!world.labels.empty() && !widest_remembered) {
+      if (inFront(world.labels, {widest})) {
+        world.labels.clear();
+        world.chosen_by = "behind";  // the widest segment below
+      } else if (own.pixels[std::size_t(widest)] > config.world_outgrown_ratio * remembered_pixels &&
+                 !inFront({widest}, world.labels)) {
+        world.labels.clear();
+        world.chosen_by = "outgrown";  // the widest segment below, named for why the memory was left
+      }
     }
     if (!world.labels.empty()) world.chosen_by = "previous";
   }
-  // 3. The widest segment.
+  // 3. The widest segment, or the second widest when the widest is in front of it (a near thing covering most of the
+  // view).
   if (world.labels.empty()) {
-    world.labels.push_back(widest);
-    if (world.chosen_by.empty()) world.chosen_by = "widest";
+    int second = -1;
+    for (int i = 0; i < n; ++i)
+      if (i != widest && (second < 0 || own.pixels[std::size_t(i)] > own.pixels[std::size_t(second)])) second = i;
+    if (world.chosen_by.empty() && second >= 0 && inFront({widest}, {second})) {
+      world.labels.push_back(second);
+      world.chosen_by = "behind";
+    } else {
+      world.labels.push_back(widest);
+      if (world.chosen_by.empty()) world.chosen_by = "widest";
+    }
   }
 
   // One robust rigid fit on the union, from the motion of its widest member: a world split into segments gives one

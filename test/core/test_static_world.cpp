@@ -4,11 +4,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 
 #include <Eigen/Eigenvalues>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/label_adaptation.h"
+#include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/core/static_world.h"
@@ -212,16 +215,124 @@ TEST(StaticWorld, AWorldOutgrownByAnotherSegmentIsLeftForIt) {
   ASSERT_NE(smallest->id, room_id);
   previous.world.ids = {smallest->id};  // the stream remembers the part as its world
 
-  Solver solver(cpuConfig());
+  // The part is in front of the room: without the depth order (world_front_share 0) only its size can leave it.
+  Config by_size = cpuConfig();
+  by_size.world_front_share = 0;
+  Solver solver(by_size);
   const Result outgrown = solver.solve(f1.frame, f2.frame, f1.K, previous);
   ASSERT_TRUE(outgrown.world.found);
   EXPECT_EQ(outgrown.world.chosen_by, "outgrown");
   EXPECT_EQ(outgrown.world.ids, std::vector<int>{room_id});
 
-  Config keep = cpuConfig();
+  Config keep = by_size;
   keep.world_outgrown_ratio = 1e6;
   Solver keeping(keep);
   const Result kept = keeping.solve(f1.frame, f2.frame, f1.K, previous);
   EXPECT_EQ(kept.world.chosen_by, "previous");
   EXPECT_EQ(kept.world.ids, std::vector<int>{smallest->id});
+
+  // With the depth order (the default), a remembered world in front of the widest segment is left for it whatever
+  // the sizes: the room is behind the things that move in it.
+  Config behind = cpuConfig();
+  behind.world_outgrown_ratio = 1e6;
+  Solver ordering(behind);
+  const Result left = ordering.solve(f1.frame, f2.frame, f1.K, previous);
+  EXPECT_EQ(left.world.chosen_by, "behind");
+  EXPECT_EQ(left.world.ids, std::vector<int>{room_id});
+}
+
+TEST(StaticWorld, TheDepthOrderDecidesBetweenTheMemoryAndTheWidestSegment) {
+  // Two labels on a rendered pair: label 0 the room (the widest), label 1 every part. A hand-made depth order says the
+  // widest is in front of the other (a thing near the camera covering most of the view).
+  SyntheticSceneOptions options;
+  options.variant = 0;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Config config = cpuConfig();
+  const int levels = pyramidLevelCount(pair.frame1.width(), pair.frame1.height(), config.coarsest_min_width);
+  const Pyramid pyr1 = buildPyramid(pair.frame1, pair.intrinsics, levels, config);
+  const Pyramid pyr2 = buildPyramid(pair.frame2, pair.intrinsics, levels, config);
+  const int level = 1;
+  const ImageF& points = pyr1[level].points;
+  const int room = pair.parts.front().id;
+  SoftLabels u(points.width, points.height, 3, 0.f);
+  for (int y = 0; y < points.height; ++y)
+    for (int x = 0; x < points.width; ++x) {
+      const std::size_t k = std::size_t(y) * points.width + x;
+      if (!std::isfinite(points(x, y, 2))) continue;
+      (pair.gt_parts(2 * x, 2 * y) == room ? u.plane(0) : u.plane(1))[k] = 1.f;
+    }
+  ASSERT_GT(u.support(0), u.support(1));
+  std::vector<Segment> segments(2);
+  segments[0].id = 10;
+  segments[1].id = 11;
+  for (Segment& seg : segments) {
+    seg.twist = pair.parts.front().twist;
+    seg.transform = se3Exp(seg.twist);
+  }
+  DepthOrder widest_in_front;
+  widest_in_front.segments = 2;
+  widest_in_front.front = {0, 100, 0, 0};  // label 0 nearer than label 1 on 100 edges
+  config.world_outgrown_ratio = 1.0;       // by size alone, the widest would take a remembered world
+  std::vector<Matrix6d> covariances;
+  auto choose = [&](const std::vector<int>& memory, const DepthOrder* order) {
+    HostLabelStore store(u, pyr1[level], pyr2[level], nullptr);
+    return estimateStaticWorld(store, segments, memory, nullptr, false, config, covariances, order);
+  };
+  const StaticWorld kept = choose({11}, &widest_in_front);
+  EXPECT_EQ(kept.chosen_by, "previous");
+  EXPECT_EQ(kept.ids, std::vector<int>{11});
+  const StaticWorld outgrown = choose({11}, nullptr);
+  EXPECT_EQ(outgrown.chosen_by, "outgrown");
+  EXPECT_EQ(outgrown.ids, std::vector<int>{10});
+  const StaticWorld first_pair = choose({}, &widest_in_front);
+  EXPECT_EQ(first_pair.chosen_by, "behind");
+  EXPECT_EQ(first_pair.ids, std::vector<int>{11});
+  EXPECT_EQ(choose({}, nullptr).chosen_by, "widest");
+  // Too few edges say nothing.
+  DepthOrder few = widest_in_front;
+  few.front = {0, 5, 0, 0};
+  EXPECT_EQ(choose({}, &few).chosen_by, "widest");
+  // world_front_share 0: the depth order decides nothing.
+  config.world_front_share = 0;
+  EXPECT_EQ(choose({}, &widest_in_front).chosen_by, "widest");
+}
+
+TEST(DepthOrder, CountsTheEdgesWhereOneSegmentIsInFrontOfAnother) {
+  // A 4x4 square of segment 7 at 1 m in front of segment 3 at 2 m, in an 8x8 image; one row of segment 3 without
+  // depth; ids read at step 1.
+  const int w = 8, h = 8;
+  ImageI32 ids(w, h, 1, 3);
+  ImageF points(w, h, 3, 0.f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool square = x >= 2 && x < 6 && y >= 2 && y < 6;
+      ids(x, y) = square ? 7 : 3;
+      points(x, y, 2) = square ? 1.f : 2.f;
+      if (y == 7) points(x, y, 2) = std::numeric_limits<float>::quiet_NaN();
+    }
+  std::vector<Segment> segments(2);
+  segments[0].id = 3;
+  segments[1].id = 7;
+  const DepthOrder order = depthOrderOf(ids, segments, points, 1, 0.05);
+  ASSERT_EQ(order.segments, 2);
+  double edges = 0;
+  EXPECT_DOUBLE_EQ(order.frontShare({1}, {0}, edges), 1.0);  // the square is in front
+  EXPECT_DOUBLE_EQ(edges, 16.0);                             // its perimeter: 4 sides of 4 pixels
+  EXPECT_DOUBLE_EQ(order.frontShare({0}, {1}, edges), 0.0);
+  EXPECT_DOUBLE_EQ(order.frontShare({0}, {0}, edges), 0.0);
+  EXPECT_DOUBLE_EQ(edges, 0.0);
+  // A jump below the edge threshold is no edge.
+  EXPECT_DOUBLE_EQ(depthOrderOf(ids, segments, points, 1, 1.5).front[1 * 2 + 0], 0.0);
+  // Ids of a level twice as fine: the same order from every second id.
+  ImageI32 fine(2 * w, 2 * h, 1, 0);
+  for (int y = 0; y < 2 * h; ++y)
+    for (int x = 0; x < 2 * w; ++x) fine(x, y) = ids(x / 2, y / 2);
+  EXPECT_EQ(depthOrderOf(fine, segments, points, 2, 0.05).front, order.front);
+  // Points that do not fit the ids at the step are refused, naming both sizes.
+  try {
+    depthOrderOf(ids, segments, points, 2, 0.05);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("8x8x3 at step 2"), std::string::npos) << e.what();
+  }
 }

@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 
 #include "mc_flow/core/config.h"
+#include "mc_flow/core/image.h"
 #include "mc_flow/core/se3.h"
 
 namespace mc_flow {
@@ -30,10 +31,30 @@ struct StaticWorld {
   Matrix6d covariance = Matrix6d::Zero();  ///< of `twist` [m^2, m rad, rad^2]
   double pixels = 0;                       ///< weighted pixels of the fit (processing level)
   /// Why these segments: "prior" (agree with the camera-motion prior), "previous" (the previous pair's world ids),
-  /// "widest" (the segment of most pixels) or "outgrown" (the widest, which has outgrown the previous world by
-  /// Config::world_outgrown_ratio).
+  /// "widest" (the segment of most pixels), "outgrown" (the widest, which has outgrown the previous world by
+  /// Config::world_outgrown_ratio) or "behind" (the segment that the remembered world, or the widest, is in front of:
+  /// DepthOrder).
   std::string chosen_by;
 };
+
+/// @brief Which segment is in front of which where they meet, over the depth edges of a pair's frame 1: neighbouring
+/// pixels (4-neighbours) of two different segments whose depths differ by more than Config::world_depth_edge.
+/// Moving things are in front of the room they move in: the static world is what they hide.
+struct DepthOrder {
+  int segments = 0;
+  std::vector<double> front;  ///< segments x segments, row-major: edges where segment a (row) is nearer than b
+
+  /// @brief Of the depth edges between the segment groups `a` and `b` (indices in `segments` order), the share where a
+  /// is nearer; `edges` receives their count. 0 with no edge.
+  double frontShare(const std::vector<int>& a, const std::vector<int>& b, double& edges) const;
+};
+
+/// @brief The depth order of `segments` over `segment_ids` (Result::labels: a Segment::id per pixel, 0 for none) and
+/// `points` (frame 1's points, 3 channels, NaN z where depth is invalid) of a level `step` times coarser (the ids are
+/// read at x * step, y * step). Pixels whose id is not a segment's, or without depth, take no part. Throws InputError
+/// when `points` is not 3 channels or does not fit inside the ids at that step.
+DepthOrder depthOrderOf(const ImageI32& segment_ids, const std::vector<Segment>& segments, const ImageF& points,
+                        int step, double depth_edge);
 
 /// @brief The covariance of a twist fitted by the motion step's Gauss-Newton model: (E / (2 N - 6)) H^-1 with H the
 /// curvature (the normalised Cauchy cost E(xi + d) ~ E + 2 g^T d + d^T H d), E the cost and N the pixels (two residuals
@@ -46,13 +67,16 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
 /// segment's twist). In this order: the segments whose pixels `camera_motion_prior` (the camera's motion over the
 /// pair, frame 1 -> frame 2, e.g. from wheel odometry; null: none) explains as well as their own motions up to
 /// merge_refit_tolerance (oneMotionExplains, against the widest segment's noise level); else the segments carrying an
-/// id of `previous_world_ids` (a stream keeps its world), unless the widest segment is not among them and holds more
-/// than Config::world_outgrown_ratio times their pixels; else the widest segment. Also fills each segment's twist
-/// covariance (`segment_covariances`, in `segments` order). Passes over the label level's pixels: one, one more with a
-/// prior, and one per fit iteration.
+/// id of `previous_world_ids` (a stream keeps its world), unless the widest segment is not among them and either they
+/// are in front of it (`depth_order`, Config::world_front_share: "behind") or it holds more than
+/// Config::world_outgrown_ratio times their pixels and is not in front of them ("outgrown"); else the widest segment,
+/// or the second widest when the widest is in front of it ("behind"). `depth_order` null: depth order decides nothing.
+/// Also fills each segment's twist covariance (`segment_covariances`, in `segments` order). Passes over the label
+/// level's pixels: one, one more with a prior, and one per fit iteration.
 StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& segments,
                                 const std::vector<int>& previous_world_ids, const Eigen::Matrix4d* camera_motion_prior,
-                                bool use_occlusion, const Config& config, std::vector<Matrix6d>& segment_covariances);
+                                bool use_occlusion, const Config& config, std::vector<Matrix6d>& segment_covariances,
+                                const DepthOrder* depth_order = nullptr);
 
 /// @brief A segment's motion relative to the static world over the interval, in the camera frame of frame 1:
 /// exp(-world.twist) exp(segment twist), as a velocity [m/s at the segment's centroid, rad/s] with its covariance
