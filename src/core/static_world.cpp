@@ -166,11 +166,32 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
     }
   }
 
-  // One robust rigid fit on the union, from the motion of its widest member: a world split into segments gives one
-  // motion, not the widest piece's.
   int start = world.labels.front();
   for (const int i : world.labels)
     if (own.pixels[std::size_t(i)] > own.pixels[std::size_t(start)]) start = i;
+  // 4. Pieces of the room: the segments that the world's motion explains as well as their own motions do (the merge
+  // test's rule) and that are not in front of it. Without the depth order a slowly moving thing would join the world
+  // and stay there (docs/decisions/0011); things that move are in front of the room.
+  if (config.world_joins_pieces && depth_order && depth_order->segments == n && config.world_front_share > 0 &&
+      world.chosen_by != "prior" && int(world.labels.size()) < n) {
+    const LabelCostModel under_world =
+        labels.costModel(std::vector<Vector6d>(std::size_t(n), twists[std::size_t(start)]), use_occlusion, config);
+    const std::vector<int> chosen = world.labels;
+    for (int i = 0; i < n; ++i) {
+      if (std::find(chosen.begin(), chosen.end(), i) != chosen.end() || own.pixels[std::size_t(i)] < 6.0) continue;
+      MergeEvidence e;
+      e.own_a = e.own_b = own.cost[std::size_t(i)];
+      e.increase_a = e.increase_b = under_world.cost[std::size_t(i)] - own.cost[std::size_t(i)];
+      e.pixels_a = e.pixels_b = own.pixels[std::size_t(i)];
+      e.noise_per_pixel = noise;
+      if (oneMotionExplains(e, config.merge_refit_tolerance, config.merge_refit_noise_tolerance) &&
+          !inFront({i}, chosen))
+        world.labels.push_back(i);
+    }
+  }
+
+  // One robust rigid fit on the union, from the motion of its widest member: a world split into segments gives one
+  // motion, not the widest piece's.
   const std::vector<UnionFit> fit = refitUnions(labels, twists, {world.labels}, {twists[std::size_t(start)]},
                                                 config.world_fit_iterations, use_occlusion, config);
   world.twist = fit[0].twist;

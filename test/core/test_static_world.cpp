@@ -39,6 +39,51 @@ Config cpuConfig() {
   return config;
 }
 
+// A rendered pair (synthetic-0) and its pyramids, for tests that set the labels by hand at kLevel (the label level).
+struct RoomScene {
+  static constexpr int kLevel = 1;
+  SyntheticPair pair;
+  Pyramid pyr1, pyr2;
+  RoomScene() {
+    SyntheticSceneOptions options;
+    options.variant = 0;
+    pair = renderSyntheticPair(options);
+    const Config config;
+    const int levels = pyramidLevelCount(pair.frame1.width(), pair.frame1.height(), config.coarsest_min_width);
+    pyr1 = buildPyramid(pair.frame1, pair.intrinsics, levels, config);
+    pyr2 = buildPyramid(pair.frame2, pair.intrinsics, levels, config);
+  }
+  // Two motion labels and the outlier at kLevel: each pixel with depth goes to label_of(x, y, whether it is the room).
+  template <typename LabelOf>
+  SoftLabels labels(LabelOf label_of) const {
+    const ImageF& points = pyr1[kLevel].points;
+    const int room = pair.parts.front().id;
+    SoftLabels u(points.width, points.height, 3, 0.f);
+    for (int y = 0; y < points.height; ++y)
+      for (int x = 0; x < points.width; ++x)
+        if (std::isfinite(points(x, y, 2)))
+          u.plane(label_of(x, y, pair.gt_parts(2 * x, 2 * y) == room))[std::size_t(y) * points.width + x] = 1.f;
+    return u;
+  }
+  // Two segments with ids a and b, both with the room's motion.
+  std::vector<Segment> roomSegments(int a, int b) const {
+    std::vector<Segment> segments(2);
+    segments[0].id = a;
+    segments[1].id = b;
+    for (Segment& seg : segments) {
+      seg.twist = pair.parts.front().twist;
+      seg.transform = se3Exp(seg.twist);
+    }
+    return segments;
+  }
+  StaticWorld choose(SoftLabels& u, const std::vector<Segment>& segments, const std::vector<int>& memory,
+                     const DepthOrder* order, const Config& config) const {
+    HostLabelStore store(u, pyr1[kLevel], pyr2[kLevel], nullptr);
+    std::vector<Matrix6d> covariances;
+    return estimateStaticWorld(store, segments, memory, nullptr, false, config, covariances, order);
+  }
+};
+
 bool symmetricPositiveDefinite(const Matrix6d& m) {
   if (!m.isApprox(m.transpose(), 1e-9)) return false;
   return Eigen::SelfAdjointEigenSolver<Matrix6d>(m).eigenvalues().minCoeff() > 0;
@@ -244,39 +289,17 @@ TEST(StaticWorld, AWorldOutgrownByAnotherSegmentIsLeftForIt) {
 TEST(StaticWorld, TheDepthOrderDecidesBetweenTheMemoryAndTheWidestSegment) {
   // Two labels on a rendered pair: label 0 the room (the widest), label 1 every part. A hand-made depth order says the
   // widest is in front of the other (a thing near the camera covering most of the view).
-  SyntheticSceneOptions options;
-  options.variant = 0;
-  const SyntheticPair pair = renderSyntheticPair(options);
-  Config config = cpuConfig();
-  const int levels = pyramidLevelCount(pair.frame1.width(), pair.frame1.height(), config.coarsest_min_width);
-  const Pyramid pyr1 = buildPyramid(pair.frame1, pair.intrinsics, levels, config);
-  const Pyramid pyr2 = buildPyramid(pair.frame2, pair.intrinsics, levels, config);
-  const int level = 1;
-  const ImageF& points = pyr1[level].points;
-  const int room = pair.parts.front().id;
-  SoftLabels u(points.width, points.height, 3, 0.f);
-  for (int y = 0; y < points.height; ++y)
-    for (int x = 0; x < points.width; ++x) {
-      const std::size_t k = std::size_t(y) * points.width + x;
-      if (!std::isfinite(points(x, y, 2))) continue;
-      (pair.gt_parts(2 * x, 2 * y) == room ? u.plane(0) : u.plane(1))[k] = 1.f;
-    }
+  const RoomScene scene;
+  SoftLabels u = scene.labels([](int, int, bool on_room) { return on_room ? 0 : 1; });
   ASSERT_GT(u.support(0), u.support(1));
-  std::vector<Segment> segments(2);
-  segments[0].id = 10;
-  segments[1].id = 11;
-  for (Segment& seg : segments) {
-    seg.twist = pair.parts.front().twist;
-    seg.transform = se3Exp(seg.twist);
-  }
+  const std::vector<Segment> segments = scene.roomSegments(10, 11);
   DepthOrder widest_in_front;
   widest_in_front.segments = 2;
   widest_in_front.front = {0, 100, 0, 0};  // label 0 nearer than label 1 on 100 edges
-  config.world_outgrown_ratio = 1.0;       // by size alone, the widest would take a remembered world
-  std::vector<Matrix6d> covariances;
+  Config config = cpuConfig();
+  config.world_outgrown_ratio = 1.0;  // by size alone, the widest would take a remembered world
   auto choose = [&](const std::vector<int>& memory, const DepthOrder* order) {
-    HostLabelStore store(u, pyr1[level], pyr2[level], nullptr);
-    return estimateStaticWorld(store, segments, memory, nullptr, false, config, covariances, order);
+    return scene.choose(u, segments, memory, order, config);
   };
   const StaticWorld kept = choose({11}, &widest_in_front);
   EXPECT_EQ(kept.chosen_by, "previous");
@@ -295,6 +318,29 @@ TEST(StaticWorld, TheDepthOrderDecidesBetweenTheMemoryAndTheWidestSegment) {
   // world_front_share 0: the depth order decides nothing.
   config.world_front_share = 0;
   EXPECT_EQ(choose({}, &widest_in_front).chosen_by, "widest");
+}
+
+TEST(StaticWorld, PiecesOfTheRoomJoinTheWorldUnlessInFrontOfIt) {
+  // The room in two labels (left and right of the image), both with the room's motion; the parts go to the outlier
+  // label. The right piece joins the world the left (wider) one is chosen as, unless the depth order says it is in
+  // front of it.
+  const RoomScene scene;
+  const int width = scene.pyr1[RoomScene::kLevel].points.width;
+  SoftLabels u = scene.labels([&](int x, int, bool on_room) { return !on_room ? 2 : x < width * 3 / 5 ? 0 : 1; });
+  ASSERT_GT(u.support(0), u.support(1));
+  const std::vector<Segment> segments = scene.roomSegments(20, 21);
+  const Config config = cpuConfig();
+  DepthOrder level_ground;  // the pieces meet without a depth edge
+  level_ground.segments = 2;
+  level_ground.front = {0, 0, 0, 0};
+  EXPECT_EQ(scene.choose(u, segments, {}, &level_ground, config).ids, (std::vector<int>{20, 21}));
+  DepthOrder right_in_front = level_ground;
+  right_in_front.front = {0, 0, 100, 0};  // label 1 nearer than label 0 on 100 edges
+  EXPECT_EQ(scene.choose(u, segments, {}, &right_in_front, config).ids, std::vector<int>{20});
+  EXPECT_EQ(scene.choose(u, segments, {}, nullptr, config).ids, std::vector<int>{20});  // no depth order: no join
+  Config no_join = config;
+  no_join.world_joins_pieces = false;
+  EXPECT_EQ(scene.choose(u, segments, {}, &level_ground, no_join).ids, std::vector<int>{20});
 }
 
 TEST(DepthOrder, CountsTheEdgesWhereOneSegmentIsInFrontOfAnother) {

@@ -20,6 +20,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/stream_frames.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/kmeans.h"
 #include "mc_flow/core/label_adaptation.h"
@@ -646,4 +647,35 @@ TEST(CudaSolveBackend, TheStaticWorldMatchesTheCpus) {
     EXPECT_TRUE(b.world.covariance.isApprox(a.world.covariance, 0.05)) << a.world.covariance << "\n"
                                                                        << b.world.covariance;
   }
+}
+
+// The depth order's choices on the device: a stream that remembers a part (in front of the room) as its world leaves it
+// for the room ("behind"), as the CPU does, and the room's pieces that join the world are the CPU's.
+TEST(CudaSolveBackend, TheWorldBehindARememberedPartMatchesTheCpus) {
+  SKIP_WITHOUT_GPU();
+  const mc_flow::StreamFrame f0 = mc_flow::test::syntheticStreamFrame(0, 0.0),
+                             f1 = mc_flow::test::syntheticStreamFrame(1, 1 / 30.0),
+                             f2 = mc_flow::test::syntheticStreamFrame(2, 2 / 30.0);
+  mc_flow::Config config;
+  config.threads = 2;
+  config.backend = mc_flow::Backend::Cpu;
+  mc_flow::Solver first(config);
+  mc_flow::Result previous = first.solve(f0.frame, f1.frame, f0.K);
+  ASSERT_GE(previous.segments.size(), 2u);
+  const int room_id = previous.world.ids.front();
+  const auto smallest =
+      std::min_element(previous.segments.begin(), previous.segments.end(),
+                       [](const mc_flow::Segment& a, const mc_flow::Segment& b) { return a.support < b.support; });
+  ASSERT_NE(smallest->id, room_id);
+  previous.world.ids = {smallest->id};
+  config.world_outgrown_ratio = 1e6;  // only the depth order can leave the remembered part
+  mc_flow::Solver cpu(config);
+  config.backend = mc_flow::Backend::Cuda;
+  mc_flow::Solver cuda(config);
+  const mc_flow::Result a = cpu.solve(f1.frame, f2.frame, f1.K, previous);
+  const mc_flow::Result b = cuda.solve(f1.frame, f2.frame, f1.K, previous);
+  EXPECT_EQ(a.world.chosen_by, "behind");
+  EXPECT_EQ(b.world.chosen_by, a.world.chosen_by);
+  EXPECT_EQ(b.world.ids, a.world.ids);
+  EXPECT_NE(std::find(b.world.ids.begin(), b.world.ids.end(), room_id), b.world.ids.end());
 }
