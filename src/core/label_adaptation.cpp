@@ -20,11 +20,6 @@ namespace {
 
 using union_refit::kRidge;
 
-// mergeWhereOneMotionExplains refits a pair only where the quadratic model predicts an increase below this many times
-// what the pair may pay: the model is exact near the optima and errs by a small factor away from them (measured on
-// the TUM excerpt: docs/ALGORITHM.md), while distinct motions are priced hundreds of times above.
-constexpr double kRefitCandidateRatio = 20.0;
-
 // Newton decrement g^T H^-1 g: how much the cost falls when the label takes its Gauss-Newton step.
 double newtonDecrement(const Matrix6d& H, const Vector6d& g) { return g.dot(withRidge(H).ldlt().solve(g)); }
 

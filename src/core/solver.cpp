@@ -293,7 +293,7 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   // Which segment is in front of which, on frame 1's points at the label level (a stream's warm start has them on the
   // host already).
   DepthOrder depth_order;
-  if (!result.segments.empty() && config.world_front_share > 0)
+  if (result.segments.size() >= 2 && config.world_front_share > 0)
     depth_order = depthOrderOf(result.labels, result.segments, backend->framePoints(p.label_level),
                                1 << (p.label_level - p.finest), config.world_depth_edge);
   result.world = estimateStaticWorld(*backend, result.segments, previous ? previous->world.ids : std::vector<int>(),

@@ -174,18 +174,32 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
   // and stay there (docs/decisions/0011); things that move are in front of the room.
   if (config.world_joins_pieces && depth_order && depth_order->segments == n && config.world_front_share > 0 &&
       world.chosen_by != "prior" && int(world.labels.size()) < n) {
-    const LabelCostModel under_world =
-        labels.costModel(std::vector<Vector6d>(std::size_t(n), twists[std::size_t(start)]), use_occlusion, config);
     const std::vector<int> chosen = world.labels;
+    // Candidates: not in front of the world, and not priced by their own quadratic model far beyond what the test
+    // allows (a distinct motion), so that a pair of a room and people pays no pass.
+    const Vector6d& world_twist = twists[std::size_t(start)];
+    std::vector<int> candidates;
     for (int i = 0; i < n; ++i) {
-      if (std::find(chosen.begin(), chosen.end(), i) != chosen.end() || own.pixels[std::size_t(i)] < 6.0) continue;
+      if (std::find(chosen.begin(), chosen.end(), i) != chosen.end() || own.pixels[std::size_t(i)] < 6.0 ||
+          inFront({i}, chosen))
+        continue;
+      const Vector6d d = world_twist - twists[std::size_t(i)];
+      const double predicted = d.dot(own.curvature[std::size_t(i)] * d);
+      const double allowed = std::min(config.merge_refit_tolerance * std::max(0.0, own.cost[std::size_t(i)]),
+                                      config.merge_refit_noise_tolerance * noise * own.pixels[std::size_t(i)]);
+      if (predicted < kRefitCandidateRatio * std::max(allowed, 1e-9)) candidates.push_back(i);
+    }
+    const LabelCostModel under_world =
+        candidates.empty()
+            ? LabelCostModel()
+            : labels.costModel(std::vector<Vector6d>(std::size_t(n), world_twist), use_occlusion, config);
+    for (const int i : candidates) {
       MergeEvidence e;
       e.own_a = e.own_b = own.cost[std::size_t(i)];
       e.increase_a = e.increase_b = under_world.cost[std::size_t(i)] - own.cost[std::size_t(i)];
       e.pixels_a = e.pixels_b = own.pixels[std::size_t(i)];
       e.noise_per_pixel = noise;
-      if (oneMotionExplains(e, config.merge_refit_tolerance, config.merge_refit_noise_tolerance) &&
-          !inFront({i}, chosen))
+      if (oneMotionExplains(e, config.merge_refit_tolerance, config.merge_refit_noise_tolerance))
         world.labels.push_back(i);
     }
   }

@@ -197,6 +197,12 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
                                   const std::vector<std::vector<int>>& groups, const std::vector<Vector6d>& starts,
                                   int iterations, bool use_occlusion, const Config& config);
 
+/// @brief mergeWhereOneMotionExplains refits a pair (and estimateStaticWorld tests a segment under the world's motion)
+/// only where the quadratic model predicts an increase below this many times what may be paid: the model is exact near
+/// the optima and errs by a small factor away from them (measured on the TUM excerpt: docs/ALGORITHM.md), while
+/// distinct motions are priced hundreds of times above.
+inline constexpr double kRefitCandidateRatio = 20.0;
+
 /// @brief What the merge test of two labels a and b measured: each one's data cost under its own motion (own_*), how
 /// much more its pixels pay under the motion refitted on the union (increase_*), its weighted pixels, and the data
 /// term's noise level (the cost per pixel of the widest label under its own motion).
