@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 
 #include <Eigen/Cholesky>
 
@@ -56,14 +55,21 @@ DepthOrder depthOrderOf(const ImageI32& segment_ids, const std::vector<Segment>&
   DepthOrder order;
   order.segments = int(segments.size());
   order.front.assign(segments.size() * segments.size(), 0.0);
-  std::map<int, int> index_of;
-  for (std::size_t i = 0; i < segments.size(); ++i) index_of[segments[i].id] = int(i);
   const int w = points.width, h = points.height;
   std::vector<int> index(std::size_t(w) * std::size_t(h), -1);
+  // Neighbouring pixels mostly share a segment: the last id's index is reused, a new id is looked up among the few
+  // segments.
+  int last_id = 0, last_index = -1;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const auto it = index_of.find(segment_ids(x * step, y * step));
-      if (it != index_of.end() && std::isfinite(points(x, y, 2))) index[std::size_t(y) * w + x] = it->second;
+      const int id = segment_ids(x * step, y * step);
+      if (id != last_id) {
+        last_id = id;
+        last_index = -1;
+        for (std::size_t i = 0; i < segments.size(); ++i)
+          if (segments[i].id == id) last_index = int(i);
+      }
+      if (last_index >= 0 && std::isfinite(points(x, y, 2))) index[std::size_t(y) * w + x] = last_index;
     }
   auto edge = [&](int x0, int y0, int x1, int y1) {
     const int a = index[std::size_t(y0) * w + x0], b = index[std::size_t(y1) * w + x1];
