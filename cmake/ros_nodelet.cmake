@@ -1,5 +1,8 @@
 # The nodelet library, its tools and its tests (gtest + rostest). Included after the core targets.
 
+# What the ROS code includes: the package's headers, ROS's and OpenCV's.
+set(MCFLOW_ROS_INCLUDE_DIRS ${CMAKE_CURRENT_SOURCE_DIR}/include ${catkin_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
+
 add_library(mc_flow_nodelet SHARED
   src/ros/conversions.cpp
   src/ros/input_gate.cpp
@@ -12,8 +15,7 @@ add_library(mc_flow_nodelet SHARED
   src/ros/reconfigure.cpp
   src/ros/startup_report.cpp
   src/ros/mc_flow_nodelet.cpp)
-target_include_directories(mc_flow_nodelet PUBLIC
-  ${CMAKE_CURRENT_SOURCE_DIR}/include ${catkin_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
+target_include_directories(mc_flow_nodelet PUBLIC ${MCFLOW_ROS_INCLUDE_DIRS})
 target_link_libraries(mc_flow_nodelet PUBLIC mc_flow_core ${catkin_LIBRARIES} ${OpenCV_LIBS})
 target_compile_options(mc_flow_nodelet PRIVATE -Wall -Wextra)
 add_dependencies(mc_flow_nodelet ${PROJECT_NAME}_generate_messages_cpp ${PROJECT_NAME}_gencfg)
@@ -101,8 +103,7 @@ if(MCFLOW_BUILD_TESTS AND CATKIN_ENABLE_TESTING)
     src/ros/message_validation.cpp
     src/ros/conversions.cpp
     src/core/buffer_layout.cpp)
-  target_include_directories(test_message_validation_sanitized PRIVATE
-    ${CMAKE_CURRENT_SOURCE_DIR}/include ${catkin_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
+  target_include_directories(test_message_validation_sanitized PRIVATE ${MCFLOW_ROS_INCLUDE_DIRS})
   target_compile_options(test_message_validation_sanitized PRIVATE
     -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer -g -O1)
   target_link_options(test_message_validation_sanitized PRIVATE -fsanitize=address,undefined)

@@ -129,6 +129,14 @@ __global__ void addChunksKernel(const double* __restrict__ partials, int chunks,
   if (lane == 0) out[value] = s;
 }
 
+/// @brief What several per-label pixel functors of launchChunkSums read: the labels' planes (plane values each) and
+/// frame 1's points.
+struct LabelPlanesAndPoints {
+  const float* u;
+  DeviceImage points;
+  std::size_t plane;
+};
+
 /// @brief Per label (labels of them), V sums over `pixels` pixels into out[label * V + v]; `partials` is grown to
 /// the chunks' scratch. For the .cu files' launchers.
 template <int V, class Pixel>
@@ -213,6 +221,7 @@ std::unique_ptr<DeviceMotionAccumulator> makeDeviceMotionAccumulator(cudaStream_
 
 // ---------------------------------------------------------------- label step (label_optimization.cu)
 /// @brief The label problem on the device (see LabelProblem).
+/// @brief The label step's problem on device buffers (aggregate: brace-initialised in member order).
 struct DeviceLabelProblem {
   int width = 0, height = 0, count = 0;
   const float* data_cost = nullptr;

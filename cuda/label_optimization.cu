@@ -478,16 +478,8 @@ class CudaLabelOptimizer final : public LabelOptimizer {
     upload(outlier_only_.get(), problem.outlier_only.ptr(), plane);
     upload(u_.get(), u.data.data(), plane * n);
     upload(p_.get(), dual.p.data(), plane * n * 2);
-    cuda_detail::DeviceLabelProblem device;
-    device.width = W;
-    device.height = H;
-    device.count = n;
-    device.data_cost = data_cost_.get();
-    device.weight_x = rx_.get();
-    device.weight_y = ry_.get();
-    device.outlier_only = outlier_only_.get();
-    device.regularizer = problem.regularizer;
-    device.lambda = problem.lambda;
+    const cuda_detail::DeviceLabelProblem device{
+        W, H, n, data_cost_.get(), rx_.get(), ry_.get(), outlier_only_.get(), problem.regularizer, problem.lambda};
     const LabelStats stats = engine_.run(device, u_.get(), p_.get(), iterations, tolerance);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(u.data.data(), u_.get(), plane * n * sizeof(float), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_CHECK(

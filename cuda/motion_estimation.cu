@@ -66,6 +66,28 @@ constexpr long long kPairBlocks = 16384;        // accumulatePairs' grid: above 
 constexpr int kLabelMaskWords = (kMaxMotionLabels + 63) / 64;
 constexpr int kLabelCost = kUpper + 6, kLabelPixels = kUpper + 7;
 
+/// One staging buffer carved into consecutive arrays, each on a 16-byte boundary: one copy moves them all up, and a run
+/// of adjacent arrays comes down in one copy (from an array's offset to the end).
+class StagingLayout {
+ public:
+  /// Room for `count` values of T after the arrays so far; returns its offset [bytes].
+  template <typename T>
+  std::size_t add(std::size_t count) {
+    const std::size_t offset = (bytes_ + 15) / 16 * 16;
+    bytes_ = offset + count * sizeof(T);
+    return offset;
+  }
+  std::size_t bytes() const { return bytes_; }
+  /// The array at `offset` in a host or device copy of the buffer.
+  template <typename T>
+  static T* at(unsigned char* base, std::size_t offset) {
+    return reinterpret_cast<T*>(base + offset);
+  }
+
+ private:
+  std::size_t bytes_ = 0;
+};
+
 /// One motion label's linearisation point as the CPU uses it: the transform and left Jacobian in float
 /// (row-major), the twist in double (blended pixels mix twists before their exp).
 struct LabelMotion {
@@ -1136,41 +1158,37 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     std::vector<int> owner(std::size_t(n), -1);
     for (int g = 0; g < group_count; ++g)
       for (const int i : groups[std::size_t(g)]) owner[std::size_t(i)] = g;
-    const std::size_t motion_bytes = std::size_t(n) * sizeof(LabelMotion);
-    const std::size_t owner_bytes = (std::size_t(n) * sizeof(int) + 15) / 16 * 16;
-    const std::size_t state_bytes = std::size_t(group_count) * sizeof(UnionRefitState);
-    const std::size_t cost_bytes = std::size_t(n) * sizeof(double);
-    const std::size_t staging_bytes = motion_bytes + owner_bytes + state_bytes + cost_bytes;
-    level_staging_.reserve(staging_bytes);
-    level_device_.reserve(staging_bytes);
-    unsigned char* host = level_staging_.get();
-    auto* motions = reinterpret_cast<LabelMotion*>(host);
-    auto* group_of_label = reinterpret_cast<int*>(host + motion_bytes);
-    auto* state = reinterpret_cast<UnionRefitState*>(host + motion_bytes + owner_bytes);
-    auto* member_cost = reinterpret_cast<double*>(host + motion_bytes + owner_bytes + state_bytes);
+    StagingLayout staged;
+    const std::size_t motions_at = staged.add<LabelMotion>(n), owner_at = staged.add<int>(n),
+                      state_at = staged.add<UnionRefitState>(group_count), cost_at = staged.add<double>(n);
+    unsigned char* host = reserveStaging(staged);
+    auto* motions = StagingLayout::at<LabelMotion>(host, motions_at);
+    auto* group_of_label = StagingLayout::at<int>(host, owner_at);
+    auto* member_cost = StagingLayout::at<double>(host, cost_at);
     for (int i = 0; i < n; ++i) {
       const int g = owner[std::size_t(i)];
       motions[i] = labelMotion(g >= 0 ? starts[std::size_t(g)] : twists[std::size_t(i)]);
       group_of_label[i] = g;
       member_cost[i] = 0.0;
     }
+    auto* state = StagingLayout::at<UnionRefitState>(host, state_at);
     for (int g = 0; g < group_count; ++g) {
       UnionRefitState& st = state[g];
       st = UnionRefitState{};
       for (int k = 0; k < 6; ++k) st.twist[k] = st.proposed[k] = starts[std::size_t(g)](k);
       st.damping = config.motion_damping;
     }
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(level_device_.get(), host, staging_bytes, cudaMemcpyHostToDevice, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(level_device_.get(), host, staged.bytes(), cudaMemcpyHostToDevice, s));
     unsigned char* device = level_device_.get();
     UnionRefitParams q;
     q.sums = sums_.get();
-    q.group_of_label = reinterpret_cast<const int*>(device + motion_bytes);
+    q.group_of_label = StagingLayout::at<int>(device, owner_at);
     q.n = n;
     q.groups = group_count;
     q.min_damping = config.motion_damping;
-    q.state = reinterpret_cast<UnionRefitState*>(device + motion_bytes + owner_bytes);
-    q.member_cost = reinterpret_cast<double*>(device + motion_bytes + owner_bytes + state_bytes);
-    q.motions = reinterpret_cast<LabelMotion*>(device);
+    q.state = StagingLayout::at<UnionRefitState>(device, state_at);
+    q.member_cost = StagingLayout::at<double>(device, cost_at);
+    q.motions = StagingLayout::at<LabelMotion>(device, motions_at);
     const unsigned blocks = unsigned((group_count + 63) / 64);
     for (int pass = 0; pass <= iterations; ++pass) {
       enqueueSums(layout, nullptr, q.motions, false);
@@ -1180,7 +1198,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       MCFLOW_CUDA_CHECK_LAUNCH("unionRefitStep");
     }
     // Down: the states and the members' costs (adjacent), one wait.
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(state, q.state, state_bytes + cost_bytes, cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(state, q.state, staged.bytes() - state_at, cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_WAIT(s);
     for (int g = 0; g < group_count; ++g) {
       const UnionRefitState& st = state[g];
@@ -1209,24 +1227,21 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     const int iterations = config.motion_iterations_per_level;
 
     // Up: the linearisation points, the step control's start and the loop state, in one staging buffer.
-    const std::size_t motion_bytes = std::size_t(n) * sizeof(LabelMotion);
-    const std::size_t control_bytes = std::size_t(n) * sizeof(MotionLabelControl);
-    const std::size_t twist_bytes = std::size_t(n) * 6 * sizeof(double);
-    const std::size_t staging_bytes = motion_bytes + control_bytes + twist_bytes + sizeof(IrlsState);
-    level_staging_.reserve(staging_bytes);
-    level_device_.reserve(staging_bytes);
-    unsigned char* host = level_staging_.get();
-    auto* motions = reinterpret_cast<LabelMotion*>(host);
-    auto* control = reinterpret_cast<MotionLabelControl*>(host + motion_bytes);
-    auto* xi = reinterpret_cast<double*>(host + motion_bytes + control_bytes);
-    auto* state = reinterpret_cast<IrlsState*>(host + motion_bytes + control_bytes + twist_bytes);
+    StagingLayout staged;
+    const std::size_t motions_at = staged.add<LabelMotion>(n), control_at = staged.add<MotionLabelControl>(n),
+                      twists_at = staged.add<double>(6 * std::size_t(n)), state_at = staged.add<IrlsState>(1);
+    unsigned char* host = reserveStaging(staged);
+    auto* motions = StagingLayout::at<LabelMotion>(host, motions_at);
+    auto* control = StagingLayout::at<MotionLabelControl>(host, control_at);
+    auto* xi = StagingLayout::at<double>(host, twists_at);
+    auto* state = StagingLayout::at<IrlsState>(host, state_at);
     for (int i = 0; i < n; ++i) {
       motions[i] = labelMotion(twists[std::size_t(i)]);
       startMotionLabelControl(twists[std::size_t(i)].data(), config.motion_damping, control[i]);
       for (int k = 0; k < 6; ++k) xi[6 * i + k] = twists[std::size_t(i)](k);
     }
     *state = IrlsState{0, int(MotionStop::IterationLimit), 0, 0, 0, 0.0, 0.0};
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(level_device_.get(), host, staging_bytes, cudaMemcpyHostToDevice, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(level_device_.get(), host, staged.bytes(), cudaMemcpyHostToDevice, s));
     unsigned char* device = level_device_.get();
 
     StepParams q;
@@ -1236,10 +1251,10 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     q.min_damping = config.motion_damping;
     q.min_update = config.motion_min_update;
     q.min_coupling = config.motion_min_coupling;
-    q.motions = reinterpret_cast<LabelMotion*>(device);
-    q.control = reinterpret_cast<MotionLabelControl*>(device + motion_bytes);
-    q.twists = reinterpret_cast<double*>(device + motion_bytes + control_bytes);
-    q.state = reinterpret_cast<IrlsState*>(device + motion_bytes + control_bytes + twist_bytes);
+    q.motions = StagingLayout::at<LabelMotion>(device, motions_at);
+    q.control = StagingLayout::at<MotionLabelControl>(device, control_at);
+    q.twists = StagingLayout::at<double>(device, twists_at);
+    q.state = StagingLayout::at<IrlsState>(device, state_at);
     const std::size_t matrix_bytes = std::size_t(6 * n + 1) * std::size_t(6 * n + 1) * sizeof(double);
     const std::size_t panel_bytes = std::size_t(6 * n + 1) * 6 * sizeof(double);
     q.matrix_in_shared = matrix_bytes + panel_bytes + step_static_shared_ <= max_shared_bytes_;
@@ -1257,8 +1272,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       MCFLOW_CUDA_CHECK_LAUNCH("irlsStep");
     }
     // Down: the accepted twists and the state (the control array and the state are adjacent).
-    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(control, q.control, control_bytes + twist_bytes + sizeof(IrlsState),
-                                      cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(control, q.control, staged.bytes() - control_at, cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_WAIT(s);
     for (int i = 0; i < n; ++i)
       for (int k = 0; k < 6; ++k) twists[std::size_t(i)](k) = control[i].accepted_twist[k];
@@ -1460,6 +1474,13 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   PinnedBuffer<LabelMotion> host_motions_;
   PinnedBuffer<double> host_sums_;
   // The device IRLS loop: its motions, step control, twists and state in one buffer, staged in one.
+  // The host staging buffer and its device copy, grown to `layout`; returns the host one.
+  unsigned char* reserveStaging(const StagingLayout& layout) {
+    level_staging_.reserve(layout.bytes());
+    level_device_.reserve(layout.bytes());
+    return level_staging_.get();
+  }
+
   PinnedBuffer<unsigned char> level_staging_;
   DeviceBuffer<unsigned char> level_device_;
   DeviceBuffer<double> step_matrix_;  // a group's matrix where it does not fit in shared memory

@@ -71,13 +71,7 @@ __global__ void occlusionTestKernel(const OcclusionParams q, const long long* __
 
 void launchOcclusion(const DeviceLevel& level, const float* u, int count, const double* motions, const Config& config,
                      int* counts, long long* targets, float* warped_z, std::uint8_t* occluded, cudaStream_t stream) {
-  OcclusionParams q;
-  q.level = level;
-  q.u = u;
-  q.count = count;
-  q.motions = motions;
-  q.kz = float(config.occlusion_kz);
-  q.ko = float(config.occlusion_ko);
+  const OcclusionParams q{level, u, count, motions, float(config.occlusion_kz), float(config.occlusion_ko)};
   const std::size_t plane = std::size_t(level.width) * level.height;
   const unsigned blocks = unsigned((plane + kThreads - 1) / kThreads);
   MCFLOW_CUDA_CHECK(cudaMemsetAsync(counts, 0, plane * sizeof(int), stream));

@@ -58,10 +58,7 @@ __global__ void outputsKernel(const DeviceImage points, float* __restrict__ u, i
 }
 
 // Pixel k's share of a motion label's centroid sums: u-weighted x, y, z of the valid points, and u.
-struct CentroidPixel {
-  const float* u;
-  DeviceImage points;
-  std::size_t plane;
+struct CentroidPixel : LabelPlanesAndPoints {
   __device__ void operator()(int label, std::size_t k, double* m) const {
     const float z = points.data[k * 3 + 2];
     const double w = u[label * plane + k];
@@ -86,7 +83,7 @@ void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, cons
 void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels,
                              DeviceBuffer<double>& scratch, double* out, cudaStream_t stream) {
   const std::size_t plane = std::size_t(points.width) * points.height;
-  launchChunkSums<kCentroidValues>(CentroidPixel{u, points, plane}, plane, motion_labels, scratch, out, stream,
+  launchChunkSums<kCentroidValues>(CentroidPixel{{u, points, plane}}, plane, motion_labels, scratch, out, stream,
                                    "label centroid sums");
 }
 

@@ -146,10 +146,7 @@ struct SupportPixel {
 };
 
 // Per motion label: count, sum P, sum P P^T (xx xy xz yy yz zz) of its owned pixels (u >= 0.5).
-struct MomentPixel {
-  const float* u;
-  DeviceImage points;
-  std::size_t plane;
+struct MomentPixel : LabelPlanesAndPoints {
   __device__ void operator()(int label, std::size_t k, double* m) const {
     const float z = points.data[k * 3 + 2];
     if (u[label * plane + k] < 0.5f || !isfinite(z)) return;
@@ -293,7 +290,7 @@ void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, D
 void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, DeviceBuffer<double>& scratch,
                         double* out, cudaStream_t stream) {
   const std::size_t plane = std::size_t(points.width) * points.height;
-  launchChunkSums<kMomentValues>(MomentPixel{u, points, plane}, plane, motion_labels, scratch, out, stream,
+  launchChunkSums<kMomentValues>(MomentPixel{{u, points, plane}}, plane, motion_labels, scratch, out, stream,
                                  "owned moments");
 }
 

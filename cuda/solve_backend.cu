@@ -321,16 +321,15 @@ class CudaSolveBackend final : public SolveBackend {
     before_.reserve(values);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(before_.get(), labels(), values * sizeof(float), cudaMemcpyDeviceToDevice, s));
 
-    cuda_detail::DeviceLabelProblem problem;
-    problem.width = L.width;
-    problem.height = L.height;
-    problem.count = count_;
-    problem.data_cost = data_cost_.get();
-    problem.weight_x = weight_x_.get();
-    problem.weight_y = weight_y_.get();
-    problem.outlier_only = outlier_only_.get();
-    problem.regularizer = config.regularizer;
-    problem.lambda = config.lambda();
+    const cuda_detail::DeviceLabelProblem problem{L.width,
+                                                  L.height,
+                                                  count_,
+                                                  data_cost_.get(),
+                                                  weight_x_.get(),
+                                                  weight_y_.get(),
+                                                  outlier_only_.get(),
+                                                  config.regularizer,
+                                                  config.lambda()};
     const LabelStats ls = primal_dual_->run(problem, labels(), dual_.get(), iterations, tolerance);
 
     scalar_.reserve(2);
@@ -403,17 +402,10 @@ class CudaSolveBackend final : public SolveBackend {
       MCFLOW_CUDA_CHECK(
           cudaMemcpyAsync(staged_sums, scalar_.get(), std::size_t(4 * n) * sizeof(double), cudaMemcpyDeviceToHost, s));
 
-    StagedOutputs staged;
-    staged.width = W;
-    staged.height = H;
-    staged.label_count = count_;
-    staged.soft_labels = staged_labels;
-    staged.scene_flow = staged_scene;
-    staged.optical_flow = staged_optical;
-    staged.moved_depth = staged_moved;
-    staged.labels = staged_ids;
-    staged.occlusion = staged_occlusion;
-    // On OpenMP threads, which may not have used this backend's device yet.
+    // The images in StagedOutputs' order; each waited for on OpenMP threads, which may not have used this backend's
+    // device yet.
+    StagedOutputs staged{
+        W, H, count_, staged_labels, staged_scene, staged_optical, staged_moved, staged_ids, staged_occlusion, {}};
     staged.wait_for_image = [this](int i) {
       cudaError_t e = cudaSetDevice(device_);
       if (e == cudaSuccess) e = cudaEventSynchronize(image_downloaded_[i].event);

@@ -19,6 +19,17 @@ namespace {
 // centre sits at input coordinate 2i + 0.5, which is exactly what Intrinsics::scaled(0.5) assumes.
 int halved(int n) { return std::max(1, n / 2); }
 
+// Sorts four values with five compare-exchanges (`order(a, b)` leaves the smaller in a): the same steps whatever the
+// values, in the scalar function and in each lane of the SSE one.
+template <typename T, typename Order>
+void sortFour(T c[4], Order order) {
+  order(c[0], c[1]);
+  order(c[2], c[3]);
+  order(c[0], c[2]);
+  order(c[1], c[3]);
+  order(c[1], c[2]);
+}
+
 // pyramid_pixel::downsampledDepth for an output pixel whose whole 4x4 window lies inside the image (rows
 // r0..r3 = input rows 2y-1..2y+2, window columns x0..x0+3 with x0 = 2x-1): the same float operations in the
 // same order, so the same bits, without the border tests and without branches on the data where the shared
@@ -44,11 +55,7 @@ inline float interiorDownsampledDepth(const float* r0, const float* r1, const fl
     a = lo;
     b = hi;
   };
-  order(c[0], c[1]);
-  order(c[2], c[3]);
-  order(c[0], c[2]);
-  order(c[1], c[3]);
-  order(c[1], c[2]);
+  sortFour(c, order);
   const float reference = c[(n - 1) / 2];
   const float k[4] = {1.f, 3.f, 3.f, 1.f};
   const float* rows[4] = {r0, r1, r2, r3};
@@ -96,11 +103,7 @@ inline void interiorDownsampledDepth4(const float* const rows[4], int x0, float 
     a = lo;
     b = hi;
   };
-  order(c[0], c[1]);
-  order(c[2], c[3]);
-  order(c[0], c[2]);
-  order(c[1], c[3]);
-  order(c[1], c[2]);
+  sortFour(c, order);
   // The lower median c[(n - 1) / 2]: c[1] for n = 3, 4, else c[0].
   const __m128 upper = _mm_castsi128_ps(_mm_cmpgt_epi32(n, _mm_set1_epi32(2)));
   const __m128 reference = _mm_or_ps(_mm_and_ps(upper, c[1]), _mm_andnot_ps(upper, c[0]));

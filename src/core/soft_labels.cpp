@@ -65,10 +65,17 @@ ImageI32 SoftLabels::argmax() const {
   return out;
 }
 
+namespace {
+// The checked input of a resampling of `u` and its output, out_width x out_height with u's labels.
+SoftLabels resizedOutput(const char* what, const SoftLabels& u, int out_width, int out_height) {
+  requireLabels(what, u);
+  requireSize(what, out_width, out_height);
+  return SoftLabels(out_width, out_height, u.count);
+}
+}  // namespace
+
 SoftLabels downsampleLabels(const SoftLabels& u, int out_width, int out_height) {
-  requireLabels("downsampleLabels", u);
-  requireSize("downsampleLabels", out_width, out_height);
-  SoftLabels out(out_width, out_height, u.count);
+  SoftLabels out = resizedOutput("downsampleLabels", u, out_width, out_height);
   const int w = u.width, h = u.height;
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < out_height; ++y) {
@@ -90,9 +97,7 @@ SoftLabels downsampleLabels(const SoftLabels& u, int out_width, int out_height) 
 }
 
 SoftLabels upsampleLabels(const SoftLabels& u, int out_width, int out_height) {
-  requireLabels("upsampleLabels", u);
-  requireSize("upsampleLabels", out_width, out_height);
-  SoftLabels out(out_width, out_height, u.count);
+  SoftLabels out = resizedOutput("upsampleLabels", u, out_width, out_height);
   const int w = u.width, h = u.height;
 
   // Pixel-centre-aligned taps (soft_labels_pixel::upsampleTap), once per column and per row.

@@ -414,6 +414,12 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
   std::vector<LabelLineage> lineage(twists.size());
   std::copy_n(start.carried_lineage.begin(), std::min(lineage.size(), start.carried_lineage.size()), lineage.begin());
   std::vector<LabelLineage>* lineage_or_null = start.carried_lineage.empty() ? nullptr : &lineage;
+  // The label-count update on the energy at the current twists (tiny labels removed when `remove_small`); `model`
+  // receives the cost model it decided on.
+  auto updateCount = [&](bool remove_small, LabelCostModel& model) {
+    model = labels.costModel(twists, occlusions, config);
+    return adaptLabelCount(labels, twists, model, p.valid_label_level, config, remove_small, lineage_or_null);
+  };
   auto t = Clock::now();
 
   // ---- Algorithm 1. An outer iteration that split labels is followed by another (up to the larger of the start's
@@ -447,10 +453,8 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     // Labels whose motions came out alike are merged before the label step as well as after it: the
     // result is the same as merging one step later, but the label step then runs on a few labels, not 20.
     t = Clock::now();
-    LabelCostModel early_model = labels.costModel(twists, occlusions, config);
-    const AdaptationStats early =
-        adaptLabelCount(labels, twists, early_model, p.valid_label_level, config, false, lineage_or_null);
-    stats.merged += early.merged;
+    LabelCostModel early_model;
+    stats.merged += updateCount(false, early_model).merged;
     // Labels whose pixels the largest label's motion explains as well (Config::merge_occlusion_absorbers), from the
     // second outer iteration on: in the first, small labels' motions are still poor, and merging them there cost the
     // pairs with people their residuals (docs/ACCURACY.md). It leaves the occlusion mask of the labels it returns.
@@ -475,9 +479,8 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
 
     // 3. update n: merges and removals on the energy, then (while a motion step follows) splits
     t = Clock::now();
-    LabelCostModel model = labels.costModel(twists, occlusions, config);
-    const AdaptationStats as =
-        adaptLabelCount(labels, twists, model, p.valid_label_level, config, true, lineage_or_null);
+    LabelCostModel model;
+    const AdaptationStats as = updateCount(true, model);
     stats.merged += as.merged;
     stats.removed = as.removed;
     stats.smallest_refused_merge = as.smallest_refused_merge;

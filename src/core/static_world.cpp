@@ -106,6 +106,16 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
         twistCovariance(own.curvature[std::size_t(i)], own.cost[std::size_t(i)], own.pixels[std::size_t(i)], config);
   const int widest = int(std::max_element(own.pixels.begin(), own.pixels.end()) - own.pixels.begin());
   const double noise = own.cost[std::size_t(widest)] / std::max(1.0, own.pixels[std::size_t(widest)]);
+  // Whether one motion (the pass `under` of every segment at it) explains segment i's pixels as well as its own motion
+  // does: the merge test's rule, against the widest segment's noise level.
+  auto explainedBy = [&](const LabelCostModel& under, int i) {
+    MergeEvidence e;
+    e.own_a = e.own_b = own.cost[std::size_t(i)];
+    e.increase_a = e.increase_b = under.cost[std::size_t(i)] - own.cost[std::size_t(i)];
+    e.pixels_a = e.pixels_b = own.pixels[std::size_t(i)];
+    e.noise_per_pixel = noise;
+    return oneMotionExplains(e, config.merge_refit_tolerance, config.merge_refit_noise_tolerance);
+  };
   // Whether group a is in front of group b where they meet (a moving thing in front of the room it moves in).
   auto inFront = [&](const std::vector<int>& a, const std::vector<int>& b) {
     if (!depth_order || depth_order->segments != n || config.world_front_share <= 0) return false;
@@ -121,13 +131,7 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
         labels.costModel(std::vector<Vector6d>(std::size_t(n), prior_twist), use_occlusion, config);
     for (int i = 0; i < n; ++i) {
       if (own.pixels[std::size_t(i)] < 6.0) continue;  // no evidence either way
-      MergeEvidence e;
-      e.own_a = e.own_b = own.cost[std::size_t(i)];
-      e.increase_a = e.increase_b = under_prior.cost[std::size_t(i)] - own.cost[std::size_t(i)];
-      e.pixels_a = e.pixels_b = own.pixels[std::size_t(i)];
-      e.noise_per_pixel = noise;
-      if (oneMotionExplains(e, config.merge_refit_tolerance, config.merge_refit_noise_tolerance))
-        world.labels.push_back(i);
+      if (explainedBy(under_prior, i)) world.labels.push_back(i);
     }
     if (!world.labels.empty()) world.chosen_by = "prior";
   }
@@ -200,13 +204,7 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
             ? LabelCostModel()
             : labels.costModel(std::vector<Vector6d>(std::size_t(n), world_twist), use_occlusion, config);
     for (const int i : candidates) {
-      MergeEvidence e;
-      e.own_a = e.own_b = own.cost[std::size_t(i)];
-      e.increase_a = e.increase_b = under_world.cost[std::size_t(i)] - own.cost[std::size_t(i)];
-      e.pixels_a = e.pixels_b = own.pixels[std::size_t(i)];
-      e.noise_per_pixel = noise;
-      if (oneMotionExplains(e, config.merge_refit_tolerance, config.merge_refit_noise_tolerance))
-        world.labels.push_back(i);
+      if (explainedBy(under_world, i)) world.labels.push_back(i);
     }
   }
 

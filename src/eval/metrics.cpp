@@ -197,30 +197,33 @@ double segmentationAgreement(const ImageI32& estimate, const ImageI32& truth) {
   return double(matched) / double(total);
 }
 
-double maskAgreement(const ImageU8& a, const ImageU8& b, const ImageU8* valid) {
-  requireSameSize("maskAgreement", "a", a, "b", b);
-  if (valid) requireSameSize("maskAgreement", "a", a, "valid mask", *valid);
-  std::size_t agree = 0, total = 0;
+namespace {
+// Calls visit(in_a, in_b) for every pixel of two masks of one size that `valid` (null: every pixel) keeps.
+template <typename Visit>
+void visitMasks(const char* name, const ImageU8& a, const ImageU8& b, const ImageU8* valid, Visit visit) {
+  requireSameSize(name, "a", a, "b", b);
+  if (valid) requireSameSize(name, "a", a, "valid mask", *valid);
   const std::size_t n = a.pixelCount();
-  for (std::size_t k = 0; k < n; ++k) {
-    if (valid && valid->data[k] == 0) continue;
+  for (std::size_t k = 0; k < n; ++k)
+    if (!valid || valid->data[k] != 0) visit(a.data[k] != 0, b.data[k] != 0);
+}
+}  // namespace
+
+double maskAgreement(const ImageU8& a, const ImageU8& b, const ImageU8* valid) {
+  std::size_t agree = 0, total = 0;
+  visitMasks("maskAgreement", a, b, valid, [&](bool in_a, bool in_b) {
     ++total;
-    agree += (a.data[k] != 0) == (b.data[k] != 0) ? 1 : 0;
-  }
+    agree += in_a == in_b ? 1 : 0;
+  });
   return total > 0 ? double(agree) / double(total) : 0.0;
 }
 
 double maskIou(const ImageU8& a, const ImageU8& b, const ImageU8* valid) {
-  requireSameSize("maskIou", "a", a, "b", b);
-  if (valid) requireSameSize("maskIou", "a", a, "valid mask", *valid);
   std::size_t both = 0, either = 0;
-  const std::size_t n = a.pixelCount();
-  for (std::size_t k = 0; k < n; ++k) {
-    if (valid && valid->data[k] == 0) continue;
-    const bool in_a = a.data[k] != 0, in_b = b.data[k] != 0;
+  visitMasks("maskIou", a, b, valid, [&](bool in_a, bool in_b) {
     both += in_a && in_b;
     either += in_a || in_b;
-  }
+  });
   return either > 0 ? double(both) / double(either) : 1.0;
 }
 

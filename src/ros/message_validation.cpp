@@ -46,14 +46,10 @@ EncodingLayout validateImage(const sensor_msgs::Image& image, ImageRole role, st
     throw FrameInputError(InputProblem::Layout, std::string(what) + " (" + image.encoding + "): is_bigendian is " +
                                                     std::to_string(int(image.is_bigendian)) + ", expected 0 or 1");
   }
-  mc_flow::BufferLayout buffer;
-  buffer.width = image.width;
-  buffer.height = image.height;
-  buffer.channels = std::uint64_t(layout.channels);
-  buffer.value_bytes = std::uint64_t(layout.value_bytes);
-  buffer.row_step = image.step;
-  buffer.available_bytes = image.data.size();
-  buffer.exact = true;
+  // A message's data must be exactly height * step bytes.
+  const mc_flow::BufferLayout buffer{
+      image.width,       image.height, std::uint64_t(layout.channels), std::uint64_t(layout.value_bytes), image.step,
+      image.data.size(), true};
   const std::string problem = mc_flow::bufferLayoutProblem(buffer, max_pixels);
   if (!problem.empty()) {
     std::uint64_t pixels = 0;
