@@ -153,8 +153,8 @@ TEST_F(PriorFrame, WithoutTheTransformItWarnsFallsBackAndTakesThePriorAgainOnceI
     const auto pair = solve(t, stamps[std::size_t(t)]);
     const std::string which = "pair " + std::to_string(t) + " without a transform";
     ASSERT_TRUE(pair) << "no ~segments for " << which << ": the nodelet must go on" << watcher_->dump();
-    // Chosen otherwise: the widest segment, then the previous pair's world.
-    const std::set<std::string> fallbacks = {"widest", "previous", "outgrown"};
+    // Chosen otherwise: the widest segment (or the one behind it), then the previous pair's world.
+    const std::set<std::string> fallbacks = {"widest", "previous", "outgrown", "behind"};
     EXPECT_TRUE(fallbacks.count(pair->world_chosen_by)) << which << ": '" << pair->world_chosen_by << "'";
     expectTheBackgroundIsTheWorld(*pair, which);
   }
