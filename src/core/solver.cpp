@@ -290,15 +290,15 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   // on the labels the outputs came from.
   t = Clock::now();
   std::vector<Matrix6d> covariances;
-  // Which segment is in front of which, on frame 1's points at the label level, or a coarser level at least 160
-  // pixels wide (a host pass: its cost stays that of 160x120 at any input size; the edges of a thing worth a segment
-  // are still tens of pixels there).
+  // Which segment is in front of which, on frame 1's points at the coarsest level from the processing level on that is
+  // still at least 160 pixels wide (a host pass of about 160x120 pixels from 320x240 or 640x480 input; the edges of a
+  // thing worth a segment are still tens of pixels there). The result's ids are at the input resolution: 2^level apart.
   DepthOrder depth_order;
   if (result.segments.size() >= 2 && config.world_front_share > 0) {
-    int order_level = p.label_level;
+    int order_level = p.finest;
     while (order_level + 1 < p.levels && pyramidLevelExtent(p.width, order_level + 1) >= 160) ++order_level;
-    depth_order = depthOrderOf(result.labels, result.segments, backend->framePoints(order_level),
-                               1 << (order_level - p.finest), config.world_depth_edge);
+    depth_order = depthOrderOf(result.labels, result.segments, backend->framePoints(order_level), 1 << order_level,
+                               config.world_depth_edge);
   }
   result.world = estimateStaticWorld(*backend, result.segments, previous ? previous->world.ids : std::vector<int>(),
                                      camera_motion_prior, config.detect_occlusions, config, covariances, &depth_order);

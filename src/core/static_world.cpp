@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <Eigen/Cholesky>
 
@@ -26,14 +27,19 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
 }
 
 namespace {
-// Fewer depth edges than this between two candidates say nothing about which is in front (pixels of a level 160 to
-// 320 wide: a few pixels of noise along a seam).
+// Fewer depth edges than this between two candidates say nothing about which is in front (pixels of a level about
+// 160 pixels wide: a few pixels of noise along a seam).
 constexpr double kMinDepthEdges = 20;
+// A seam is a depth edge only where its jump is more than this many times the depth step next to it on either side.
+constexpr double kSurfaceJump = 3.0;
 }  // namespace
 
 double DepthOrder::frontShare(const std::vector<int>& a, const std::vector<int>& b, double& edges) const {
   double nearer = 0;
   edges = 0;
+  if (segments < 0 || front.size() != std::size_t(segments) * std::size_t(segments))
+    throw InputError("DepthOrder: " + std::to_string(front.size()) + " counts for " + std::to_string(segments) +
+                     " segments");
   for (const int i : a)
     for (const int j : b) {
       if (i < 0 || j < 0 || i >= segments || j >= segments) continue;
@@ -59,10 +65,12 @@ DepthOrder depthOrderOf(const ImageI32& segment_ids, const std::vector<Segment>&
   std::vector<int> index(std::size_t(w) * std::size_t(h), -1);
   // Neighbouring pixels mostly share a segment: the last id's index is reused, a new id is looked up among the few
   // segments.
-  int last_id = 0, last_index = -1;
+  int last_id = std::numeric_limits<int>::min(), last_index = -1;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const int id = segment_ids(x * step, y * step);
+      // The id at the centre of the block of ids the point stands for.
+      const int id = segment_ids(std::min(x * step + step / 2, segment_ids.width - 1),
+                                 std::min(y * step + step / 2, segment_ids.height - 1));
       if (id != last_id) {
         last_id = id;
         last_index = -1;
@@ -71,18 +79,30 @@ DepthOrder depthOrderOf(const ImageI32& segment_ids, const std::vector<Segment>&
       }
       if (last_index >= 0 && std::isfinite(points(x, y, 2))) index[std::size_t(y) * w + x] = last_index;
     }
-  auto edge = [&](int x0, int y0, int x1, int y1) {
-    const int a = index[std::size_t(y0) * w + x0], b = index[std::size_t(y1) * w + x1];
+  // Depth of a point, NaN outside the image (or without depth).
+  auto depth = [&](int x, int y) {
+    return x >= 0 && y >= 0 && x < w && y < h ? double(points(x, y, 2)) : std::numeric_limits<double>::quiet_NaN();
+  };
+  // The seam between pixel (x, y) and (x + dx, y + dy): an edge where the jump is larger than depth_edge and than
+  // kSurfaceJump times the steps on either side of it (a slanted floor or wall changes depth steadily from pixel to
+  // pixel: its seam is no edge).
+  auto edge = [&](int x, int y, int dx, int dy) {
+    const int a = index[std::size_t(y) * w + x], b = index[std::size_t(y + dy) * w + x + dx];
     if (a < 0 || b < 0 || a == b) return;
-    const double za = points(x0, y0, 2), zb = points(x1, y1, 2);
-    if (std::abs(za - zb) <= depth_edge) return;
+    const double za = depth(x, y), zb = depth(x + dx, y + dy);
+    const double jump = std::abs(za - zb);
+    if (jump <= depth_edge) return;
+    const double before = std::abs(depth(x - dx, y - dy) - za), after = std::abs(depth(x + 2 * dx, y + 2 * dy) - zb);
+    if ((std::isfinite(before) && jump <= kSurfaceJump * before) ||
+        (std::isfinite(after) && jump <= kSurfaceJump * after))
+      return;
     const int nearer = za < zb ? a : b, farther = za < zb ? b : a;
     order.front[std::size_t(nearer) * segments.size() + std::size_t(farther)] += 1;
   };
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      if (x + 1 < w) edge(x, y, x + 1, y);
-      if (y + 1 < h) edge(x, y, x, y + 1);
+      if (x + 1 < w) edge(x, y, 1, 0);
+      if (y + 1 < h) edge(x, y, 0, 1);
     }
   return order;
 }
@@ -208,8 +228,8 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
     }
   }
 
-  // One robust rigid fit on the union, from the motion of its widest member: a world split into segments gives one
-  // motion, not the widest piece's.
+  // One robust rigid fit on the union, from the motion of its widest chosen member: a world split into segments gives
+  // one motion, not the widest piece's.
   const std::vector<UnionFit> fit = refitUnions(labels, twists, {world.labels}, {twists[std::size_t(start)]},
                                                 config.world_fit_iterations, use_occlusion, config);
   world.twist = fit[0].twist;

@@ -286,6 +286,34 @@ TEST(StaticWorld, AWorldOutgrownByAnotherSegmentIsLeftForIt) {
   EXPECT_EQ(left.world.ids, std::vector<int>{room_id});
 }
 
+TEST(StaticWorld, TheDepthOrderOfASolveAboveTheInputResolutionPutsThePartsInFront) {
+  // The solver reads the result's ids (at the input resolution) at 2^level steps over a level's points. A solve that
+  // finishes at level 1 of a 320x240 pair: every part that meets the room on enough depth edges is in front of it.
+  const RoomScene scene;
+  Config config = cpuConfig();
+  config.processing_level = 1;
+  Solver solver(config);
+  const Result r = solver.solve(scene.pair.frame1, scene.pair.frame2, scene.pair.intrinsics);
+  ASSERT_EQ(r.labels.width, scene.pair.frame1.width());
+  ASSERT_GE(r.segments.size(), 2u);
+  const int level = RoomScene::kLevel;
+  const DepthOrder order = depthOrderOf(r.labels, r.segments, scene.pyr1[level].points, 1 << level, 0.05);
+  const int room = r.world.labels.front();
+  int parts_in_front = 0;
+  for (int i = 0; i < int(r.segments.size()); ++i) {
+    if (i == room) continue;
+    double edges = 0;
+    const double share = order.frontShare({i}, {room}, edges);
+    std::printf("segment %d: %.0f depth edges with the room, %.2f of them in front\n", r.segments[std::size_t(i)].id,
+                edges, share);
+    if (edges >= 20) {
+      EXPECT_GT(share, 0.7) << "segment " << r.segments[std::size_t(i)].id;
+      ++parts_in_front;
+    }
+  }
+  EXPECT_GE(parts_in_front, 2);
+}
+
 TEST(StaticWorld, TheDepthOrderDecidesBetweenTheMemoryAndTheWidestSegment) {
   // Two labels on a rendered pair: label 0 the room (the widest), label 1 every part. A hand-made depth order says the
   // widest is in front of the other (a thing near the camera covering most of the view).
@@ -369,6 +397,13 @@ TEST(DepthOrder, CountsTheEdgesWhereOneSegmentIsInFrontOfAnother) {
   EXPECT_DOUBLE_EQ(edges, 0.0);
   // A jump below the edge threshold is no edge.
   EXPECT_DOUBLE_EQ(depthOrderOf(ids, segments, points, 1, 1.5).front[1 * 2 + 0], 0.0);
+  // Nor is the seam of a slanted surface: depth growing 0.2 m per column across the two segments' seam.
+  ImageF slanted(w, h, 3, 0.f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) slanted(x, y, 2) = 1.f + 0.2f * float(x);
+  EXPECT_DOUBLE_EQ(depthOrderOf(ids, segments, slanted, 1, 0.05).front[1 * 2 + 0] +
+                       depthOrderOf(ids, segments, slanted, 1, 0.05).front[0 * 2 + 1],
+                   0.0);
   // Ids of a level twice as fine: the same order from every second id.
   ImageI32 fine(2 * w, 2 * h, 1, 0);
   for (int y = 0; y < 2 * h; ++y)

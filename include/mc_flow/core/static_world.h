@@ -50,9 +50,11 @@ struct DepthOrder {
 };
 
 /// @brief The depth order of `segments` over `segment_ids` (Result::labels: a Segment::id per pixel, 0 for none) and
-/// `points` (frame 1's points, 3 channels, NaN z where depth is invalid) of a level `step` times coarser (the ids are
-/// read at x * step, y * step). Pixels whose id is not a segment's, or without depth, take no part. Throws InputError
-/// when `points` is not 3 channels or does not fit inside the ids at that step.
+/// `points` (frame 1's points, 3 channels, NaN z where depth is invalid) of a level `step` times coarser (point (x, y)
+/// takes the id at the centre of its step x step block). Pixels whose id is not a segment's, or without depth, take no
+/// part. A seam is a depth edge where the jump exceeds `depth_edge` and three times the depth step beside it on either
+/// side (a slanted surface is no edge). Throws InputError when `points` is not 3 channels or does not fit inside the
+/// ids at that step.
 DepthOrder depthOrderOf(const ImageI32& segment_ids, const std::vector<Segment>& segments, const ImageF& points,
                         int step, double depth_edge);
 
@@ -71,8 +73,11 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
 /// are in front of it (`depth_order`, Config::world_front_share: "behind") or it holds more than
 /// Config::world_outgrown_ratio times their pixels and is not in front of them ("outgrown"); else the widest segment,
 /// or the second widest when the widest is in front of it ("behind"). `depth_order` null: depth order decides nothing.
-/// Also fills each segment's twist covariance (`segment_covariances`, in `segments` order). Passes over the label
-/// level's pixels: one, one more with a prior, and one per fit iteration.
+/// Then, unless a prior chose (Config::world_joins_pieces), every other segment that the chosen world's motion (its
+/// widest segment's) explains and that is not in front of the world joins it. The world's motion is fitted on the
+/// union from its widest chosen segment's twist. Also fills each segment's twist covariance (`segment_covariances`, in
+/// `segments` order). Passes over the label level's pixels: one, one more with a prior, one more where a segment is a
+/// candidate to join, and one per fit iteration.
 StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& segments,
                                 const std::vector<int>& previous_world_ids, const Eigen::Matrix4d* camera_motion_prior,
                                 bool use_occlusion, const Config& config, std::vector<Matrix6d>& segment_covariances,
