@@ -211,11 +211,14 @@ class DeviceMotionAccumulator : public MotionAccumulator {
   /// the device memory must stay unchanged while accumulate() is used.
   virtual void bind(const DeviceLevel& level, const float* labels, int count, const std::uint8_t* occluded,
                     const Config& config) = 0;
-  /// @brief refitUnions (label_adaptation.h) on the bound level and labels: every pass and step on the device, one
-  /// wait. The arguments are refitUnions' (checked there).
+  /// @brief refitUnions (label_adaptation.h) on the bound level and labels: every pass and step on the device, the
+  /// batches (unionBatches) of a pass in one launch, one wait. The arguments are refitUnions' (checked there).
   virtual void refitUnions(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
-                           const std::vector<Vector6d>& starts, int iterations, const Config& config,
-                           std::vector<UnionFit>& fits) = 0;
+                           const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
+                           const Config& config, std::vector<UnionFit>& fits) = 0;
+  /// @brief accumulateLabelBlocks at each set of twists, the sets as batches of one launch, one wait.
+  virtual void accumulateLabelBlockSets(const std::vector<std::vector<Vector6d>>& twist_sets,
+                                        std::vector<MotionNormalEquations>& out) = 0;
 };
 std::unique_ptr<DeviceMotionAccumulator> makeDeviceMotionAccumulator(cudaStream_t stream);
 

@@ -65,6 +65,9 @@ constexpr int kPairChunkPixels = 4 * kThreads;  // pixels per block of accumulat
 constexpr long long kPairBlocks = 16384;        // accumulatePairs' grid: above this, several pairs per block
 constexpr int kLabelMaskWords = (kMaxMotionLabels + 63) / 64;
 constexpr int kLabelCost = kUpper + 6, kLabelPixels = kUpper + 7;
+// Device memory for the block partials of one launch of batched passes (the merge test's pairs): 64 MiB holds about 95
+// batches of 10 labels at 320x240, 17 of 13 labels at 640x480; more batches run in several launches.
+constexpr std::size_t kBatchPartialBytes = std::size_t(64) << 20;
 
 /// One staging buffer carved into consecutive arrays, each on a 16-byte boundary: one copy moves them all up, and a run
 /// of adjacent arrays comes down in one copy (from an array's offset to the end).
@@ -118,7 +121,8 @@ struct KernelParams {
   // queued for its remaining iterations return at once.
   const int* skip = nullptr;
   // False for a cost model's pass (accumulateLabelBlocks): the per-label sums only, no blended pixels stored for
-  // the label pairs' kernel, no chunk masks.
+  // the label pairs' kernel, no chunk masks. Such passes may be batched: blockIdx.y is the batch, its motions are
+  // motions + batch * motion_labels and its block partials follow the previous batch's.
   bool label_pairs = true;
 };
 
@@ -193,6 +197,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
   const int n = p.motion_labels;
   const int block_values = n * kLabelStride + 2;
   const int regions = p.sum_regions;
+  const LabelMotion* motions = p.motions + std::size_t(blockIdx.y) * std::size_t(n);
   for (int k = threadIdx.x; k < regions * block_values; k += blockDim.x) block_sums[k] = 0.0;
   __syncthreads();
 
@@ -243,13 +248,13 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
           for (unsigned long long bits = active_labels[word]; bits != 0ull; bits &= bits - 1ull) {
             const int i = word * 64 + __ffsll(static_cast<long long>(bits)) - 1;
             const double w = double(divRn(rawWeight(p, plane, idx, i, mass), active_mass));
-            for (int k = 0; k < 6; ++k) xi_bar[k] += w * p.motions[i].twist[k];
+            for (int k = 0; k < 6; ++k) xi_bar[k] += w * motions[i].twist[k];
           }
         se3ExpDevice(xi_bar, T);
         se3LeftJacobianDevice(xi_bar, J);
       } else {
-        transform = p.motions[first].transform;
-        left_jacobian = p.motions[first].left_jacobian;
+        transform = motions[first].transform;
+        left_jacobian = motions[first].left_jacobian;
       }
       float P2[3];
       transformPoint(transform, P, P2);
@@ -401,7 +406,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
     }
     __syncthreads();
   }
-  double* partial = p.block_partials + std::size_t(blockIdx.x) * block_values;
+  double* partial = p.block_partials + (std::size_t(blockIdx.y) * gridDim.x + blockIdx.x) * block_values;
   for (int k = threadIdx.x; k < block_values; k += blockDim.x) {
     double sum = 0.0;
     for (int r = 0; r < regions; ++r) sum += block_sums[r * block_values + k];
@@ -409,10 +414,13 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
   }
 }
 
-// Adds the blocks' partial sums in block order: one warp per value, lane l takes blocks l, l + 32, ...
+// Adds the blocks' partial sums in block order: one warp per value, lane l takes blocks l, l + 32, ...; blockIdx.y is
+// the batch (its partials and sums follow the previous batch's).
 __global__ void reduceBlockPartials(const double* __restrict__ partials, int blocks, int values,
                                     double* __restrict__ sums, const int* skip) {
   if (skip && *skip) return;
+  partials += std::size_t(blockIdx.y) * std::size_t(blocks) * std::size_t(values);
+  sums += std::size_t(blockIdx.y) * std::size_t(values);
   const int value = int((std::size_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5);
   const int lane = threadIdx.x & 31;
   if (value >= values) return;  // whole warps leave together (value is warp-uniform)
@@ -914,15 +922,17 @@ struct UnionRefitState {
 };
 
 struct UnionRefitParams {
-  const double* sums = nullptr;         // the pass's per-label sums (kLabelStride values per label)
-  const int* group_of_label = nullptr;  // per motion label: its group, or -1
+  const double* sums = nullptr;         // the pass's per-label sums (kLabelStride values per label), batch after batch
+  std::size_t batch_values = 0;         // values per batch in `sums`
+  const int* batch_of_group = nullptr;  // per group: the batch of the pass it shares
+  const int* group_of_label = nullptr;  // per batch and motion label (batch * n + label): its group, or -1
   int n = 0, groups = 0;
   bool first = false;    // the pass at the starts: take its sums, no acceptance test
   bool propose = false;  // a further pass follows: propose its step and write the members' motions
   double min_damping = 0;
   UnionRefitState* state = nullptr;
-  double* member_cost = nullptr;  // per motion label: its cost at its group's accepted twist
-  LabelMotion* motions = nullptr;
+  double* member_cost = nullptr;   // per batch and motion label: its cost at its group's accepted twist
+  LabelMotion* motions = nullptr;  // per batch and motion label
 };
 
 // x = A^-1 b for a symmetric positive definite 6x6 A (row-major); false when the factorisation fails.
@@ -957,13 +967,19 @@ __global__ void unionRefitStep(const UnionRefitParams q) {
   const int g = int(blockIdx.x * blockDim.x + threadIdx.x);
   if (g >= q.groups) return;
   UnionRefitState& st = q.state[g];
+  // This group's batch: its sums, its labels' groups, costs and motions.
+  const std::size_t batch = std::size_t(q.batch_of_group[g]);
+  const double* sums = q.sums + batch * q.batch_values;
+  const int* group_of_label = q.group_of_label + batch * std::size_t(q.n);
+  double* member_cost = q.member_cost + batch * std::size_t(q.n);
+  LabelMotion* motions = q.motions + batch * std::size_t(q.n);
   // The union's model at the pass's twist: its members' sums, in ascending label order.
   double H[kUpper], grad[6], cost = 0.0, pixels = 0.0;
   for (int k = 0; k < kUpper; ++k) H[k] = 0.0;
   for (int k = 0; k < 6; ++k) grad[k] = 0.0;
   for (int i = 0; i < q.n; ++i) {
-    if (q.group_of_label[i] != g) continue;
-    const double* label = q.sums + std::size_t(i) * kLabelStride;
+    if (group_of_label[i] != g) continue;
+    const double* label = sums + std::size_t(i) * kLabelStride;
     for (int k = 0; k < kUpper; ++k) H[k] += label[k];
     for (int k = 0; k < 6; ++k) grad[k] += label[kUpper + k];
     cost += label[kLabelCost];
@@ -985,7 +1001,7 @@ __global__ void unionRefitStep(const UnionRefitParams q) {
     st.cost = cost;
     st.pixels = pixels;
     for (int i = 0; i < q.n; ++i)
-      if (q.group_of_label[i] == g) q.member_cost[i] = q.sums[std::size_t(i) * kLabelStride + kLabelCost];
+      if (group_of_label[i] == g) member_cost[i] = sums[std::size_t(i) * kLabelStride + kLabelCost];
   }
   if (!q.propose) return;
   // The next step from the accepted model: (H + (damping + ridge) s I) d = -g, s the largest diagonal entry.
@@ -1021,7 +1037,7 @@ __global__ void unionRefitStep(const UnionRefitParams q) {
   se3LeftJacobianDevice(st.proposed, m.left_jacobian);
   for (int k = 0; k < 6; ++k) m.twist[k] = st.proposed[k];
   for (int i = 0; i < q.n; ++i)
-    if (q.group_of_label[i] == g) q.motions[i] = m;
+    if (group_of_label[i] == g) motions[i] = m;
 }
 
 // ----------------------------------------------------------------- host side
@@ -1140,37 +1156,108 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     accumulateSums(twists, out, false);
   }
 
+  void accumulateLabelBlockSets(const std::vector<std::vector<Vector6d>>& twist_sets,
+                                std::vector<MotionNormalEquations>& out) override {
+    if (level_.width <= 0) throw InputError("CUDA motion step: a pass requested before setLevel() or bind()");
+    const int n = motion_labels_, batches = int(twist_sets.size());
+    for (const std::vector<Vector6d>& twists : twist_sets)
+      if (int(twists.size()) != n)
+        throw InputError("CUDA motion step: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
+                         " motion labels");
+    out.assign(twist_sets.size(), MotionNormalEquations());
+    for (MotionNormalEquations& equations : out) equations.reset(n);
+    if (n == 0 || batches == 0) return;
+    const int per_pass = batchesPerPass();
+    if (batches > per_pass) {  // in several passes, each within the memory for the block partials
+      for (int first = 0; first < batches; first += per_pass) {
+        const int last = std::min(batches, first + per_pass);
+        std::vector<MotionNormalEquations> part;
+        accumulateLabelBlockSets({twist_sets.begin() + first, twist_sets.begin() + last}, part);
+        std::move(part.begin(), part.end(), out.begin() + first);
+      }
+      return;
+    }
+    cudaStream_t s = stream_;
+    const Layout layout = reserve(batches);
+    for (int b = 0; b < batches; ++b)
+      for (int i = 0; i < n; ++i)
+        host_motions_.get()[std::size_t(b) * n + i] = labelMotion(twist_sets[std::size_t(b)][std::size_t(i)]);
+    upload(motions_.get(), host_motions_.get(), std::size_t(batches) * n);
+    enqueueSums(layout, nullptr, nullptr, false, batches);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(host_sums_.get(), sums_.get(),
+                                      std::size_t(batches) * layout.block_values * sizeof(double),
+                                      cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_WAIT(s);
+    for (int b = 0; b < batches; ++b)
+      unpack(layout, host_sums_.get() + std::size_t(b) * layout.block_values, out[std::size_t(b)], false);
+  }
+
   void refitUnions(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
-                   const std::vector<Vector6d>& starts, int iterations, const Config& config,
-                   std::vector<UnionFit>& fits) override {
+                   const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
+                   const Config& config, std::vector<UnionFit>& fits) override {
     if (level_.width <= 0) throw InputError("CUDA motion step: refitUnions() called before setLevel() or bind()");
     const int n = motion_labels_, group_count = int(groups.size());
-    if (int(twists.size()) != n || starts.size() != groups.size())
+    if (int(twists.size()) != n || starts.size() != groups.size() || batches.size() != groups.size())
       throw InputError("CUDA refitUnions: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
-                       " motion labels, " + std::to_string(starts.size()) + " starts for " +
-                       std::to_string(group_count) + " groups");
+                       " motion labels, " + std::to_string(starts.size()) + " starts and " +
+                       std::to_string(batches.size()) + " batch numbers for " + std::to_string(group_count) +
+                       " groups");
     fits.assign(groups.size(), UnionFit());
     if (n == 0 || group_count == 0) return;
+    const int batch_count = *std::max_element(batches.begin(), batches.end()) + 1;
+    const int per_pass = batchesPerPass();
+    if (batch_count > per_pass) {  // a group's fit depends on its batch alone: ranges of batches one after the other
+      for (int first = 0; first < batch_count; first += per_pass) {
+        std::vector<std::vector<int>> part_groups;
+        std::vector<int> part_batches, index;
+        std::vector<Vector6d> part_starts;
+        for (int g = 0; g < group_count; ++g)
+          if (batches[std::size_t(g)] >= first && batches[std::size_t(g)] < first + per_pass) {
+            part_groups.push_back(groups[std::size_t(g)]);
+            part_batches.push_back(batches[std::size_t(g)] - first);
+            part_starts.push_back(starts[std::size_t(g)]);
+            index.push_back(g);
+          }
+        std::vector<UnionFit> part;
+        refitUnions(twists, part_groups, part_batches, part_starts, iterations, config, part);
+        for (std::size_t k = 0; k < index.size(); ++k) fits[std::size_t(index[k])] = std::move(part[k]);
+      }
+      return;
+    }
     cudaStream_t s = stream_;
-    const Layout layout = reserve();
-    // Up, in one staging buffer: the motions at the starts (the other labels at their own twists), each label's
-    // group, and the groups' states.
-    std::vector<int> owner(std::size_t(n), -1);
-    for (int g = 0; g < group_count; ++g)
-      for (const int i : groups[std::size_t(g)]) owner[std::size_t(i)] = g;
+    const Layout layout = reserve(batch_count);
+    // Up, in one staging buffer: per batch the motions at the starts (the other labels at their own twists) and each
+    // label's group; each group's batch and state.
+    const std::size_t slots = std::size_t(batch_count) * std::size_t(n);
     StagingLayout staged;
-    const std::size_t motions_at = staged.add<LabelMotion>(n), owner_at = staged.add<int>(n),
-                      state_at = staged.add<UnionRefitState>(group_count), cost_at = staged.add<double>(n);
+    const std::size_t motions_at = staged.add<LabelMotion>(slots), owner_at = staged.add<int>(slots),
+                      batch_at = staged.add<int>(group_count), state_at = staged.add<UnionRefitState>(group_count),
+                      cost_at = staged.add<double>(slots);
     unsigned char* host = reserveStaging(staged);
     auto* motions = StagingLayout::at<LabelMotion>(host, motions_at);
     auto* group_of_label = StagingLayout::at<int>(host, owner_at);
+    auto* batch_of_group = StagingLayout::at<int>(host, batch_at);
     auto* member_cost = StagingLayout::at<double>(host, cost_at);
-    for (int i = 0; i < n; ++i) {
-      const int g = owner[std::size_t(i)];
-      motions[i] = labelMotion(g >= 0 ? starts[std::size_t(g)] : twists[std::size_t(i)]);
-      group_of_label[i] = g;
-      member_cost[i] = 0.0;
+    std::fill(group_of_label, group_of_label + slots, -1);
+    std::fill(member_cost, member_cost + slots, 0.0);
+    for (int g = 0; g < group_count; ++g) {
+      const int b = batches[std::size_t(g)];
+      if (b < 0 || b >= batch_count)
+        throw InputError("CUDA refitUnions: group " + std::to_string(g) + " in batch " + std::to_string(b));
+      batch_of_group[g] = b;
+      for (const int i : groups[std::size_t(g)]) {
+        int& owner = group_of_label[std::size_t(b) * n + i];
+        if (owner >= 0)
+          throw InputError("CUDA refitUnions: label " + std::to_string(i) + " in two groups of batch " +
+                           std::to_string(b));
+        owner = g;
+      }
     }
+    for (int b = 0; b < batch_count; ++b)
+      for (int i = 0; i < n; ++i) {
+        const int g = group_of_label[std::size_t(b) * n + i];
+        motions[std::size_t(b) * n + i] = labelMotion(g >= 0 ? starts[std::size_t(g)] : twists[std::size_t(i)]);
+      }
     auto* state = StagingLayout::at<UnionRefitState>(host, state_at);
     for (int g = 0; g < group_count; ++g) {
       UnionRefitState& st = state[g];
@@ -1182,6 +1269,8 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     unsigned char* device = level_device_.get();
     UnionRefitParams q;
     q.sums = sums_.get();
+    q.batch_values = layout.block_values;
+    q.batch_of_group = StagingLayout::at<int>(device, batch_at);
     q.group_of_label = StagingLayout::at<int>(device, owner_at);
     q.n = n;
     q.groups = group_count;
@@ -1191,7 +1280,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     q.motions = StagingLayout::at<LabelMotion>(device, motions_at);
     const unsigned blocks = unsigned((group_count + 63) / 64);
     for (int pass = 0; pass <= iterations; ++pass) {
-      enqueueSums(layout, nullptr, q.motions, false);
+      enqueueSums(layout, nullptr, q.motions, false, batch_count);
       q.first = pass == 0;
       q.propose = pass < iterations;
       unionRefitStep<<<blocks, 64, 0, s>>>(q);
@@ -1210,7 +1299,8 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       f.cost = st.cost;
       f.pixels = st.pixels;
       f.iterations = st.iterations;
-      for (const int i : groups[std::size_t(g)]) f.member_cost.push_back(member_cost[i]);
+      const std::size_t batch = std::size_t(batches[std::size_t(g)]) * n;
+      for (const int i : groups[std::size_t(g)]) f.member_cost.push_back(member_cost[batch + std::size_t(i)]);
     }
   }
 
@@ -1293,9 +1383,19 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   struct Layout {
     std::size_t pairs = 0, label_values = 0, block_values = 0, sum_values = 0, plane = 0, pair_chunks = 0;
     unsigned blocks = 0;
+    int batches = 1;  // the batched passes reserved for
   };
 
-  Layout reserve() {
+  // Batched passes that one launch runs: as many as keep their block partials within kBatchPartialBytes.
+  int batchesPerPass() const {
+    const std::size_t plane = std::size_t(level_.width) * level_.height;
+    const std::size_t batch_bytes =
+        (plane + kThreads - 1) / kThreads * (std::size_t(motion_labels_) * kLabelStride + 2) * sizeof(double);
+    return int(std::max<std::size_t>(1, kBatchPartialBytes / std::max<std::size_t>(1, batch_bytes)));
+  }
+
+  // `batches`: how many batched passes (without the label pairs) the sums must hold.
+  Layout reserve(int batches = 1) {
     const int n = motion_labels_;
     Layout l;
     l.pairs = std::size_t(n) * (n - 1) / 2;
@@ -1306,10 +1406,13 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     l.plane = std::size_t(level_.width) * level_.height;
     l.blocks = unsigned((l.plane + kThreads - 1) / kThreads);
     l.pair_chunks = (l.plane + kPairChunkPixels - 1) / kPairChunkPixels;
-    motions_.reserve(std::size_t(n));
-    sums_.reserve(l.sum_values);
-    host_sums_.reserve(l.sum_values);
-    partials_.reserve(std::size_t(l.blocks) * l.block_values);
+    l.batches = batches;
+    const std::size_t sum_values = std::max(l.sum_values, std::size_t(batches) * l.block_values);
+    motions_.reserve(std::size_t(n) * std::size_t(batches));
+    host_motions_.reserve(std::size_t(n) * std::size_t(batches));
+    sums_.reserve(sum_values);
+    host_sums_.reserve(sum_values);
+    partials_.reserve(std::size_t(l.blocks) * l.block_values * std::size_t(batches));
     chunk_labels_.reserve(l.pair_chunks * kLabelMaskWords);
     if (l.pairs > 0) pair_partials_.reserve(l.pair_chunks * l.pairs * kUpper);
     return l;
@@ -1326,7 +1429,6 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     if (n == 0) return;
     cudaStream_t s = stream_;
     const Layout layout = reserve();
-    host_motions_.reserve(std::size_t(n));
     for (int i = 0; i < n; ++i) host_motions_.get()[i] = labelMotion(twists[std::size_t(i)]);
     upload(motions_.get(), host_motions_.get(), std::size_t(n));
     enqueueSums(layout, nullptr, nullptr, label_pairs);
@@ -1334,7 +1436,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     MCFLOW_CUDA_CHECK(
         cudaMemcpyAsync(host_sums_.get(), sums_.get(), values * sizeof(double), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_WAIT(s);
-    unpack(layout, out, label_pairs);
+    unpack(layout, host_sums_.get(), out, label_pairs);
   }
 
   // A label's linearisation point in float, as the CPU computes it.
@@ -1350,8 +1452,14 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   }
 
   // Queues one accumulation at the motions in `motions` (default: motions_) into sums_; `skip` and `label_pairs` as
-  // KernelParams (without the pairs, only sums_' first block_values are written).
-  void enqueueSums(const Layout& l, const int* skip, const LabelMotion* motions = nullptr, bool label_pairs = true) {
+  // KernelParams (without the pairs, only sums_' first block_values are written). Without the pairs, `batches` passes
+  // (at most the layout's) at batches sets of motions, one after the other in `motions`, into consecutive
+  // block_values of sums_.
+  void enqueueSums(const Layout& l, const int* skip, const LabelMotion* motions = nullptr, bool label_pairs = true,
+                   int batches = 1) {
+    if (batches < 1 || batches > l.batches || (label_pairs && batches != 1))
+      throw InputError("CUDA motion step: " + std::to_string(batches) + " batched passes, " +
+                       std::to_string(l.batches) + " reserved" + (label_pairs ? ", with the label pairs" : ""));
     cudaStream_t s = stream_;
     const int n = motion_labels_;
     KernelParams p;
@@ -1398,11 +1506,11 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       MCFLOW_CUDA_CHECK(
           cudaMemsetAsync(chunk_labels_.get(), 0, l.pair_chunks * kLabelMaskWords * sizeof(unsigned long long), s));
     p.chunk_labels = chunk_labels_.get();
-    accumulateNormalEquations<<<l.blocks, kThreads, shared_bytes, s>>>(p);
+    accumulateNormalEquations<<<dim3(l.blocks, unsigned(batches)), kThreads, shared_bytes, s>>>(p);
     MCFLOW_CUDA_CHECK_LAUNCH("accumulateNormalEquations");
     const unsigned reduce_blocks = unsigned((l.block_values * 32 + kThreads - 1) / kThreads);
-    reduceBlockPartials<<<reduce_blocks, kThreads, 0, s>>>(partials_.get(), int(l.blocks), int(l.block_values),
-                                                           sums_.get(), skip);
+    reduceBlockPartials<<<dim3(reduce_blocks, unsigned(batches)), kThreads, 0, s>>>(
+        partials_.get(), int(l.blocks), int(l.block_values), sums_.get(), skip);
     MCFLOW_CUDA_CHECK_LAUNCH("reduceBlockPartials");
     if (label_pairs && l.pairs > 0) {
       const int chunks = int(l.pair_chunks);
@@ -1418,12 +1526,12 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     }
   }
 
-  // `label_pairs`: the sums hold the pairs' blocks (accumulate) or not (accumulateLabelBlocks: they stay zero).
-  void unpack(const Layout& l, MotionNormalEquations& out, bool label_pairs) {
+  // `sums`: one pass's sums on the host; `label_pairs`: they hold the pairs' blocks (accumulate) or not
+  // (accumulateLabelBlocks: those stay zero).
+  void unpack(const Layout& l, const double* sums, MotionNormalEquations& out, bool label_pairs) {
     const int n = motion_labels_;
     const std::size_t label_values = l.label_values, block_values = l.block_values;
     // Unpack: symmetric diagonal blocks from their upper triangles, pair blocks into (a,b) and (b,a).
-    const double* sums = host_sums_.get();
     auto fillSymmetric = [&out](const double* upper, int row0, int col0, bool mirror_block) {
       int k = 0;
       for (int r = 0; r < 6; ++r)

@@ -508,12 +508,23 @@ class CudaSolveBackend final : public SolveBackend {
   }
 
   bool refitUnionsWhereTheSumsAre(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
-                                  const std::vector<Vector6d>& starts, int iterations, bool use_occlusion,
-                                  const Config& config, std::vector<UnionFit>& fits) override {
+                                  const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
+                                  bool use_occlusion, const Config& config, std::vector<UnionFit>& fits) override {
     requireTwists("refitUnions", twists);
     motionAccumulator(level_, MotionLabels::Current, use_occlusion, config);  // binds accumulator_ to the labels
-    accumulator_->refitUnions(twists, groups, starts, iterations, config, fits);
+    accumulator_->refitUnions(twists, groups, batches, starts, iterations, config, fits);
     return true;
+  }
+
+  std::vector<LabelCostModel> costModels(const std::vector<std::vector<Vector6d>>& twist_sets, bool use_occlusion,
+                                         const Config& config) override {
+    for (const std::vector<Vector6d>& twists : twist_sets) requireTwists("costModels", twists);
+    motionAccumulator(level_, MotionLabels::Current, use_occlusion, config);  // binds accumulator_ to the labels
+    std::vector<MotionNormalEquations> equations;
+    accumulator_->accumulateLabelBlockSets(twist_sets, equations);
+    std::vector<LabelCostModel> models;
+    for (const MotionNormalEquations& e : equations) models.push_back(costModelFromEquations(e, count_ - 1));
+    return models;
   }
 
   LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {

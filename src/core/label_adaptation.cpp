@@ -374,6 +374,32 @@ AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vecto
   return stats;
 }
 
+std::vector<LabelCostModel> LabelStore::costModels(const std::vector<std::vector<Vector6d>>& twist_sets,
+                                                   bool use_occlusion, const Config& config) {
+  std::vector<LabelCostModel> models;
+  models.reserve(twist_sets.size());
+  for (const std::vector<Vector6d>& twists : twist_sets) models.push_back(costModel(twists, use_occlusion, config));
+  return models;
+}
+
+std::vector<int> unionBatches(const std::vector<std::vector<int>>& groups) {
+  std::vector<int> batch(groups.size(), 0);
+  std::vector<std::vector<int>> taken;  // per batch: the labels its groups hold
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    int b = 0;
+    for (; b < int(taken.size()); ++b) {
+      const std::vector<int>& used = taken[std::size_t(b)];
+      const bool clash = std::any_of(groups[g].begin(), groups[g].end(),
+                                     [&](int i) { return std::find(used.begin(), used.end(), i) != used.end(); });
+      if (!clash) break;
+    }
+    if (b == int(taken.size())) taken.emplace_back();
+    taken[std::size_t(b)].insert(taken[std::size_t(b)].end(), groups[g].begin(), groups[g].end());
+    batch[g] = b;
+  }
+  return batch;
+}
+
 std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d>& twists,
                                   const std::vector<std::vector<int>>& groups, const std::vector<Vector6d>& starts,
                                   int iterations, bool use_occlusion, const Config& config) {
@@ -382,23 +408,31 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
     throw InputError("refitUnions: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
                      " motion labels, " + std::to_string(starts.size()) + " starts for " +
                      std::to_string(groups.size()) + " groups");
-  std::vector<int> owner(std::size_t(n), -1);
-  for (std::size_t g = 0; g < groups.size(); ++g)
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    if (groups[g].empty()) throw InputError("refitUnions: group " + std::to_string(g) + " is empty");
+    std::vector<bool> member(std::size_t(n), false);
     for (const int i : groups[g]) {
       if (i < 0 || i >= n)
         throw InputError("refitUnions: label " + std::to_string(i) + " outside [0, " + std::to_string(n) + ")");
-      if (owner[std::size_t(i)] >= 0) throw InputError("refitUnions: label " + std::to_string(i) + " is in two groups");
-      owner[std::size_t(i)] = int(g);
+      if (member[std::size_t(i)])
+        throw InputError("refitUnions: label " + std::to_string(i) + " twice in group " + std::to_string(g));
+      member[std::size_t(i)] = true;
     }
+  }
+  const std::vector<int> batch = unionBatches(groups);
+  const int batches = groups.empty() ? 0 : *std::max_element(batch.begin(), batch.end()) + 1;
   std::vector<UnionFit> fits(groups.size());
   if (groups.empty()) return fits;
-  if (labels.refitUnionsWhereTheSumsAre(twists, groups, starts, iterations, use_occlusion, config, fits)) return fits;
+  if (labels.refitUnionsWhereTheSumsAre(twists, groups, batch, starts, iterations, use_occlusion, config, fits))
+    return fits;
   std::vector<Vector6d> gradient(groups.size(), Vector6d::Zero());
   std::vector<double> damping(groups.size(), config.motion_damping);
-  std::vector<Vector6d> trial = twists;
-  // Sums a pass's model over each group into the fits (the union's cost, H and g at its trial twist).
-  auto gather = [&](const LabelCostModel& model, std::vector<UnionFit>& out, std::vector<Vector6d>& out_gradient) {
+  std::vector<std::vector<Vector6d>> trial(std::size_t(batches), twists);  // one set of twists per batch
+  // Sums a pass's models over each group into the fits (the union's cost, H and g at its trial twist).
+  auto gather = [&](const std::vector<LabelCostModel>& models, std::vector<UnionFit>& out,
+                    std::vector<Vector6d>& out_gradient) {
     for (std::size_t g = 0; g < groups.size(); ++g) {
+      const LabelCostModel& model = models[std::size_t(batch[g])];
       UnionFit& f = out[g];
       f.member_cost.assign(groups[g].size(), 0.0);
       f.cost = 0;
@@ -417,11 +451,11 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
   };
   auto setTrial = [&](const std::vector<Vector6d>& group_twists) {
     for (std::size_t g = 0; g < groups.size(); ++g)
-      for (const int i : groups[g]) trial[std::size_t(i)] = group_twists[g];
+      for (const int i : groups[g]) trial[std::size_t(batch[g])][std::size_t(i)] = group_twists[g];
   };
   std::vector<Vector6d> current = starts;
   setTrial(current);
-  gather(labels.costModel(trial, use_occlusion, config), fits, gradient);
+  gather(labels.costModels(trial, use_occlusion, config), fits, gradient);
   for (std::size_t g = 0; g < groups.size(); ++g) fits[g].twist = current[g];
   std::vector<UnionFit> next(groups.size());
   std::vector<Vector6d> next_gradient(groups.size());
@@ -446,7 +480,7 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
         proposed[g] = current[g];
       }
     setTrial(proposed);
-    gather(labels.costModel(trial, use_occlusion, config), next, next_gradient);
+    gather(labels.costModels(trial, use_occlusion, config), next, next_gradient);
     for (std::size_t g = 0; g < groups.size(); ++g) {
       if (finite[g] && next[g].cost <= fits[g].cost) {  // accepted: the union's model at the new twist
         const int accepted = fits[g].iterations + 1;
@@ -500,9 +534,6 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
                      std::to_string(twists.size()) + " motion labels");
   if (config.merge_refit_tolerance <= 0 || config.merge_refit_noise_tolerance <= 0) return stats;
   (void)valid_pixels;
-  // Pairs refused since the labels last changed: the next round tests the others (the dominant label takes part in
-  // one pair per round).
-  std::vector<std::pair<int, int>> refused;
   LabelCostModel own;  // the labels' models under their own motions; kept while no merge changes the labels
   bool own_current = false;
   if (own_model) {
@@ -550,44 +581,42 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
         const double predicted = mergeCostIncrease(own.curvature[std::size_t(a)], own.curvature[std::size_t(b)],
                                                    twists[std::size_t(a)], twists[std::size_t(b)]);
         const double ratio = predicted / std::max(allowed, 1e-9);
-        if (ratio < kRefitCandidateRatio && !deferred(a, b) &&
-            std::find(refused.begin(), refused.end(), std::make_pair(a, b)) == refused.end())
-          candidates.push_back({ratio, {a, b}});
+        if (ratio < kRefitCandidateRatio && !deferred(a, b)) candidates.push_back({ratio, {a, b}});
       }
     if (candidates.empty()) break;
     std::sort(candidates.begin(), candidates.end());
-    std::vector<bool> used(std::size_t(n), false);
-    std::vector<std::pair<int, int>> pairs;
-    for (const auto& c : candidates) {
-      const auto [a, b] = c.second;
-      if (used[std::size_t(a)] || used[std::size_t(b)]) continue;
-      used[std::size_t(a)] = used[std::size_t(b)] = true;
-      pairs.push_back({a, b});
-    }
-    // Each side under the other's motion (one pass for every pair): the union's cost at either start.
-    std::vector<Vector6d> swapped = twists;
-    for (const auto& [a, b] : pairs) {
-      swapped[std::size_t(a)] = twists[std::size_t(b)];
-      swapped[std::size_t(b)] = twists[std::size_t(a)];
-    }
-    const LabelCostModel cross = labels.costModel(swapped, use_occlusion, config);
+    // Every candidate is tested in this round: pairs with disjoint labels share a pass (unionBatches), and the batches
+    // share their launches on the GPU.
     std::vector<std::vector<int>> groups;
+    for (const auto& c : candidates) groups.push_back({c.second.first, c.second.second});
+    const std::vector<int> batch = unionBatches(groups);
+    // Each side under the other's motion (one pass per batch): the union's cost at either start.
+    std::vector<std::vector<Vector6d>> swapped(std::size_t(*std::max_element(batch.begin(), batch.end()) + 1), twists);
+    for (std::size_t p = 0; p < groups.size(); ++p) {
+      const int a = groups[p][0], b = groups[p][1];
+      swapped[std::size_t(batch[p])][std::size_t(a)] = twists[std::size_t(b)];
+      swapped[std::size_t(batch[p])][std::size_t(b)] = twists[std::size_t(a)];
+    }
+    const std::vector<LabelCostModel> cross = labels.costModels(swapped, use_occlusion, config);
     std::vector<Vector6d> starts;
-    for (const auto& [a, b] : pairs) {
-      const double at_a = own.cost[std::size_t(a)] + cross.cost[std::size_t(b)];
-      const double at_b = cross.cost[std::size_t(a)] + own.cost[std::size_t(b)];
-      groups.push_back({a, b});
+    for (std::size_t p = 0; p < groups.size(); ++p) {
+      const int a = groups[p][0], b = groups[p][1];
+      const LabelCostModel& other = cross[std::size_t(batch[p])];
+      const double at_a = own.cost[std::size_t(a)] + other.cost[std::size_t(b)];
+      const double at_b = other.cost[std::size_t(a)] + own.cost[std::size_t(b)];
       starts.push_back(at_a <= at_b ? twists[std::size_t(a)] : twists[std::size_t(b)]);
     }
     const std::vector<UnionFit> fits =
         refitUnions(labels, twists, groups, starts, config.merge_refit_iterations, use_occlusion, config);
-    // Merges of this round: each pair into its larger label, which takes the union's motion.
+    // Merges of this round, most alike first, each label in one at most: each pair into its larger label, which takes
+    // the union's motion. An explained pair with a label already merged is tested again on the merged labels.
     std::vector<int> group(static_cast<std::size_t>(n));
     for (int i = 0; i < n; ++i) group[std::size_t(i)] = i;
+    std::vector<bool> used(std::size_t(n), false);
     std::vector<Vector6d> merged_twists = twists;
     int merged = 0;
-    for (std::size_t p = 0; p < pairs.size(); ++p) {
-      const auto [a, b] = pairs[p];
+    for (std::size_t p = 0; p < groups.size(); ++p) {
+      const int a = groups[p][0], b = groups[p][1];
       const UnionFit& f = fits[p];
       MergeEvidence evidence;
       evidence.own_a = own.cost[std::size_t(a)];
@@ -597,10 +626,10 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
       evidence.pixels_a = own.pixels[std::size_t(a)];
       evidence.pixels_b = own.pixels[std::size_t(b)];
       evidence.noise_per_pixel = noise;
-      if (!oneMotionExplains(evidence, ownTolerance(a, b), config.merge_refit_noise_tolerance)) {
-        refused.push_back({a, b});
+      if (!oneMotionExplains(evidence, ownTolerance(a, b), config.merge_refit_noise_tolerance) ||
+          used[std::size_t(a)] || used[std::size_t(b)])
         continue;
-      }
+      used[std::size_t(a)] = used[std::size_t(b)] = true;
       const int keep = own.pixels[std::size_t(a)] >= own.pixels[std::size_t(b)] ? a : b;
       const int drop = keep == a ? b : a;
       group[std::size_t(drop)] = keep;
@@ -609,8 +638,7 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
         (*lineage)[std::size_t(keep)] = mergedLineage((*lineage)[std::size_t(keep)], (*lineage)[std::size_t(drop)]);
       ++merged;
     }
-    if (merged == 0) continue;  // the same labels: the refused pairs stay refused, the others get their turn
-    refused.clear();
+    if (merged == 0) break;  // every candidate was tested and refused
     own_current = false;
     std::vector<int> target(std::size_t(n) + 1);
     std::vector<Vector6d> kept_twists;

@@ -529,9 +529,36 @@ TEST(OneMotionMerge, RefitOnTheUnionFindsTheMotionOfBoth) {
   EXPECT_LT(fits[0].cost, start_model.cost[0] + start_model.cost[1]);
   EXPECT_NEAR(fits[0].member_cost[0] + fits[0].member_cost[1], fits[0].cost, 1e-9 * fits[0].cost);
   EXPECT_GT(fits[0].pixels, 0.0);
-  EXPECT_THROW(refitUnions(store, twists, {{0, 1}, {1, 2}}, {off, off}, 1, false, config), InputError);
+  EXPECT_THROW(refitUnions(store, twists, {{0, 1, 1}}, {off}, 1, false, config), InputError);
+  EXPECT_THROW(refitUnions(store, twists, {{}}, {off}, 1, false, config), InputError);
   EXPECT_THROW(refitUnions(store, twists, {{0, 7}}, {off}, 1, false, config), InputError);
   EXPECT_THROW(refitUnions(store, twists, {{0, 1}}, {}, 1, false, config), InputError);
+}
+
+TEST(OneMotionMerge, GroupsThatShareALabelAreRefittedInSeparateBatchesAsEachAlone) {
+  EXPECT_EQ(unionBatches({{0, 1}, {1, 2}, {2, 3}, {0, 3}, {4}}), (std::vector<int>{0, 1, 0, 1, 0}));
+  EXPECT_EQ(unionBatches({}), std::vector<int>{});
+  const ArmScene s = renderArmScene();
+  int background = -1, box = -1;
+  SoftLabels u = backgroundHalvesAndBox(s, background, box);
+  const Vector6d truth = trueTwist(s.pair, "background");
+  Vector6d off = truth;
+  off(4) += 0.01;
+  const std::vector<Vector6d> twists{off, truth, trueTwist(s.pair, "box")};
+  Config config;
+  HostLabelStore store(u, s.pyr1[s.level], s.pyr2[s.level], nullptr);
+  // (0,1) and (1,2) share label 1, (0,2) shares a label with both: three batches, each group's fit its own.
+  const std::vector<std::vector<int>> groups{{0, 1}, {1, 2}, {0, 2}};
+  const std::vector<Vector6d> starts{off, truth, twists[2]};
+  const std::vector<UnionFit> together = refitUnions(store, twists, groups, starts, 3, false, config);
+  ASSERT_EQ(together.size(), 3u);
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    const std::vector<UnionFit> alone = refitUnions(store, twists, {groups[g]}, {starts[g]}, 3, false, config);
+    ASSERT_EQ(alone.size(), 1u);
+    EXPECT_EQ(together[g].twist, alone[0].twist) << "group " << g;
+    EXPECT_EQ(together[g].member_cost, alone[0].member_cost) << "group " << g;
+    EXPECT_EQ(together[g].iterations, alone[0].iterations) << "group " << g;
+  }
 }
 
 TEST(OneMotionMerge, TheHalvesOfTheStaticWorldMergeAndTheSmallMovingBoxStaysApart) {

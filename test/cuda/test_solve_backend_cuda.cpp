@@ -238,19 +238,35 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
     expectRelativelyClose(ca.curvature[std::size_t(i)].reshaped(), cb.curvature[std::size_t(i)].reshaped(), 1e-3,
                           "curvature of label " + std::to_string(i));
 
+  // Batched cost models (one launch): each batch's model is the same pass alone, bit for bit.
+  {
+    std::vector<Vector6d> other = twists;
+    for (Vector6d& xi : other) xi += Vector6d::Constant(0.001);
+    const std::vector<LabelCostModel> both = gpu->costModels({twists, other}, true, config);
+    ASSERT_EQ(both.size(), 2u);
+    const LabelCostModel alone = gpu->costModel(other, true, config);
+    for (int i = 0; i < n; ++i) {
+      EXPECT_EQ(both[0].cost[std::size_t(i)], cb.cost[std::size_t(i)]) << "label " << i;
+      EXPECT_EQ(both[1].cost[std::size_t(i)], alone.cost[std::size_t(i)]) << "label " << i;
+      EXPECT_EQ(both[1].curvature[std::size_t(i)], alone.curvature[std::size_t(i)]) << "label " << i;
+      EXPECT_EQ(both[1].gradient[std::size_t(i)], alone.gradient[std::size_t(i)]) << "label " << i;
+    }
+  }
+
   // refitUnions: the device's loop (one wait) against the host's loop over the same backend's passes (a store that
-  // forwards everything but refitUnionsWhereTheSumsAre; they differ by the 6x6 solve's rounding and the left
-  // Jacobian's float rounding), and against the CPU backend.
+  // forwards everything but refitUnionsWhereTheSumsAre and costModels; they differ by the 6x6 solve's rounding and
+  // the left Jacobian's float rounding), and against the CPU backend. Group {1, 2} shares labels with both others: a
+  // second batch.
   if (n >= 3) {
-    const std::vector<std::vector<int>> groups = {{0, 1}, {2}};
-    const std::vector<Vector6d> starts = {twists[1], twists[2] + Vector6d::Constant(0.002)};
+    const std::vector<std::vector<int>> groups = {{0, 1}, {2}, {1, 2}};
+    const std::vector<Vector6d> starts = {twists[1], twists[2] + Vector6d::Constant(0.002), twists[2]};
     const std::vector<UnionFit> host_loop = [&] {
       HostLoopOf forward(*gpu);
       return refitUnions(forward, twists, groups, starts, 3, true, config);
     }();
     const std::vector<UnionFit> device = refitUnions(*gpu, twists, groups, starts, 3, true, config);
     const std::vector<UnionFit> cpu_fits = refitUnions(*cpu, twists, groups, starts, 3, true, config);
-    ASSERT_EQ(device.size(), 2u);
+    ASSERT_EQ(device.size(), 3u);
     for (std::size_t g = 0; g < groups.size(); ++g) {
       SCOPED_TRACE("group " + std::to_string(g));
       EXPECT_EQ(device[g].iterations, host_loop[g].iterations);

@@ -123,17 +123,27 @@ class LabelStore {
   /// @brief One pass over the pixels: the cost model of every motion label at `twists`, with the occlusion
   /// mask of the labels' level when `use_occlusion`.
   virtual LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) = 0;
-  /// @brief refitUnions (below; its arguments checked there) where the sums are, when the store can do it without the
-  /// host: the CUDA backend runs the passes and the steps on the device and waits once. False (the default): the store
-  /// cannot, and refitUnions runs its host loop over costModel.
+  /// @brief costModel at each set of twists (one set per motion label each), one model per set: the CUDA backend
+  /// runs them as one batched pass and waits once; the default calls costModel per set.
+  virtual std::vector<LabelCostModel> costModels(const std::vector<std::vector<Vector6d>>& twist_sets,
+                                                 bool use_occlusion, const Config& config);
+  /// @brief refitUnions (below; its arguments checked there, `batches` = unionBatches(groups)) where the sums are,
+  /// when the store can do it without the host: the CUDA backend runs the passes and the steps on the device and waits
+  /// once. False (the default): the store cannot, and refitUnions runs its host loop over costModels.
   virtual bool refitUnionsWhereTheSumsAre(const std::vector<Vector6d>& twists,
-                                          const std::vector<std::vector<int>>& groups,
+                                          const std::vector<std::vector<int>>& groups, const std::vector<int>& batches,
                                           const std::vector<Vector6d>& starts, int iterations, bool use_occlusion,
                                           const Config& config, std::vector<UnionFit>& fits) {
-    (void)twists, (void)groups, (void)starts, (void)iterations, (void)use_occlusion, (void)config, (void)fits;
+    (void)twists, (void)groups, (void)batches, (void)starts, (void)iterations, (void)use_occlusion, (void)config,
+        (void)fits;
     return false;
   }
 };
+
+/// @brief Which pass each group of refitUnions shares: groups are taken in order, each into the first batch none of
+/// whose groups holds one of its labels (labels of one batch's groups are disjoint, so one set of twists serves them
+/// all). Batch numbers start at 0.
+std::vector<int> unionBatches(const std::vector<std::vector<int>>& groups);
 
 /// @brief H with the label-count update's relative ridge (1e-6 of its largest diagonal entry): the 6x6 solves stay
 /// defined for planar or textureless segments, whose pixels leave directions unconstrained.
@@ -188,11 +198,13 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
 AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vector6d>& twists, int valid_pixels,
                                         const Config& config, std::vector<LabelLineage>* lineage = nullptr);
 
-/// @brief For each group of motion labels (disjoint lists of label indices), one rigid motion for the union of their
-/// pixels: Gauss-Newton with per-group Levenberg-Marquardt backtracking from `starts` (one per group), the other labels
-/// keeping `twists`. One accumulator pass per iteration serves every group (labels that share a twist form one label of
-/// the interpolation model), plus one at the starts. Steps are capped at 0.1 m / 0.1 rad. Throws InputError on
-/// mismatched sizes, a label outside [0, n) or in two groups.
+/// @brief For each group of motion labels (lists of label indices; a label may be in several groups), one rigid motion
+/// for the union of their pixels: Gauss-Newton with per-group Levenberg-Marquardt backtracking from `starts` (one per
+/// group), the other labels keeping `twists`. Groups with disjoint labels share a pass (unionBatches: a batch of them
+/// is one set of twists, as labels that share a twist form one label of the interpolation model); each iteration is one
+/// batched pass (LabelStore::costModels) for all, plus one at the starts. A group's fit depends only on its own batch.
+/// Steps are capped at 0.1 m / 0.1 rad. Throws InputError on mismatched sizes, an empty group, a label outside [0, n)
+/// or twice in one group.
 std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d>& twists,
                                   const std::vector<std::vector<int>>& groups, const std::vector<Vector6d>& starts,
                                   int iterations, bool use_occlusion, const Config& config);
@@ -221,14 +233,15 @@ bool oneMotionExplains(const MergeEvidence& evidence, double own_tolerance, doub
 /// @brief Config::merge_refit_tolerance, merge_refit_tolerance_parts and merge_refit_noise_tolerance: pairs of motion
 /// labels, most alike first (by the quadratic model), tested by
 /// refitting one motion on each pair's union (refitUnions from the better of the two motions, merge_refit_iterations
-/// steps; disjoint pairs share passes) and merged when oneMotionExplains; repeated on the merged labels until no pair
-/// merges. No switching cost: a stream's carried segments that one motion explains merge like any others, with two
-/// differences that keep a stream's parts through a brief rest: two carried labels are judged with
-/// merge_refit_tolerance_parts (the stream kept them apart a pair ago), and two that movedApartBefore by
-/// merge_memory_displacement are not tested in this pair (a part merges after a pair at rest, not at the turn of its
-/// motion). The merged label takes the refitted motion and mergedLineage. Costs one accumulator pass for the labels'
-/// own costs (none when `own_model`, the labels' LabelStore::costModel under `twists`, is given) and 2 +
-/// merge_refit_iterations per round. Throws InputError on mismatched sizes.
+/// steps; every candidate pair in one round of batched passes) and merged when oneMotionExplains, most alike first and
+/// each label in at most one merge per round; repeated on the merged labels until no pair merges. No switching cost: a
+/// stream's carried segments that one motion explains merge like any others, with two differences that keep a stream's
+/// parts through a brief rest: two carried labels are judged with merge_refit_tolerance_parts (the stream kept them
+/// apart a pair ago), and two that movedApartBefore by merge_memory_displacement are not tested in this pair (a part
+/// merges after a pair at rest, not at the turn of its motion). The merged label takes the refitted motion and
+/// mergedLineage. Costs one accumulator pass for the labels' own costs (none when `own_model`, the labels'
+/// LabelStore::costModel under `twists`, is given) and 2 + merge_refit_iterations batched passes per round (a round per
+/// generation of merges, and one that merges nothing). Throws InputError on mismatched sizes.
 AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
                                             bool use_occlusion, const Config& config,
                                             std::vector<LabelLineage>* lineage = nullptr,
