@@ -20,6 +20,10 @@ namespace {
 
 using union_refit::kRidge;
 
+// mergeWhereOneMotionExplains: a round tests as many batches of disjoint pairs as make about this many pixel
+// evaluations (4 batches at 160x120, 1 from 320x240 on; there a pass fills the GPU by itself).
+constexpr int kMergeRoundPixels = 4 * 160 * 120;
+
 // Newton decrement g^T H^-1 g: how much the cost falls when the label takes its Gauss-Newton step.
 double newtonDecrement(const Matrix6d& H, const Vector6d& g) { return g.dot(withRidge(H).ldlt().solve(g)); }
 
@@ -533,7 +537,11 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
     throw InputError("mergeWhereOneMotionExplains: " + std::to_string(lineage->size()) + " lineages for " +
                      std::to_string(twists.size()) + " motion labels");
   if (config.merge_refit_tolerance <= 0 || config.merge_refit_noise_tolerance <= 0) return stats;
-  (void)valid_pixels;
+  // Batches of disjoint pairs tested per round: what fills about one pass over kMergeRoundPixels (on the GPU the
+  // batches of a round share one launch, nearly free while the label level is small).
+  const int batches_per_round = std::max(1, int(kMergeRoundPixels / std::max(1, valid_pixels)));
+  // Pairs refused since the labels last changed: a round tests the others.
+  std::vector<std::pair<int, int>> refused;
   LabelCostModel own;  // the labels' models under their own motions; kept while no merge changes the labels
   bool own_current = false;
   if (own_model) {
@@ -581,15 +589,24 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
         const double predicted = mergeCostIncrease(own.curvature[std::size_t(a)], own.curvature[std::size_t(b)],
                                                    twists[std::size_t(a)], twists[std::size_t(b)]);
         const double ratio = predicted / std::max(allowed, 1e-9);
-        if (ratio < kRefitCandidateRatio && !deferred(a, b)) candidates.push_back({ratio, {a, b}});
+        if (ratio < kRefitCandidateRatio && !deferred(a, b) &&
+            std::find(refused.begin(), refused.end(), std::make_pair(a, b)) == refused.end())
+          candidates.push_back({ratio, {a, b}});
       }
     if (candidates.empty()) break;
     std::sort(candidates.begin(), candidates.end());
-    // Every candidate is tested in this round: pairs with disjoint labels share a pass (unionBatches), and the batches
-    // share their launches on the GPU.
+    // The candidates of the round's first batches_per_round batches (unionBatches: disjoint pairs share a pass, the
+    // dominant label takes part in one pair per batch), most alike first.
+    std::vector<std::vector<int>> all;
+    for (const auto& c : candidates) all.push_back({c.second.first, c.second.second});
+    const std::vector<int> all_batches = unionBatches(all);
     std::vector<std::vector<int>> groups;
-    for (const auto& c : candidates) groups.push_back({c.second.first, c.second.second});
-    const std::vector<int> batch = unionBatches(groups);
+    std::vector<int> batch;
+    for (std::size_t p = 0; p < all.size(); ++p)
+      if (all_batches[p] < batches_per_round) {
+        groups.push_back(all[p]);
+        batch.push_back(all_batches[p]);
+      }
     // Each side under the other's motion (one pass per batch): the union's cost at either start.
     std::vector<std::vector<Vector6d>> swapped(std::size_t(*std::max_element(batch.begin(), batch.end()) + 1), twists);
     for (std::size_t p = 0; p < groups.size(); ++p) {
@@ -626,9 +643,11 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
       evidence.pixels_a = own.pixels[std::size_t(a)];
       evidence.pixels_b = own.pixels[std::size_t(b)];
       evidence.noise_per_pixel = noise;
-      if (!oneMotionExplains(evidence, ownTolerance(a, b), config.merge_refit_noise_tolerance) ||
-          used[std::size_t(a)] || used[std::size_t(b)])
+      if (!oneMotionExplains(evidence, ownTolerance(a, b), config.merge_refit_noise_tolerance)) {
+        refused.push_back({a, b});
         continue;
+      }
+      if (used[std::size_t(a)] || used[std::size_t(b)]) continue;
       used[std::size_t(a)] = used[std::size_t(b)] = true;
       const int keep = own.pixels[std::size_t(a)] >= own.pixels[std::size_t(b)] ? a : b;
       const int drop = keep == a ? b : a;
@@ -638,7 +657,8 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
         (*lineage)[std::size_t(keep)] = mergedLineage((*lineage)[std::size_t(keep)], (*lineage)[std::size_t(drop)]);
       ++merged;
     }
-    if (merged == 0) break;  // every candidate was tested and refused
+    if (merged == 0) continue;  // the same labels: the refused pairs stay refused, the others get their turn
+    refused.clear();
     own_current = false;
     std::vector<int> target(std::size_t(n) + 1);
     std::vector<Vector6d> kept_twists;
