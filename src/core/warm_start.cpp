@@ -14,6 +14,36 @@
 
 namespace mc_flow {
 
+namespace {
+
+// The distinct ids of an id image, each with a dense index (in order of first appearance): a pixel's id is looked up
+// in a short list, the last hit first (neighbouring pixels mostly share an id), instead of a tree map per pixel.
+class IdIndex {
+ public:
+  int operator()(int id) {
+    if (last_ >= 0 && ids_[std::size_t(last_)] == id) return last_;
+    const auto it = std::find(ids_.begin(), ids_.end(), id);
+    last_ = int(it - ids_.begin());
+    if (it == ids_.end()) ids_.push_back(id);
+    return last_;
+  }
+  int size() const { return int(ids_.size()); }
+  int id(int index) const { return ids_[std::size_t(index)]; }
+
+ private:
+  std::vector<int> ids_;
+  int last_ = -1;
+};
+
+// std::lround for |v| < 2^23 without the library call (the splat rounds every pixel's target): v - trunc(v) is exact in
+// float there, so the result is lround's.
+int roundHalfAway(float v) {
+  const float t = std::trunc(v);
+  return int(t) + (std::fabs(v - t) >= 0.5f ? (v < 0.f ? -1 : 1) : 0);
+}
+
+}  // namespace
+
 ImageI32 carrySegmentIds(const Result& previous, const ImageF& points, double depth_tolerance) {
   return carryIds(previous.labels, previous, points, depth_tolerance);
 }
@@ -37,8 +67,9 @@ ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& poi
       const int id = ids(x, y);
       if (id <= 0) continue;
       const float u = float(x) + previous.optical_flow(x, y, 0), v = float(y) + previous.optical_flow(x, y, 1);
-      if (!std::isfinite(u) || !std::isfinite(v)) continue;
-      const int tx = int(std::lround(u)), ty = int(std::lround(v));
+      // Off the image (NaN fails too) before rounding: a point within half a pixel of the border still lands.
+      if (!(u > -1.f && u < float(W) && v > -1.f && v < float(H))) continue;
+      const int tx = roundHalfAway(u), ty = roundHalfAway(v);
       if (tx < 0 || ty < 0 || tx >= W || ty >= H) continue;
       const float z_moved = previous.moved_depth(x, y);  // where the point is in frame 2, seen from frame 2's camera
       if (!(z_moved > 0) || z_moved >= nearest(tx, ty)) continue;
@@ -145,19 +176,30 @@ std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, cons
     throw InputError("segment ids: labels are " + std::to_string(labels.width) + "x" + std::to_string(labels.height) +
                      ", carried ids " + std::to_string(carried_ids.width) + "x" + std::to_string(carried_ids.height));
   std::vector<double> size(std::size_t(segment_count) + 1, 0.0);
-  std::map<int, double> carried_size;
-  std::map<std::pair<int, int>, double> overlap;  // (segment, id) -> pixels
+  IdIndex carried;
+  std::vector<double> carried_size;          // per carried id's index
+  std::vector<std::vector<double>> overlap;  // per carried id's index, per segment 1..segment_count: pixels
   for (std::size_t k = 0; k < labels.data.size(); ++k) {
     const int s = labels.data[k], id = carried_ids.data[k];
-    if (s > 0 && s <= segment_count) size[std::size_t(s)] += 1;
-    if (id > 0) carried_size[id] += 1;
-    if (s > 0 && s <= segment_count && id > 0) overlap[{s, id}] += 1;
+    const bool segment = s > 0 && s <= segment_count;
+    if (segment) size[std::size_t(s)] += 1;
+    if (id <= 0) continue;
+    const int c = carried(id);
+    if (c == int(carried_size.size())) {
+      carried_size.push_back(0.0);
+      overlap.emplace_back(std::size_t(segment_count) + 1, 0.0);
+    }
+    carried_size[std::size_t(c)] += 1;
+    if (segment) overlap[std::size_t(c)][std::size_t(s)] += 1;
   }
   std::vector<std::tuple<double, int, int>> candidates;  // (overlap, segment, id)
-  for (const auto& [key, pixels] : overlap) {
-    const double smaller = std::min(size[std::size_t(key.first)], carried_size[key.second]);
-    if (smaller > 0 && pixels >= min_overlap * smaller) candidates.emplace_back(pixels, key.first, key.second);
-  }
+  for (int c = 0; c < carried.size(); ++c)
+    for (int segment = 1; segment <= segment_count; ++segment) {
+      const double pixels = overlap[std::size_t(c)][std::size_t(segment)];
+      const double smaller = std::min(size[std::size_t(segment)], carried_size[std::size_t(c)]);
+      if (pixels > 0 && smaller > 0 && pixels >= min_overlap * smaller)
+        candidates.emplace_back(pixels, segment, carried.id(c));
+    }
   std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
     return std::get<0>(a) > std::get<0>(b) ||
            (std::get<0>(a) == std::get<0>(b) &&
@@ -219,13 +261,23 @@ void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32
   result.next_id = next_id;
 
   // Previous ids without a segment now: merged into the segment that holds most of their carried pixels.
-  std::map<int, std::map<int, double>> now_under;  // previous id -> (new id -> pixels)
-  std::map<int, double> carried_size;
+  IdIndex carried, now;
+  std::vector<double> carried_size;            // per previous id's index
+  std::vector<std::vector<double>> now_under;  // per previous id's index, per new id's index: pixels
   for (std::size_t k = 0; k < carried_ids.data.size(); ++k) {
     const int old_id = carried_ids.data[k];
     if (old_id <= 0) continue;
-    carried_size[old_id] += 1;
-    if (result.labels.data[k] > 0) now_under[old_id][result.labels.data[k]] += 1;
+    const int c = carried(old_id);
+    if (c == int(carried_size.size())) {
+      carried_size.push_back(0.0);
+      now_under.emplace_back();
+    }
+    carried_size[std::size_t(c)] += 1;
+    if (result.labels.data[k] <= 0) continue;
+    const int n = now(result.labels.data[k]);
+    std::vector<double>& under = now_under[std::size_t(c)];
+    if (n >= int(under.size())) under.resize(std::size_t(n) + 1, 0.0);
+    under[std::size_t(n)] += 1;
   }
   std::map<int, bool> alive;
   for (const Segment& s : result.segments) alive[s.id] = true;
@@ -233,14 +285,20 @@ void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32
   result.ended_ids.clear();
   for (const Segment& s : previous.segments) {
     if (alive.count(s.id)) continue;
+    // The new id holding most of its pixels; ties to the smaller id.
     int into = 0;
-    double most = 0;
-    for (const auto& [id, pixels] : now_under[s.id])
-      if (pixels > most) {
-        most = pixels;
-        into = id;
+    double most = 0, size = 0;
+    for (int c = 0; c < carried.size(); ++c)
+      if (carried.id(c) == s.id) {
+        size = carried_size[std::size_t(c)];
+        const std::vector<double>& under = now_under[std::size_t(c)];
+        for (int n = 0; n < int(under.size()); ++n)
+          if (under[std::size_t(n)] > most || (under[std::size_t(n)] == most && most > 0 && now.id(n) < into)) {
+            most = under[std::size_t(n)];
+            into = now.id(n);
+          }
       }
-    if (into > 0 && most >= min_overlap * carried_size[s.id])
+    if (into > 0 && most >= min_overlap * size)
       result.merged_ids.emplace_back(s.id, into);
     else
       result.ended_ids.push_back(s.id);
@@ -262,13 +320,27 @@ void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32
       result.dormant_ids.emplace_back(s.id, 0);
       went_now[s.id] = true;
     }
+  // Per pixel, whether its carried id went now or its dormant id is kept: looked up through IdIndex, each id's answer
+  // once.
+  IdIndex now_index, earlier_index;
+  std::vector<char> now_went, earlier_kept;
+  const bool has_earlier = carried_dormant.sameSize(result.labels);
   for (std::size_t k = 0; k < result.dormant_regions.data.size(); ++k) {
     const int now = carried_ids.data[k];
-    const int earlier = carried_dormant.sameSize(result.labels) ? carried_dormant.data[k] : 0;
-    if (now > 0 && went_now.count(now))
-      result.dormant_regions.data[k] = now;
-    else if (earlier > 0 && keep.count(earlier))
-      result.dormant_regions.data[k] = earlier;
+    if (now > 0) {
+      const int i = now_index(now);
+      if (i == int(now_went.size())) now_went.push_back(went_now.count(now) ? 1 : 0);
+      if (now_went[std::size_t(i)]) {
+        result.dormant_regions.data[k] = now;
+        continue;
+      }
+    }
+    const int earlier = has_earlier ? carried_dormant.data[k] : 0;
+    if (earlier > 0) {
+      const int i = earlier_index(earlier);
+      if (i == int(earlier_kept.size())) earlier_kept.push_back(keep.count(earlier) ? 1 : 0);
+      if (earlier_kept[std::size_t(i)]) result.dormant_regions.data[k] = earlier;
+    }
   }
 }
 
