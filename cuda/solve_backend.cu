@@ -348,7 +348,8 @@ class CudaSolveBackend final : public SolveBackend {
     return out;
   }
 
-  void outputs(const std::vector<Vector6d>& twists, const Config& config, Result& result) override {
+  void outputs(const std::vector<Vector6d>& twists, const Config& config, const OutputSelection& selection,
+               Result& result) override {
     requireTwists("outputs", twists);
     moveLabels(0);  // carried up from the processing level; clears the occlusion mask
     DeviceLevel L = levels_[0];
@@ -387,13 +388,14 @@ class CudaSolveBackend final : public SolveBackend {
     std::uint8_t* staged_occlusion = staged_bytes_.reserve(p);
     double* staged_sums = staged_doubles_.reserve(std::size_t(std::max(1, 4 * n)));
     int image = 0;
-    auto down = [&](void* to, const void* from, std::size_t bytes) {
-      MCFLOW_CUDA_CHECK(cudaMemcpyAsync(to, from, bytes, cudaMemcpyDeviceToHost, s));
+    // An image not selected is not copied; its event is still recorded (fillOutputImages waits for every image).
+    auto down = [&](void* to, const void* from, std::size_t bytes, bool selected = true) {
+      if (selected) MCFLOW_CUDA_CHECK(cudaMemcpyAsync(to, from, bytes, cudaMemcpyDeviceToHost, s));
       MCFLOW_CUDA_CHECK(cudaEventRecord(image_downloaded_[image++].event, s));
     };
     // In fillOutputImages' order of images.
-    down(staged_labels, labels(), label_values * sizeof(float));
-    down(staged_scene, scene_flow_.get(), p * 3 * sizeof(float));
+    down(staged_labels, labels(), label_values * sizeof(float), selection.soft_labels);
+    down(staged_scene, scene_flow_.get(), p * 3 * sizeof(float), selection.scene_flow);
     down(staged_optical, optical_flow_.get(), p * 2 * sizeof(float));
     down(staged_moved, moved_depth_.get(), p * sizeof(float));
     down(staged_ids, ids_.get(), p * sizeof(int));
@@ -404,8 +406,16 @@ class CudaSolveBackend final : public SolveBackend {
 
     // The images in StagedOutputs' order; each waited for on OpenMP threads, which may not have used this backend's
     // device yet.
-    StagedOutputs staged{
-        W, H, count_, staged_labels, staged_scene, staged_optical, staged_moved, staged_ids, staged_occlusion, {}};
+    StagedOutputs staged{W,
+                         H,
+                         count_,
+                         selection.soft_labels ? staged_labels : nullptr,
+                         selection.scene_flow ? staged_scene : nullptr,
+                         staged_optical,
+                         staged_moved,
+                         staged_ids,
+                         staged_occlusion,
+                         {}};
     staged.wait_for_image = [this](int i) {
       cudaError_t e = cudaSetDevice(device_);
       if (e == cudaSuccess) e = cudaEventSynchronize(image_downloaded_[i].event);

@@ -91,7 +91,14 @@ std::unique_ptr<Solver> SequencePipeline::makeSolver(const Config& config, std::
   }
   if (unavailable) *unavailable = failed;
   if (!why.empty()) note = why;
-  return std::make_unique<Solver>(solver_config, std::move(backend), note);
+  auto solver = std::make_unique<Solver>(solver_config, std::move(backend), note);
+  solver->setOutputs(outputs_);
+  return solver;
+}
+
+void SequencePipeline::setOutputs(const OutputSelection& selection) {
+  outputs_ = selection;
+  solver_->setOutputs(selection);
 }
 
 void SequencePipeline::setConfig(const Config& config) {

@@ -168,7 +168,8 @@ class CpuSolveBackend final : public SolveBackend {
 
   SoftLabels downloadLabels() override { return u_; }
 
-  void outputs(const std::vector<Vector6d>& twists, const Config& config, Result& result) override {
+  void outputs(const std::vector<Vector6d>& twists, const Config& config, const OutputSelection& selection,
+               Result& result) override {
     if (int(twists.size()) != u_.count - 1)
       throw InputError("CPU backend outputs: " + std::to_string(twists.size()) + " twists for " +
                        std::to_string(u_.count - 1) + " motion labels");
@@ -198,6 +199,15 @@ class CpuSolveBackend final : public SolveBackend {
     for (std::size_t i = 0; i < twists.size(); ++i) {
       result.segments[i].support = result.soft_labels.support(int(i));
       result.segments[i].centroid = centroids[i];
+    }
+    // Computed on the way (argmax, centroids, the warp), kept only when selected.
+    if (!selection.soft_labels) {
+      result.soft_labels.width = result.soft_labels.height = result.soft_labels.count = 0;
+      result.soft_labels.data.clear();
+    }
+    if (!selection.scene_flow) {
+      result.scene_flow.width = result.scene_flow.height = 0;
+      result.scene_flow.data.clear();
     }
   }
 
@@ -261,9 +271,20 @@ class CpuSolveBackend final : public SolveBackend {
 int fillOutputImages(const StagedOutputs& s, Result& result) {
   const int W = s.width, H = s.height;
   const std::size_t p = std::size_t(W) * H;
-  const std::size_t label_values = p * std::size_t(s.label_count);
-  result.soft_labels.width = W, result.soft_labels.height = H, result.soft_labels.count = s.label_count;
-  result.scene_flow.width = W, result.scene_flow.height = H, result.scene_flow.channels = 3;
+  const std::size_t label_values = s.soft_labels ? p * std::size_t(s.label_count) : 0;
+  // Images not selected (null): 0x0, their memory kept for a later solve that selects them.
+  if (s.soft_labels) {
+    result.soft_labels.width = W, result.soft_labels.height = H, result.soft_labels.count = s.label_count;
+  } else {
+    result.soft_labels.width = result.soft_labels.height = result.soft_labels.count = 0;
+    result.soft_labels.data.clear();
+  }
+  if (s.scene_flow) {
+    result.scene_flow.width = W, result.scene_flow.height = H, result.scene_flow.channels = 3;
+  } else {
+    result.scene_flow.width = result.scene_flow.height = 0;
+    result.scene_flow.data.clear();
+  }
   result.optical_flow.width = W, result.optical_flow.height = H, result.optical_flow.channels = 2;
   result.moved_depth.width = W, result.moved_depth.height = H, result.moved_depth.channels = 1;
   result.labels.width = W, result.labels.height = H, result.labels.channels = 1;
@@ -273,7 +294,7 @@ int fillOutputImages(const StagedOutputs& s, Result& result) {
   // first would zero-fill all of it on this thread). The other images: copied in place where their size matches,
   // else allocated and copied, one task each.
   constexpr std::size_t kChunk = std::size_t(1) << 18;  // floats: 1 MiB
-  const bool labels_in_place = result.soft_labels.data.size() == label_values;
+  const bool labels_in_place = s.soft_labels && result.soft_labels.data.size() == label_values;
   const int label_tasks = labels_in_place ? std::max(1, int((label_values + kChunk - 1) / kChunk)) : 1;
   const int tasks = label_tasks + 5;
   // The soft labels come down first (the others cannot arrive before them): this thread waits for them once, and
@@ -296,6 +317,7 @@ int fillOutputImages(const StagedOutputs& s, Result& result) {
     if (status[std::size_t(task)] != 0) return;
     switch (image) {
       case 0:
+        if (!s.soft_labels) break;
         if (labels_in_place) {
           const std::size_t begin = std::size_t(task) * kChunk, end = std::min(label_values, begin + kChunk);
           std::copy(s.soft_labels + begin, s.soft_labels + end,
@@ -304,7 +326,9 @@ int fillOutputImages(const StagedOutputs& s, Result& result) {
           result.soft_labels.data.assign(s.soft_labels, s.soft_labels + label_values);
         }
         break;
-      case 1: copy(result.scene_flow.data, s.scene_flow, 3 * p); break;
+      case 1:
+        if (s.scene_flow) copy(result.scene_flow.data, s.scene_flow, 3 * p);
+        break;
       case 2: copy(result.optical_flow.data, s.optical_flow, 2 * p); break;
       case 3: copy(result.moved_depth.data, s.moved_depth, p); break;
       case 4: copy(result.labels.data, s.labels, p); break;
@@ -313,7 +337,7 @@ int fillOutputImages(const StagedOutputs& s, Result& result) {
   };
   // Threads pay off where page faults and copies outweigh waking them: from about 2 MB of images (a 320x240 pair
   // with 16 labels spent 4.5 ms in the outputs stage with one thread, against 0.8 ms with 5 labels).
-  const std::size_t bytes = p * (std::size_t(s.label_count) * 4 + 3 * 4 + 2 * 4 + 4 + 4 + 1);
+  const std::size_t bytes = label_values * 4 + p * ((s.scene_flow ? 3 * 4 : 0) + 2 * 4 + 4 + 4 + 1);
   const bool parallel = bytes >= (std::size_t(2) << 20);
 #pragma omp parallel for schedule(dynamic, 1) if (parallel)
   for (int task = 0; task < tasks; ++task) fill(task);

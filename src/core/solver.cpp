@@ -98,6 +98,7 @@ struct Solver::Impl {
   std::unique_ptr<SolveBackend> backend;
   std::string backend_note;
   Result spare;  // a finished result (Solver::recycle) whose image memory the next solve's outputs reuse
+  OutputSelection selection;
 
   template <typename... Args>
   void progress(const char* format, Args... args) const {
@@ -140,6 +141,9 @@ void Solver::recycle(Result&& finished) {
   impl_->spare = std::move(finished);
   finished = Result();  // not a half-moved result: images with sizes but no data
 }
+
+void Solver::setOutputs(const OutputSelection& selection) { impl_->selection = selection; }
+const OutputSelection& Solver::outputs() const { return impl_->selection; }
 
 const Config& Solver::config() const { return impl_->config; }
 std::string Solver::backendName() const { return toString(impl_->backend->kind()); }
@@ -529,7 +533,7 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
 
   // ---- outputs at the input resolution
   t = Clock::now();
-  labels.outputs(twists, config, result);
+  labels.outputs(twists, config, selection, result);
   for (std::size_t i = 0; i < result.segments.size(); ++i) {
     Segment& s = result.segments[i];
     s.id = int(i) + 1;

@@ -54,8 +54,7 @@ ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& poi
     throw InputError("warm start: the previous result is " + std::to_string(previous.width) + "x" +
                      std::to_string(previous.height) + " but the frame is " + std::to_string(W) + "x" +
                      std::to_string(H));
-  if (ids.data.size() != std::size_t(W) * H || previous.scene_flow.data.size() != std::size_t(W) * H * 3 ||
-      previous.optical_flow.data.size() != std::size_t(W) * H * 2 ||
+  if (ids.data.size() != std::size_t(W) * H || previous.optical_flow.data.size() != std::size_t(W) * H * 2 ||
       previous.moved_depth.data.size() != std::size_t(W) * H)
     throw InputError("warm start: the previous result has no labels or flow at its " + std::to_string(W) + "x" +
                      std::to_string(H) + " resolution");

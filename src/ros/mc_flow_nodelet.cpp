@@ -233,6 +233,7 @@ void MCFlowNodelet::process(const SyncedInput& input) {
   const ros::WallTime start = ros::WallTime::now();
   mc_flow::SequenceStep step;
   try {
+    pipeline_->setOutputs(outputs_->wantedOutputs());
     step = pipeline_->push(std::move(frame));
   } catch (const mc_flow::InputError& e) {
     warn("input", "frame " + stampText(stamp) + " skipped: " + e.what());

@@ -50,6 +50,14 @@ bool OutputPublishers::anyListener() const {
   return false;
 }
 
+mc_flow::OutputSelection OutputPublishers::wantedOutputs() const {
+  mc_flow::OutputSelection wanted;
+  wanted.soft_labels =
+      soft_labels_.getNumSubscribers() > 0 || segmentation_.getNumSubscribers() > 0 || !params_.save_dir.empty();
+  wanted.scene_flow = cloud_.getNumSubscribers() > 0;
+  return wanted;
+}
+
 std::string OutputPublishers::topics() const {
   std::string out;
   for (const ros::Publisher* p : {&segments_, &cloud_, &markers_, &info_, &odom_, &camera_path_})

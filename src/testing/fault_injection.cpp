@@ -69,9 +69,10 @@ class FaultInjectingBackend final : public SolveBackend {
     strike("downloadLabels");
     return inner_->downloadLabels();
   }
-  void outputs(const std::vector<Vector6d>& twists, const Config& config, Result& result) override {
+  void outputs(const std::vector<Vector6d>& twists, const Config& config, const OutputSelection& selection,
+               Result& result) override {
     strike("outputs");
-    inner_->outputs(twists, config, result);
+    inner_->outputs(twists, config, selection, result);
   }
 
   int labelCount() const override { return inner_->labelCount(); }

@@ -9,6 +9,7 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/testing/fault_injection.h"
+#include "mc_flow/testing/same_result.h"
 #include "mc_flow/core/sequence.h"
 #include "stream_frames.h"
 #include "mc_flow/core/solve_backend.h"
@@ -82,6 +83,41 @@ TEST(SequencePipeline, PairsFramesWarmStartsAndTracksSegments) {
   }
   EXPECT_GE(continued, 3);
   EXPECT_EQ(pipeline.pairsSolved(), 2);
+}
+
+// Outputs nobody asked for (the nodelet asks per pair by its subscribers): the soft labels and the scene flow stay 0x0,
+// and the stream goes on as with them (the warm start needs only the labels, optical flow and moved depth), bit for
+// bit; asked for again, they come back.
+TEST(SequencePipeline, OutputsNotSelectedStayEmptyAndTheStreamIsTheSame) {
+  Config config;
+  SequencePipeline with(config, 0, 0.5), without(config, 0, 0.5);
+  OutputSelection none;
+  none.soft_labels = none.scene_flow = false;
+  without.setOutputs(none);
+  for (int t = 0; t < 4; ++t) {
+    const double stamp = 10.0 + 0.033 * t;
+    if (t == 3) without.setOutputs(OutputSelection());
+    const SequenceStep a = with.push(syntheticStreamFrame(t, stamp)), b = without.push(syntheticStreamFrame(t, stamp));
+    if (t == 0) continue;
+    ASSERT_EQ(a.outcome, SequenceStep::Outcome::Solved) << a.problem;
+    ASSERT_EQ(b.outcome, SequenceStep::Outcome::Solved) << b.problem;
+    SCOPED_TRACE("pair " + std::to_string(t));
+    EXPECT_EQ(b.result->start, a.result->start);
+    if (t >= 2) EXPECT_EQ(b.result->start, StartKind::Warm) << b.result->start_note;
+    if (t == 3) {
+      EXPECT_EQ(firstDifference(*a.result, *b.result), "");
+      continue;
+    }
+    EXPECT_EQ(b.result->soft_labels.width, 0);
+    EXPECT_EQ(b.result->soft_labels.count, 0);
+    EXPECT_TRUE(b.result->soft_labels.data.empty());
+    EXPECT_EQ(b.result->scene_flow.width, 0);
+    EXPECT_TRUE(b.result->scene_flow.data.empty());
+    Result a_without = *a.result;  // everything else byte for byte (NaN where depth is missing included)
+    a_without.soft_labels = SoftLabels();
+    a_without.scene_flow = ImageF();
+    EXPECT_EQ(firstDifference(a_without, *b.result), "");
+  }
 }
 
 TEST(SequencePipeline, ResetsOnStampsGoingBackGapsAndInputChanges) {

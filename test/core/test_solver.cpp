@@ -448,6 +448,31 @@ TEST(SolveBackend, OutputImagesCopiedInChunksIntoRecycledMemory) {
   EXPECT_EQ(fresh.labels.height, H);
   for (int image = 0; image < 6; ++image) EXPECT_EQ(waits[std::size_t(image)], 1) << "image " << image;
 
+  // The soft labels and the scene flow not selected (null): 0x0, the others filled, every image waited for.
+  Result partial;
+  partial.soft_labels.data.assign(p * count, -7.f);  // a recycled result's memory
+  staged.soft_labels = nullptr;
+  staged.scene_flow = nullptr;
+  for (int& w : waits) w = 0;
+  staged.wait_for_image = [&waits](int image) {
+#pragma omp atomic
+    ++waits[std::size_t(image)];
+    return 0;
+  };
+  EXPECT_EQ(fillOutputImages(staged, partial), 0);
+  EXPECT_EQ(partial.soft_labels.width, 0);
+  EXPECT_EQ(partial.soft_labels.count, 0);
+  EXPECT_TRUE(partial.soft_labels.data.empty());
+  EXPECT_EQ(partial.scene_flow.width, 0);
+  EXPECT_TRUE(partial.scene_flow.data.empty());
+  EXPECT_EQ(partial.optical_flow.data, optical);
+  EXPECT_EQ(partial.moved_depth.data, moved);
+  EXPECT_EQ(partial.labels.data, ids);
+  EXPECT_EQ(partial.occlusion.data, occlusion);
+  for (int image = 0; image < 6; ++image) EXPECT_EQ(waits[std::size_t(image)], 1) << "image " << image;
+  staged.soft_labels = labels.data();
+  staged.scene_flow = scene.data();
+
   staged.wait_for_image = [](int image) { return image == 2 ? 719 : 0; };  // the optical flow's transfer failed
   EXPECT_EQ(fillOutputImages(staged, result), 719);
   EXPECT_EQ(result.soft_labels.width, 0) << "a failed fill leaves 0x0 images";

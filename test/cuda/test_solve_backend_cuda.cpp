@@ -26,6 +26,7 @@
 #include "mc_flow/core/label_adaptation.h"
 #include "mc_flow/core/label_optimization.h"
 #include "mc_flow/eval/metrics.h"
+#include "mc_flow/testing/same_result.h"
 #include "mc_flow/core/pyramid.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/solver.h"
@@ -334,8 +335,8 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
   // Outputs at level 0 from the labels at the label level (carried up first), with occlusions.
   for (SolveBackend* b : {cpu.get(), gpu.get()}) b->moveLabels(label_level);
   Result ra, rb;
-  cpu->outputs(final_twists, config, ra);
-  gpu->outputs(final_twists, config, rb);
+  cpu->outputs(final_twists, config, OutputSelection(), ra);
+  gpu->outputs(final_twists, config, OutputSelection(), rb);
   expectSameOutputs(ra, rb);
 }
 
@@ -582,6 +583,39 @@ TEST(CudaSolveBackend, KMeansCentresOfFewOrNoValidPoints) {
 
 // Grow-only buffers: once a solver has seen pairs of a size and label count (cold and warm), solving them again
 // allocates no device or page-locked memory.
+// The soft labels and the scene flow not selected: not downloaded, 0x0 in the result; every other output and the next
+// pair's warm start (from a result without them) are the full selection's, bit for bit.
+TEST(CudaSolveBackend, OutputsNotSelectedAreLeftOutAndTheRestIsTheSame) {
+  SKIP_WITHOUT_GPU();
+  Config config;
+  config.backend = Backend::Cuda;
+  SyntheticSceneOptions options;
+  options.variant = 1;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Solver all(config), some(config);
+  OutputSelection none;
+  none.soft_labels = none.scene_flow = false;
+  some.setOutputs(none);
+  const Result a = all.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  const Result b = some.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  EXPECT_EQ(b.soft_labels.count, 0);
+  EXPECT_TRUE(b.soft_labels.data.empty());
+  EXPECT_EQ(b.scene_flow.width, 0);
+  EXPECT_TRUE(b.scene_flow.data.empty());
+  EXPECT_FALSE(a.soft_labels.data.empty());
+  auto without = [](Result r) {
+    r.soft_labels = SoftLabels();
+    r.scene_flow = ImageF();
+    return r;
+  };
+  EXPECT_EQ(firstDifference(without(a), b), "");
+  // The warm start of the next pair (the same frames again) from each result.
+  const Result wa = all.solve(pair.frame1, pair.frame2, pair.intrinsics, a);
+  const Result wb = some.solve(pair.frame1, pair.frame2, pair.intrinsics, b);
+  EXPECT_EQ(wb.start, StartKind::Warm) << wb.start_note;
+  EXPECT_EQ(firstDifference(without(wa), wb), "");
+}
+
 TEST(CudaSolveBackend, NoAllocationAfterTheFirstPairsOfASize) {
   SKIP_WITHOUT_GPU();
   Config config;

@@ -134,6 +134,10 @@ class SequencePipeline {
   /// config (the solver is kept); a backend that cannot be made falls back to the CPU as in the constructor.
   void setConfig(const Config& config);
 
+  /// @brief The optional output images of the following pairs' results (Solver::setOutputs; all by default): a caller
+  /// that publishes them only to subscribers asks for them per pair. Kept across setConfig and the CPU fallback.
+  void setOutputs(const OutputSelection& selection);
+
   const Solver& solver() const { return *solver_; }
   /// @brief Tracks of the segments alive after the last solved pair, by id.
   const std::map<int, SegmentTrack>& tracks() const { return tracks_; }
@@ -159,6 +163,7 @@ class SequencePipeline {
   std::unique_ptr<Solver> makeSolver(const Config& config, std::string* unavailable, const std::string& why = "");
 
   Config config_;
+  OutputSelection outputs_;
   int downsample_request_ = 0;
   double max_pair_interval_ = 1.0;
   SolveBackendFactory make_backend_;

@@ -111,8 +111,10 @@ class SolveBackend : public LabelStore {
   /// @brief Outputs at the input resolution, from the current labels carried to level 0: fills `result`'s
   /// soft_labels (pixels without depth on the outlier label), labels (argmax id 1..m, 0 = outlier or no
   /// depth), scene_flow, optical_flow, moved_depth, occlusion (all 0 unless detect_occlusions) and one Segment
-  /// per motion label with its support and centroid (id, twist and transform are the caller's).
-  virtual void outputs(const std::vector<Vector6d>& twists, const Config& config, Result& result) = 0;
+  /// per motion label with its support and centroid (id, twist and transform are the caller's). The soft labels and
+  /// scene flow only as `selection` asks (else 0x0).
+  virtual void outputs(const std::vector<Vector6d>& twists, const Config& config, const OutputSelection& selection,
+                       Result& result) = 0;
 };
 
 /// @brief What this process's CUDA backends have done so far (all solvers together; zeros in a build without
@@ -132,8 +134,8 @@ bool cudaDeviceMemory(std::size_t* used, std::size_t* total);
 /// @brief The output images of a solve, contiguous in host memory (the CUDA backend's one download).
 struct StagedOutputs {
   int width = 0, height = 0, label_count = 0;
-  const float* soft_labels = nullptr;   ///< label_count planes
-  const float* scene_flow = nullptr;    ///< 3 channels
+  const float* soft_labels = nullptr;   ///< label_count planes; null: not selected (Result::soft_labels 0x0)
+  const float* scene_flow = nullptr;    ///< 3 channels; null: not selected (Result::scene_flow 0x0)
   const float* optical_flow = nullptr;  ///< 2 channels
   const float* moved_depth = nullptr;
   const std::int32_t* labels = nullptr;
@@ -148,7 +150,8 @@ struct StagedOutputs {
 /// each image copied once, into a recycled image's memory where its size matches (the soft labels then in chunks of
 /// 1 MiB), else allocated and copied in one pass, on several OpenMP threads (at 1280x720, ~50 MB allocated,
 /// zero-filled and copied on one thread took most of the CUDA outputs stage; then the 26 MB of soft labels on one
-/// thread did). Returns the first non-zero code that wait_for_image returned (the six images are then 0x0), or 0.
+/// thread did). Returns the first non-zero code that wait_for_image returned (the six images are then 0x0), or 0. The
+/// images `staged` leaves null become 0x0 (wait_for_image is still called for them).
 int fillOutputImages(const StagedOutputs& staged, Result& result);
 /// @brief Copies both frames' intensity and depth planes (`width` x `height` floats each) into `staged` in the order
 /// frame1 intensity, frame1 depth, frame2 intensity, frame2 depth; several OpenMP threads from a few MB on (the CUDA

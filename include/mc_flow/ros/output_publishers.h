@@ -36,6 +36,9 @@ class OutputPublishers {
                    std::string logger);
 
   bool anyListener() const;
+  /// @brief The optional output images the next pair needs: the soft labels for ~soft_labels, ~segmentation or
+  /// save_dir, the scene flow for ~scene_flow (issue: outputs nobody subscribes to are not downloaded).
+  mc_flow::OutputSelection wantedOutputs() const;
   /// @brief The outputs' resolved names, for the start-up log.
   std::string topics() const;
 
