@@ -53,8 +53,9 @@ struct Options {
   std::vector<int> variants{0, 1, 2};
   std::vector<bool> warm_modes{false, true};
   bool noise = false;
-  bool print_ids = false;  // per pair, the majority id of each true part (stderr)
-  bool world = false;      // the static world's metrics (issue 28)
+  bool print_ids = false;   // per pair, the majority id of each true part (stderr)
+  bool world = false;       // the static world's metrics (issue 28)
+  OutputSelection outputs;  // --outputs required: no soft labels, no scene flow
   Config config;
 };
 
@@ -202,14 +203,18 @@ void scoreWorld(const SyntheticPair& p, const SequenceStep& step, const Odometry
 // `world`: run through SequencePipeline (frames stamped at kFrameRate) and score the static world into it; null: the
 // solver alone.
 ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& config, bool print_ids,
-                      WorldStats* world = nullptr) {
+                      const OutputSelection& outputs, WorldStats* world = nullptr) {
   ModeStats st;
   std::unique_ptr<Solver> solver;
   Result previous;
   std::unique_ptr<SequencePipeline> pipeline;
-  if (!world) solver = std::make_unique<Solver>(config);
+  if (!world) {
+    solver = std::make_unique<Solver>(config);
+    solver->setOutputs(outputs);
+  }
   if (world) {
     pipeline = std::make_unique<SequencePipeline>(config, 1, 1.0);  // downsample 1: the solver's input, as below
+    pipeline->setOutputs(outputs);
     pipeline->push(StreamFrame{pairs.front().frame1, pairs.front().intrinsics, 0.0, "synthetic", {}});
     world->truth.emplace_back(0.0, Eigen::Matrix4d::Identity());
     world->estimate.emplace_back(0.0, Eigen::Matrix4d::Identity());
@@ -342,7 +347,11 @@ int main(int argc, char** argv) {
                                            {"ids", false, "print each pair's majority id per true part on stderr"},
                                            {"world", false,
                                             "the static world: odometry ATE/RPE (with and without moving parts), world "
-                                            "choice, moving mask, world velocities, NEES (a second table)"}});
+                                            "choice, moving mask, world velocities, NEES (a second table)"},
+                                           {"outputs", true,
+                                            "all | required (default all): with required the solves leave out the "
+                                            "soft labels and the scene flow (OutputSelection), as the nodelet does "
+                                            "when nobody subscribes to them"}});
   try {
     line.parse(argc, argv);
     if (line.helpRequested()) {
@@ -363,6 +372,10 @@ int main(int argc, char** argv) {
     opt.noise = line.has("noise");
     opt.print_ids = line.has("ids");
     opt.world = line.has("world");
+    const std::string outputs = line.text("outputs", "all");
+    if (outputs != "all" && outputs != "required")
+      throw ConfigError("--outputs: '" + outputs + "' is neither all nor required");
+    opt.outputs.soft_labels = opt.outputs.scene_flow = outputs == "all";
     line.applySettings(opt.config);
     opt.config.validate();
   } catch (const std::exception& e) {
@@ -381,10 +394,11 @@ int main(int argc, char** argv) {
       Config config = opt.config;
       config.warm_start = warm;
       WorldRow parts_row{variant, warm, "parts", {}, -1};
-      const ModeStats st = runSequence(pairs, config, opt.print_ids, opt.world ? &parts_row.stats : nullptr);
+      const ModeStats st =
+          runSequence(pairs, config, opt.print_ids, opt.outputs, opt.world ? &parts_row.stats : nullptr);
       if (opt.world) {
         WorldRow static_row{variant, warm, "static", {}, -1};
-        runSequence(static_pairs, config, false, &static_row.stats);
+        runSequence(static_pairs, config, false, opt.outputs, &static_row.stats);
         const WorldStats& a = parts_row.stats;
         const WorldStats& b = static_row.stats;
         const double parts_ate = evaluateTrajectory(a.truth, a.estimate, 1e-3, 0.0).ate_rmse_m;
