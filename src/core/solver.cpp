@@ -229,10 +229,12 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   ImageI32 carried_ids, carried_dormant;
   if (previous) {
     t = Clock::now();
-    carried_ids = carrySegmentIds(*previous, backend->framePoints(0), config.warm_depth_tolerance);
+    // On frame 1's depth as the host has it (the points at level 0 would be a download on the GPU).
+    const float min_depth = float(config.min_depth), max_depth = float(config.max_depth);
+    carried_ids = carrySegmentIds(*previous, frame1.depth, min_depth, max_depth, config.warm_depth_tolerance);
     if (!previous->dormant_ids.empty())
-      carried_dormant =
-          carryIds(previous->dormant_regions, *previous, backend->framePoints(0), config.warm_depth_tolerance);
+      carried_dormant = carryIds(previous->dormant_regions, *previous, frame1.depth, min_depth, max_depth,
+                                 config.warm_depth_tolerance);
     result.timings.initialisation += elapsedMs(t);
   }
 

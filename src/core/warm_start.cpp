@@ -10,6 +10,7 @@
 #include <tuple>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/pyramid_pixel.h"
 #include "mc_flow/core/solver.h"
 
 namespace mc_flow {
@@ -44,12 +45,17 @@ int roundHalfAway(float v) {
 
 }  // namespace
 
-ImageI32 carrySegmentIds(const Result& previous, const ImageF& points, double depth_tolerance) {
-  return carryIds(previous.labels, previous, points, depth_tolerance);
+ImageI32 carrySegmentIds(const Result& previous, const ImageF& depth, float min_depth, float max_depth,
+                         double depth_tolerance) {
+  return carryIds(previous.labels, previous, depth, min_depth, max_depth, depth_tolerance);
 }
 
-ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& points, double depth_tolerance) {
-  const int W = points.width, H = points.height;
+ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& depth, float min_depth, float max_depth,
+                  double depth_tolerance) {
+  const int W = depth.width, H = depth.height;
+  if (depth.channels != 1 || depth.data.size() != std::size_t(W) * H)
+    throw InputError("warm start: the frame's depth has " + std::to_string(depth.channels) + " channels and " +
+                     std::to_string(depth.data.size()) + " values for " + imageSizeText(W, H));
   if (previous.width != W || previous.height != H)
     throw InputError("warm start: the previous result is " + std::to_string(previous.width) + "x" +
                      std::to_string(previous.height) + " but the frame is " + std::to_string(W) + "x" +
@@ -76,7 +82,11 @@ ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& poi
       splat(tx, ty) = id;
     }
   ImageI32 carried(W, H, 1, 0);
-  auto observed = [&](int x, int y) { return points(x, y, 2); };
+  // The depth the pyramid's level 0 holds there (pyramid_pixel.h's rule), NaN where none.
+  auto observed = [&](int x, int y) {
+    const float z = pyramid_pixel::cleanDepth(depth(x, y), min_depth, max_depth);
+    return isValidDepth(z) ? z : std::numeric_limits<float>::quiet_NaN();
+  };
   // The splat above stays serial (the nearest point wins a pixel); the passes below write one pixel each.
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y)

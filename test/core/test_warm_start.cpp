@@ -43,6 +43,8 @@ Result shiftedPrevious(int W, int H, int shift) {
   return r;
 }
 
+ImageF planeDepth(int W, int H, float depth) { return ImageF(W, H, 1, depth); }
+
 ImageF planePoints(int W, int H, float depth) {
   ImageF points(W, H, 3, 0.f);
   for (int y = 0; y < H; ++y)
@@ -54,13 +56,18 @@ ImageF planePoints(int W, int H, float depth) {
   return points;
 }
 
+// The solver's depth range (Config's defaults are wider than any value here).
+constexpr float kMinDepth = 0.1f, kMaxDepth = 5.f;
+
 TEST(WarmStart, CarriesIdsAlongTheFlowWhereTheDepthAgrees) {
   const int W = 40, H = 20;
   const Result previous = shiftedPrevious(W, H, 3);
-  ImageF points = planePoints(W, H, 2.f);
-  for (int x = 0; x < W; ++x) points(x, 5, 2) = 2.5f;  // row 5: another surface than the one that arrives
-  points(30, 10, 2) = kNaN;                            // no depth
-  const ImageI32 carried = carrySegmentIds(previous, points, 0.05);
+  ImageF depth = planeDepth(W, H, 2.f);
+  for (int x = 0; x < W; ++x) depth(x, 5) = 2.5f;  // row 5: another surface than the one that arrives
+  depth(30, 10) = kNaN;                            // no depth
+  depth(31, 10) = 0.f;                             // no depth either
+  depth(32, 10) = 7.f;                             // beyond max_depth: not observed by the solver
+  const ImageI32 carried = carrySegmentIds(previous, depth, kMinDepth, kMaxDepth, 0.05);
   // Columns 0..2 receive nothing (everything moved right); the boundary moves from 20 to 23.
   EXPECT_EQ(carried(1, 10), 0);
   EXPECT_EQ(carried(3, 10), 7);
@@ -69,8 +76,11 @@ TEST(WarmStart, CarriesIdsAlongTheFlowWhereTheDepthAgrees) {
   EXPECT_EQ(carried(39, 10), 9);
   EXPECT_EQ(carried(10, 5), 0) << "the observed depth is 0.5 m away from the carried point's";
   EXPECT_EQ(carried(30, 10), 0) << "no depth, no id";
+  EXPECT_EQ(carried(31, 10), 0) << "no depth, no id";
+  EXPECT_EQ(carried(32, 10), 0) << "a depth outside [min_depth, max_depth] is none";
+  EXPECT_EQ(carried(33, 10), 9);
   // With a looser tolerance the row is carried too.
-  EXPECT_EQ(carrySegmentIds(previous, points, 0.6)(10, 5), 7);
+  EXPECT_EQ(carrySegmentIds(previous, depth, kMinDepth, kMaxDepth, 0.6)(10, 5), 7);
 }
 
 TEST(WarmStart, ClosesOnePixelGapsOfASurfaceThatComesCloser) {
@@ -79,18 +89,19 @@ TEST(WarmStart, ClosesOnePixelGapsOfASurfaceThatComesCloser) {
   // Every second column of the previous frame is unlabelled: its points land nowhere.
   for (int y = 0; y < H; ++y)
     for (int x = 1; x < W; x += 2) previous.labels(x, y) = 0;
-  const ImageI32 carried = carrySegmentIds(previous, planePoints(W, H, 2.f), 0.05);
+  const ImageI32 carried = carrySegmentIds(previous, planeDepth(W, H, 2.f), kMinDepth, kMaxDepth, 0.05);
   EXPECT_EQ(carried(11, 10), 7);
   EXPECT_EQ(carried(25, 10), 9);
 }
 
 TEST(WarmStart, RejectsAPreviousResultOfAnotherSize) {
   const Result previous = shiftedPrevious(40, 20, 0);
-  EXPECT_THROW(carrySegmentIds(previous, planePoints(20, 10, 2.f), 0.05), InputError);
+  EXPECT_THROW(carrySegmentIds(previous, planeDepth(20, 10, 2.f), kMinDepth, kMaxDepth, 0.05), InputError);
+  EXPECT_THROW(carrySegmentIds(previous, ImageF(40, 20, 3, 2.f), kMinDepth, kMaxDepth, 0.05), InputError);
   Result empty;
   empty.width = 40;
   empty.height = 20;
-  EXPECT_THROW(carrySegmentIds(empty, planePoints(40, 20, 2.f), 0.05), InputError);
+  EXPECT_THROW(carrySegmentIds(empty, planeDepth(40, 20, 2.f), kMinDepth, kMaxDepth, 0.05), InputError);
 }
 
 TEST(WarmStart, LevelLabelsTakeTheMajorityOfTheirBlock) {

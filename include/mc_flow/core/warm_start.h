@@ -20,11 +20,14 @@ struct Result;
 /// @brief The previous pair's segment ids on the next pair's frame-1 pixels (input resolution), 0 where
 /// no segment arrives. Each labelled point of the previous frame 1 is moved by its scene flow and
 /// projected (the nearest point wins a pixel); a pixel keeps the id only where the moved point's depth is
-/// within `depth_tolerance` [m] of the depth observed there (`points`: the next frame 1's 3D points, NaN
-/// where invalid). One-pixel gaps between splatted points are closed from neighbours at a similar depth.
-ImageI32 carrySegmentIds(const Result& previous, const ImageF& points, double depth_tolerance);
+/// within `depth_tolerance` [m] of the depth observed there (`depth`: the next frame 1's input depth [m], observed
+/// where within [min_depth, max_depth], as the solver's pyramid takes it: the host's frame, so that a GPU solve
+/// downloads nothing for it). One-pixel gaps between splatted points are closed from neighbours at a similar depth.
+ImageI32 carrySegmentIds(const Result& previous, const ImageF& depth, float min_depth, float max_depth,
+                         double depth_tolerance);
 /// @brief The same for another id image on the previous pair's frame-1 pixels (e.g. its dormant regions).
-ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& points, double depth_tolerance);
+ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& depth, float min_depth, float max_depth,
+                  double depth_tolerance);
 
 /// @brief Carried ids as hard initial labels of a pyramid level.
 struct CarriedLabels {
