@@ -113,9 +113,11 @@ void depthToMetres(const cv::Mat& image, const std::string& encoding, const cv::
     throw std::logic_error("depthToMetres: OpenCV reallocated the depth image");
 }
 
+// An image message of the size (from `pool` when given; its data keeps its memory when the size is the same), every
+// field but the data set; the caller writes every byte of the data.
 sensor_msgs::ImagePtr emptyImage(const PairContext& pair, int w, int h, const std::string& encoding,
-                                 int bytes_per_pixel) {
-  auto msg = boost::make_shared<sensor_msgs::Image>();
+                                 int bytes_per_pixel, ImagePool* pool) {
+  auto msg = pool ? pool->take() : boost::make_shared<sensor_msgs::Image>();
   msg->header = pair.header;
   msg->width = std::uint32_t(w);
   msg->height = std::uint32_t(h);
@@ -240,7 +242,7 @@ sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input) {
 
 mc_flow::StreamFrame toStreamFrame(FrameInput input) {
   mc_flow::StreamFrame frame;
-  frame.frame = input.frame;
+  frame.frame = std::move(input.frame);  // the pipeline keeps it; outputs read it there (PairContext::previous_frame)
   frame.K = input.K;
   frame.stamp = input.header.stamp.toSec();
   frame.source = input.header.frame_id;
@@ -252,6 +254,7 @@ PairContext pairContext(const mc_flow::SequenceStep& step, double solve_ms) {
   PairContext pair;
   pair.previous = &std::any_cast<const FrameInput&>(step.first->extra);
   pair.current = &std::any_cast<const FrameInput&>(step.second->extra);
+  pair.previous_frame = &step.first->frame;
   pair.header = pair.current->header;
   pair.previous_stamp = pair.previous->header.stamp;
   pair.solve_time_ms = solve_ms;
@@ -318,10 +321,10 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
   return msg;
 }
 
-sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const PairContext& pair) {
+sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const PairContext& pair, ImagePool* pool) {
   const mc_flow::SoftLabels& u = result.soft_labels;
   const int n = std::max(u.count, 1);
-  auto msg = emptyImage(pair, u.width, u.height, "32FC" + std::to_string(n), int(sizeof(float)) * n);
+  auto msg = emptyImage(pair, u.width, u.height, "32FC" + std::to_string(n), int(sizeof(float)) * n, pool);
   auto* out = reinterpret_cast<float*>(msg->data.data());
   const long plane = long(u.planeSize());
 #pragma omp parallel for schedule(static)
@@ -331,8 +334,8 @@ sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const P
   return msg;
 }
 
-sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairContext& pair) {
-  auto msg = emptyImage(pair, result.labels.width, result.labels.height, enc::MONO16, 2);
+sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairContext& pair, ImagePool* pool) {
+  auto msg = emptyImage(pair, result.labels.width, result.labels.height, enc::MONO16, 2, pool);
   auto* out = reinterpret_cast<std::uint16_t*>(msg->data.data());
   for (std::size_t i = 0; i < result.labels.pixelCount(); ++i) {
     out[i] = std::uint16_t(std::min<std::uint32_t>(std::uint32_t(std::max(0, result.labels.data[i])), 65535u));
@@ -376,15 +379,16 @@ nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Ti
 }
 
 sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result,
-                                          const std::vector<mc_flow::WorldVelocity>& world, const PairContext& pair) {
+                                          const std::vector<mc_flow::WorldVelocity>& world, const PairContext& pair,
+                                          ImagePool* pool) {
   const mc_flow::ImageU8 mask = mc_flow::movingMask(result, world);
-  auto msg = emptyImage(pair, mask.width, mask.height, enc::MONO8, 1);
+  auto msg = emptyImage(pair, mask.width, mask.height, enc::MONO8, 1, pool);
   std::copy(mask.data.begin(), mask.data.end(), msg->data.begin());
   return msg;
 }
 
-sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const PairContext& pair) {
-  auto msg = emptyImage(pair, result.occlusion.width, result.occlusion.height, enc::MONO8, 1);
+sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const PairContext& pair, ImagePool* pool) {
+  auto msg = emptyImage(pair, result.occlusion.width, result.occlusion.height, enc::MONO8, 1, pool);
   std::copy(result.occlusion.data.begin(), result.occlusion.data.end(), msg->data.begin());
   return msg;
 }
@@ -395,20 +399,29 @@ cv::Mat segmentationPicture(const mc_flow::Result& result, const PairContext& pa
   for (int c = 0; c + 1 < u.count; ++c)
     ids.push_back(std::size_t(c) < result.segments.size() ? result.segments[std::size_t(c)].id : 0);
   // The grey of the pixels the labels belong to: the previous frame's (the solver's intensity).
-  const mc_flow::ImageF* grey = pair.previous ? &pair.previous->frame.intensity : nullptr;
+  const mc_flow::ImageF* grey = pair.firstFrame() ? &pair.firstFrame()->intensity : nullptr;
   const mc_flow::ImageU8 rgb = mc_flow::segmentationPicture(u, ids, grey, blend, result.world.ids);
   cv::Mat picture(rgb.height, rgb.width, CV_8UC3);
   std::copy(rgb.data.begin(), rgb.data.end(), picture.data);
   return picture;
 }
 
-sensor_msgs::ImagePtr makeSegmentationImage(const cv::Mat& picture, const PairContext& pair) {
-  return cv_bridge::CvImage(pair.header, enc::RGB8, picture).toImageMsg();
+sensor_msgs::ImagePtr makeSegmentationImage(const cv::Mat& picture, const PairContext& pair, ImagePool* pool) {
+  if (picture.type() != CV_8UC3)
+    throw std::invalid_argument("makeSegmentationImage: the picture is not CV_8UC3 (type " +
+                                std::to_string(picture.type()) + ")");
+  auto msg = emptyImage(pair, picture.cols, picture.rows, enc::RGB8, 3, pool);
+  const std::size_t row_bytes = std::size_t(picture.cols) * 3;
+  for (int y = 0; y < picture.rows; ++y)
+    std::memcpy(msg->data.data() + std::size_t(y) * row_bytes, picture.ptr<std::uint8_t>(y), row_bytes);
+  return msg;
 }
 
 sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, const PairContext& pair,
-                                               CloudColour colour) {
-  auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
+                                               CloudColour colour, CloudPool* pool) {
+  // From the pool: the data keeps its memory at the same size; every field's bytes are written below, and the padding
+  // after `occluded` is never written, so it keeps the zeros of the first fill.
+  auto cloud = pool ? pool->take() : boost::make_shared<sensor_msgs::PointCloud2>();
   cloud->header = pair.header;
   cloud->height = std::uint32_t(result.height);
   cloud->width = std::uint32_t(result.width);
@@ -430,7 +443,8 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
   cloud->is_dense = false;
 
   const FrameInput* first = pair.previous;
-  const bool have_depth = first && first->frame.depth.sameSize(result.width, result.height);
+  const mc_flow::RgbdFrame* first_frame = pair.firstFrame();
+  const bool have_depth = first_frame && first_frame->depth.sameSize(result.width, result.height);
   const bool have_colour = first && first->colour.cols == result.width && first->colour.rows == result.height;
   const mc_flow::Intrinsics K = first ? first->K : result.intrinsics;
   const float nan = std::numeric_limits<float>::quiet_NaN();
@@ -462,7 +476,7 @@ sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, co
     std::uint32_t cached_rgb = packedColour(mc_flow::colourForId(0));
     std::uint8_t* point = data + std::size_t(y) * std::size_t(cloud->row_step);
     for (int x = 0; x < result.width; ++x, point += step) {
-      const float z = have_depth ? first->frame.depth(x, y) : nan;
+      const float z = have_depth ? first_frame->depth(x, y) : nan;
       const bool valid = mc_flow::isValidDepth(z);
       const float xyz[3] = {valid ? float(ray_x[std::size_t(x)] * z) : nan,
                             valid ? float(ray_y[std::size_t(y)] * z) : nan, valid ? z : nan};

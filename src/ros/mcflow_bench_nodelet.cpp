@@ -246,12 +246,16 @@ int run(int argc, char** argv) {
     pair.previous_stamp = first.header.stamp;
     pair.previous = &first;
     pair.current = &second;
+    pair.previous_frame = &step.first->frame;
     pair.solve_time_ms = cli.has("dump") ? 0.0 : solve_ms;  // a dump compares builds: no clock in it
 
     // What arrives from a driver in another process (the length prefix, then the message).
     const std::vector<ros::SerializedMessage> arrived = {ros::serialization::serializeMessage(m1.rgb),
                                                          ros::serialization::serializeMessage(m1.depth),
                                                          ros::serialization::serializeMessage(m1.info)};
+    // The nodelet's message pools (OutputPublishers'): a pair's messages are reused by the next once released.
+    mc_flow_ros::ImagePool soft_pool, labels_pool, occlusion_pool, segmentation_pool;
+    mc_flow_ros::CloudPool cloud_pool;
     StepTimes own, wire;
     std::map<std::string, std::size_t> bytes;
     std::size_t sink = 0;
@@ -265,7 +269,7 @@ int run(int argc, char** argv) {
                                           std::uint64_t(defaults.max_input_pixels), config.depth_downsample_range);
       });
       mc_flow::StreamFrame frame;
-      own.time("StreamFrame (frame copy, FrameInput moved)",
+      own.time("StreamFrame (the frame and FrameInput moved)",
                [&] { frame = mc_flow_ros::toStreamFrame(std::move(input)); });
       sink += frame.frame.depth.data.size();
       // ---- outputs: publish() with a listener on every topic, then publishTf
@@ -276,14 +280,16 @@ int run(int argc, char** argv) {
       sensor_msgs::CameraInfo info;
       std::vector<geometry_msgs::TransformStamped> transforms;
       own.time("~segments", [&] { segments = mc_flow_ros::makeSegmentArray(result, pair); });
-      own.time("~soft_labels", [&] { soft = mc_flow_ros::makeSoftLabelsImage(result, pair); });
-      own.time("~labels", [&] { labels = mc_flow_ros::makeLabelsImage(result, pair); });
-      own.time("~occlusion", [&] { occlusion = mc_flow_ros::makeOcclusionImage(result, pair); });
+      own.time("~soft_labels", [&] { soft = mc_flow_ros::makeSoftLabelsImage(result, pair, &soft_pool); });
+      own.time("~labels", [&] { labels = mc_flow_ros::makeLabelsImage(result, pair, &labels_pool); });
+      own.time("~occlusion", [&] { occlusion = mc_flow_ros::makeOcclusionImage(result, pair, &occlusion_pool); });
       own.time("~segmentation (picture + message)", [&] {
         const cv::Mat picture = mc_flow_ros::segmentationPicture(result, pair, defaults.segmentation_blend);
-        segmentation = mc_flow_ros::makeSegmentationImage(picture, pair);
+        segmentation = mc_flow_ros::makeSegmentationImage(picture, pair, &segmentation_pool);
       });
-      own.time("~scene_flow cloud", [&] { cloud = mc_flow_ros::makeSceneFlowCloud(result, pair); });
+      own.time("~scene_flow cloud", [&] {
+        cloud = mc_flow_ros::makeSceneFlowCloud(result, pair, mc_flow_ros::CloudColour::Segment, &cloud_pool);
+      });
       own.time("~motion_markers",
                [&] { markers = mc_flow_ros::makeMotionMarkers(result, pair, defaults.marker_seconds_ahead); });
       own.time("~camera_info", [&] { info = mc_flow_ros::processingCameraInfo(*pair.current); });

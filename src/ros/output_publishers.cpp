@@ -73,19 +73,20 @@ void OutputPublishers::publish(const mc_flow::Result& result, const PairContext&
                                const mc_flow::SequencePipeline& pipeline, long pair_index, long frames_dropped,
                                const Warn& warn) {
   if (segments_.getNumSubscribers() > 0) segments_.publish(makeSegmentArray(result, pair));
-  if (soft_labels_.getNumSubscribers() > 0) soft_labels_.publish(makeSoftLabelsImage(result, pair));
-  if (labels_.getNumSubscribers() > 0) labels_.publish(makeLabelsImage(result, pair));
-  if (occlusion_.getNumSubscribers() > 0) occlusion_.publish(makeOcclusionImage(result, pair));
+  if (soft_labels_.getNumSubscribers() > 0) soft_labels_.publish(makeSoftLabelsImage(result, pair, &soft_labels_pool_));
+  if (labels_.getNumSubscribers() > 0) labels_.publish(makeLabelsImage(result, pair, &labels_pool_));
+  if (occlusion_.getNumSubscribers() > 0) occlusion_.publish(makeOcclusionImage(result, pair, &occlusion_pool_));
   cv::Mat segmentation;
   if (segmentation_.getNumSubscribers() > 0 || !params_.save_dir.empty()) {
     segmentation = segmentationPicture(result, pair, params_.segmentation_blend);
   }
-  if (segmentation_.getNumSubscribers() > 0) segmentation_.publish(makeSegmentationImage(segmentation, pair));
-  if (cloud_.getNumSubscribers() > 0) cloud_.publish(makeSceneFlowCloud(result, pair, cloud_colour_));
+  if (segmentation_.getNumSubscribers() > 0)
+    segmentation_.publish(makeSegmentationImage(segmentation, pair, &segmentation_pool_));
+  if (cloud_.getNumSubscribers() > 0) cloud_.publish(makeSceneFlowCloud(result, pair, cloud_colour_, &cloud_pool_));
   if (markers_.getNumSubscribers() > 0) markers_.publish(makeMotionMarkers(result, pair, params_.marker_seconds_ahead));
   if (info_.getNumSubscribers() > 0) info_.publish(processingCameraInfo(*pair.current));
   if (moving_mask_.getNumSubscribers() > 0 && pair.world) {
-    moving_mask_.publish(makeMovingMaskImage(result, *pair.world, pair));
+    moving_mask_.publish(makeMovingMaskImage(result, *pair.world, pair, &moving_mask_pool_));
   }
   if (params_.publish_tf) {
     tf_broadcaster_->sendTransform(

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 
+#include <cv_bridge/cv_bridge.h>
 #include <sensor_msgs/image_encodings.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 
@@ -187,6 +188,7 @@ TEST(Conversions, AStreamFrameCarriesTheFrameInputAndAPairContextFindsItAgain) {
   EXPECT_NEAR(pair.interval(), 0.1, 1e-9);
   EXPECT_DOUBLE_EQ(pair.solve_time_ms, 4.5);
   EXPECT_EQ(pair.world, &step.world_velocities);
+  EXPECT_EQ(pair.previous_frame, &first.frame) << "the outputs read the first frame where the pipeline keeps it";
 }
 
 TEST(Conversions, DepthDownsamplingDoesNotAverageAcrossEdges) {
@@ -304,6 +306,59 @@ Fixture makeFixture() {
   f.pair.current = &f.current;
   f.pair.solve_time_ms = 12.5;
   return f;
+}
+
+// A pooled message is handed out again only when nobody else holds it, and is then refilled to the same bytes as a
+// new message: for every image output and the cloud, across pairs whose contents differ.
+TEST(Conversions, PooledMessagesAreReusedOnceReleasedAndEqualNewOnes) {
+  mc_flow_ros::ImagePool pool;
+  auto held = pool.take();
+  auto second = pool.take();
+  EXPECT_NE(held, second) << "a message someone holds is not handed out again";
+  const sensor_msgs::Image* released = second.get();
+  second.reset();
+  EXPECT_EQ(pool.take().get(), released) << "a released message is reused";
+  for (int k = 0; k < 5; ++k) pool.take();  // each released at once: the same message again
+  EXPECT_EQ(pool.size(), 2u);
+
+  Fixture f = makeFixture();
+  mc_flow_ros::ImagePool soft, labels, occlusion, segmentation, moving;
+  mc_flow_ros::CloudPool cloud;
+  const std::vector<mc_flow::WorldVelocity> world(f.result.segments.size());
+  for (int pair = 0; pair < 3; ++pair) {
+    SCOPED_TRACE("pair " + std::to_string(pair));
+    // Another pair: other values (the pooled messages hold the last pair's).
+    f.result.soft_labels.at(0, 1, 1) = 0.1f * float(pair + 1);
+    f.result.labels(2, 2) = pair == 1 ? 0 : 9;
+    f.result.occlusion(1, 0) = pair == 2 ? 255 : 0;
+    f.pair.header.stamp = ros::Time(20.0 + pair);
+    auto same = [](const sensor_msgs::ImagePtr& a, const sensor_msgs::ImagePtr& b) {
+      return a->header.stamp == b->header.stamp && a->encoding == b->encoding && a->width == b->width &&
+             a->height == b->height && a->step == b->step && a->data == b->data;
+    };
+    EXPECT_TRUE(same(mc_flow_ros::makeSoftLabelsImage(f.result, f.pair, &soft),
+                     mc_flow_ros::makeSoftLabelsImage(f.result, f.pair)));
+    EXPECT_TRUE(
+        same(mc_flow_ros::makeLabelsImage(f.result, f.pair, &labels), mc_flow_ros::makeLabelsImage(f.result, f.pair)));
+    EXPECT_TRUE(same(mc_flow_ros::makeOcclusionImage(f.result, f.pair, &occlusion),
+                     mc_flow_ros::makeOcclusionImage(f.result, f.pair)));
+    EXPECT_TRUE(same(mc_flow_ros::makeMovingMaskImage(f.result, world, f.pair, &moving),
+                     mc_flow_ros::makeMovingMaskImage(f.result, world, f.pair)));
+    const cv::Mat picture = mc_flow_ros::segmentationPicture(f.result, f.pair, 0.5);
+    const auto pooled_picture = mc_flow_ros::makeSegmentationImage(picture, f.pair, &segmentation);
+    const auto bridged = cv_bridge::CvImage(f.pair.header, "rgb8", picture).toImageMsg();
+    EXPECT_TRUE(same(pooled_picture, bridged)) << "the message cv_bridge makes";
+    const auto a = mc_flow_ros::makeSceneFlowCloud(f.result, f.pair, mc_flow_ros::CloudColour::Segment, &cloud);
+    const auto b = mc_flow_ros::makeSceneFlowCloud(f.result, f.pair);
+    EXPECT_EQ(a->data, b->data);
+    EXPECT_EQ(a->fields.size(), b->fields.size());
+    EXPECT_EQ(a->point_step, b->point_step);
+    EXPECT_EQ(a->row_step, b->row_step);
+    EXPECT_EQ(a->width, b->width);
+    EXPECT_EQ(a->height, b->height);
+    EXPECT_EQ(a->header.stamp, b->header.stamp);
+  }
+  EXPECT_EQ(cloud.size(), 1u) << "every pair's cloud was released before the next: one message served all";
 }
 
 }  // namespace

@@ -25,6 +25,7 @@
 #include <nav_msgs/Path.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include "mc_flow/ros/message_pool.h"
 #include "mc_flow/SegmentArray.h"
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/image.h"
@@ -68,15 +69,22 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb, const sensor_msgs::Image&
 sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input);
 
 /// @brief The frame for a mc_flow::SequencePipeline at factor 1 (`input` is already at the processing resolution): its
-/// intensity, depth and intrinsics, its stamp [s] and frame_id (the source), and `input` itself as the frame's extra.
+/// intensity and depth (moved out of `input`), intrinsics, its stamp [s] and frame_id (the source), and `input`
+/// (without its frame: read it from the pipeline, PairContext::previous_frame) as the frame's extra.
 mc_flow::StreamFrame toStreamFrame(FrameInput input);
 
 /// @brief Everything the output builders need besides the Result.
 struct PairContext {
   std_msgs::Header header;               ///< stamp of the current frame, input frame_id
   ros::Time previous_stamp;              ///< stamp of the previous frame of the pair
-  const FrameInput* previous = nullptr;  ///< the pair's first frame (points of the scene flow cloud)
+  const FrameInput* previous = nullptr;  ///< the pair's first frame (its colour, header, intrinsics)
   const FrameInput* current = nullptr;   ///< the pair's second frame
+  /// The first frame's intensity and depth (points of the scene flow cloud, grey of ~segmentation): the pipeline's
+  /// (toStreamFrame moves them there); null: `previous->frame`.
+  const mc_flow::RgbdFrame* previous_frame = nullptr;
+  const mc_flow::RgbdFrame* firstFrame() const {
+    return previous_frame ? previous_frame : previous ? &previous->frame : nullptr;
+  }
   double solve_time_ms = 0;
   /// Each segment's motion relative to the static world (SequenceStep::world_velocities); null: unknown.
   const std::vector<mc_flow::WorldVelocity>* world = nullptr;
@@ -105,18 +113,27 @@ nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Ti
 nav_msgs::Path makeCameraPath(const std::deque<Eigen::Matrix4d>& poses, const std_msgs::Header& header);
 
 /// @brief ~moving_mask: mono8, 255 = a pixel of a segment that moves relative to the static world.
+/// The image and cloud outputs take an optional MessagePool (message_pool.h): the message then comes from the pool and
+/// is filled in place (the same bytes as a new one), so a stream at one size allocates nothing per pair.
+using ImagePool = MessagePool<sensor_msgs::Image>;
+using CloudPool = MessagePool<sensor_msgs::PointCloud2>;
+
 sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result,
-                                          const std::vector<mc_flow::WorldVelocity>& world, const PairContext& pair);
+                                          const std::vector<mc_flow::WorldVelocity>& world, const PairContext& pair,
+                                          ImagePool* pool = nullptr);
 
 /// @brief ~soft_labels: one 32FC<n> image, n = segments + 1; channel i is segment i of ~segments, the
 /// last channel the outlier label; values exactly as the solver produced them (lossless, sum to 1).
-sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const PairContext& pair);
+sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const PairContext& pair,
+                                          ImagePool* pool = nullptr);
 /// @brief ~labels: mono16 argmax with persistent ids (0 = outlier or no depth).
-sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairContext& pair);
+sensor_msgs::ImagePtr makeLabelsImage(const mc_flow::Result& result, const PairContext& pair,
+                                      ImagePool* pool = nullptr);
 /// @brief ~occlusion: mono8, 255 = occluded (or out of view) in the current frame.
-sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const PairContext& pair);
-/// @brief ~segmentation: rgb8 message of a segmentationPicture (below) with the pair's header.
-sensor_msgs::ImagePtr makeSegmentationImage(const cv::Mat& picture, const PairContext& pair);
+sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const PairContext& pair,
+                                         ImagePool* pool = nullptr);
+/// @brief ~segmentation: rgb8 message of a segmentationPicture (CV_8UC3, below) with the pair's header.
+sensor_msgs::ImagePtr makeSegmentationImage(const cv::Mat& picture, const PairContext& pair, ImagePool* pool = nullptr);
 
 /// @brief How the ~scene_flow cloud's rgb field is filled.
 enum class CloudColour { Segment, Image };
@@ -126,7 +143,7 @@ enum class CloudColour { Segment, Image };
 /// the interval] (float32), label (uint32 persistent id, 0 = outlier/no depth), occluded (uint8, 1 =
 /// occluded in the current frame). Invalid points have NaN in x y z vx vy vz.
 sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, const PairContext& pair,
-                                               CloudColour colour = CloudColour::Segment);
+                                               CloudColour colour = CloudColour::Segment, CloudPool* pool = nullptr);
 
 /// @brief ~motion_markers: per segment an arrow from its centroid along its centroid's velocity
 /// (length = speed x `seconds_ahead`) and a text with id and speed; starts with a DELETEALL marker.

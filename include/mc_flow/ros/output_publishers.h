@@ -59,6 +59,9 @@ class OutputPublishers {
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
   image_transport::Publisher soft_labels_, labels_, segmentation_, occlusion_, moving_mask_;
   ros::Publisher segments_, cloud_, markers_, info_, odom_, camera_path_;
+  // The image and cloud messages, reused once their subscribers let go of them (message_pool.h).
+  ImagePool soft_labels_pool_, labels_pool_, segmentation_pool_, occlusion_pool_, moving_mask_pool_;
+  CloudPool cloud_pool_;
   // ~camera_path: the camera's last poses (10 s at 30 Hz), oldest first.
   static constexpr std::size_t kCameraPathPoses = 300;
   std::deque<Eigen::Matrix4d> camera_poses_;
