@@ -1391,7 +1391,9 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     const std::size_t plane = std::size_t(level_.width) * level_.height;
     const std::size_t batch_bytes =
         (plane + kThreads - 1) / kThreads * (std::size_t(motion_labels_) * kLabelStride + 2) * sizeof(double);
-    return int(std::max<std::size_t>(1, kBatchPartialBytes / std::max<std::size_t>(1, batch_bytes)));
+    // At most 65535: the batch is blockIdx.y.
+    return int(std::min<std::size_t>(
+        65535, std::max<std::size_t>(1, kBatchPartialBytes / std::max<std::size_t>(1, batch_bytes))));
   }
 
   // `batches`: how many batched passes (without the label pairs) the sums must hold.

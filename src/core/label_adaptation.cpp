@@ -21,7 +21,8 @@ namespace {
 using union_refit::kRidge;
 
 // mergeWhereOneMotionExplains: a round tests as many batches of disjoint pairs as make about this many pixel
-// evaluations (4 batches at 160x120, 1 from 320x240 on; there a pass fills the GPU by itself).
+// evaluations over the label level's valid pixels (at full depth coverage 4 batches at 160x120, 1 from 320x240 on;
+// there a pass fills the GPU by itself).
 constexpr int kMergeRoundPixels = 4 * 160 * 120;
 
 // Newton decrement g^T H^-1 g: how much the cost falls when the label takes its Gauss-Newton step.

@@ -230,8 +230,8 @@ FrameInput toFrameInput(const sensor_msgs::Image& rgb_message, const sensor_msgs
 sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input) {
   sensor_msgs::CameraInfo info;
   info.header = input.header;
-  info.width = std::uint32_t(input.frame.width());
-  info.height = std::uint32_t(input.frame.height());
+  info.width = std::uint32_t(input.colour.cols);  // the processing resolution (the frame has moved to the pipeline)
+  info.height = std::uint32_t(input.colour.rows);
   info.distortion_model = "plumb_bob";
   info.D.assign(5, 0.0);  // the inputs are rectified
   info.K = {input.K.fx, 0, input.K.cx, 0, input.K.fy, input.K.cy, 0, 0, 1};
@@ -243,6 +243,7 @@ sensor_msgs::CameraInfo processingCameraInfo(const FrameInput& input) {
 mc_flow::StreamFrame toStreamFrame(FrameInput input) {
   mc_flow::StreamFrame frame;
   frame.frame = std::move(input.frame);  // the pipeline keeps it; outputs read it there (PairContext::previous_frame)
+  input.frame = mc_flow::RgbdFrame();    // 0x0, not sizes without data
   frame.K = input.K;
   frame.stamp = input.header.stamp.toSec();
   frame.source = input.header.frame_id;

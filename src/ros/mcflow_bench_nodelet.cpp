@@ -324,7 +324,7 @@ int run(int argc, char** argv) {
       });
       if (r == 0 && cli.has("dump")) {
         const std::string prefix = cli.text("dump", "") + "/downsample" + std::to_string(downsample) + "_";
-        const mc_flow::RgbdFrame& converted = std::any_cast<const mc_flow_ros::FrameInput&>(frame.extra).frame;
+        const mc_flow::RgbdFrame& converted = frame.frame;  // moved there out of the FrameInput
         writeFile(prefix + "intensity.f32", converted.intensity.data.data(), converted.intensity.data.size() * 4);
         writeFile(prefix + "depth.f32", converted.depth.data.data(), converted.depth.data.size() * 4);
         const cv::Mat& colour = std::any_cast<const mc_flow_ros::FrameInput&>(frame.extra).colour;

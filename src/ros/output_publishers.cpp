@@ -73,16 +73,21 @@ void OutputPublishers::publish(const mc_flow::Result& result, const PairContext&
                                const mc_flow::SequencePipeline& pipeline, long pair_index, long frames_dropped,
                                const Warn& warn) {
   if (segments_.getNumSubscribers() > 0) segments_.publish(makeSegmentArray(result, pair));
-  if (soft_labels_.getNumSubscribers() > 0) soft_labels_.publish(makeSoftLabelsImage(result, pair, &soft_labels_pool_));
+  // A subscriber that arrived during the solve gets the soft labels and the scene flow from the next pair on (the solve
+  // left out what nobody had asked for: wantedOutputs).
+  const bool have_soft_labels = result.soft_labels.count > 0, have_scene_flow = !result.scene_flow.empty();
+  if (soft_labels_.getNumSubscribers() > 0 && have_soft_labels)
+    soft_labels_.publish(makeSoftLabelsImage(result, pair, &soft_labels_pool_));
   if (labels_.getNumSubscribers() > 0) labels_.publish(makeLabelsImage(result, pair, &labels_pool_));
   if (occlusion_.getNumSubscribers() > 0) occlusion_.publish(makeOcclusionImage(result, pair, &occlusion_pool_));
   cv::Mat segmentation;
-  if (segmentation_.getNumSubscribers() > 0 || !params_.save_dir.empty()) {
+  if ((segmentation_.getNumSubscribers() > 0 || !params_.save_dir.empty()) && have_soft_labels) {
     segmentation = segmentationPicture(result, pair, params_.segmentation_blend);
   }
-  if (segmentation_.getNumSubscribers() > 0)
+  if (segmentation_.getNumSubscribers() > 0 && have_soft_labels)
     segmentation_.publish(makeSegmentationImage(segmentation, pair, &segmentation_pool_));
-  if (cloud_.getNumSubscribers() > 0) cloud_.publish(makeSceneFlowCloud(result, pair, cloud_colour_, &cloud_pool_));
+  if (cloud_.getNumSubscribers() > 0 && have_scene_flow)
+    cloud_.publish(makeSceneFlowCloud(result, pair, cloud_colour_, &cloud_pool_));
   if (markers_.getNumSubscribers() > 0) markers_.publish(makeMotionMarkers(result, pair, params_.marker_seconds_ahead));
   if (info_.getNumSubscribers() > 0) info_.publish(processingCameraInfo(*pair.current));
   if (moving_mask_.getNumSubscribers() > 0 && pair.world) {
@@ -154,9 +159,11 @@ void OutputPublishers::saveAndSummarise(const mc_flow::Result& result, const Pai
   if (!params_.save_dir.empty()) {
     char name[64];
     cv::Mat bgr;
-    cv::cvtColor(segmentation, bgr, cv::COLOR_RGB2BGR);
-    std::snprintf(name, sizeof(name), "/segmentation_%06ld.png", pair_index);
-    cv::imwrite(params_.save_dir + name, bgr);
+    if (!segmentation.empty()) {  // empty when the solve left out the soft labels (save_dir set during it)
+      cv::cvtColor(segmentation, bgr, cv::COLOR_RGB2BGR);
+      std::snprintf(name, sizeof(name), "/segmentation_%06ld.png", pair_index);
+      cv::imwrite(params_.save_dir + name, bgr);
+    }
     cv::Mat occlusion(result.occlusion.height, result.occlusion.width, CV_8UC1,
                       const_cast<std::uint8_t*>(result.occlusion.ptr()));
     std::snprintf(name, sizeof(name), "/occlusion_%06ld.png", pair_index);

@@ -581,8 +581,6 @@ TEST(CudaSolveBackend, KMeansCentresOfFewOrNoValidPoints) {
   EXPECT_TRUE(cpu->kmeansCentres(0, 20, 10, 0.01, 7u).empty());
 }
 
-// Grow-only buffers: once a solver has seen pairs of a size and label count (cold and warm), solving them again
-// allocates no device or page-locked memory.
 // The soft labels and the scene flow not selected: not downloaded, 0x0 in the result; every other output and the next
 // pair's warm start (from a result without them) are the full selection's, bit for bit.
 TEST(CudaSolveBackend, OutputsNotSelectedAreLeftOutAndTheRestIsTheSame) {
@@ -616,6 +614,8 @@ TEST(CudaSolveBackend, OutputsNotSelectedAreLeftOutAndTheRestIsTheSame) {
   EXPECT_EQ(firstDifference(without(wa), wb), "");
 }
 
+// Grow-only buffers: once a solver has seen pairs of a size and label count (cold and warm), solving them again
+// allocates no device or page-locked memory.
 TEST(CudaSolveBackend, NoAllocationAfterTheFirstPairsOfASize) {
   SKIP_WITHOUT_GPU();
   Config config;

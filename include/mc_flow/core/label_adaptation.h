@@ -235,16 +235,15 @@ bool oneMotionExplains(const MergeEvidence& evidence, double own_tolerance, doub
 /// refitting one motion on each pair's union (refitUnions from the better of the two motions, merge_refit_iterations
 /// steps) and merged when oneMotionExplains, most alike first and each label in at most one merge per round. A round
 /// tests the pairs of the first few unionBatches of the candidates (as many batches as make about 4 x 160 x 120 pixel
-/// evaluations over `valid_pixels`, the label level's: 4 at 160x120, 1 from 320x240 on; on the GPU a round's batches
-/// share their launches); pairs refused since the labels last changed are not tested again; repeated until no
-/// candidate is left. No switching cost: a
-/// stream's carried segments that one motion explains merge like any others, with two differences that keep a stream's
-/// parts through a brief rest: two carried labels are judged with merge_refit_tolerance_parts (the stream kept them
-/// apart a pair ago), and two that movedApartBefore by merge_memory_displacement are not tested in this pair (a part
-/// merges after a pair at rest, not at the turn of its motion). The merged label takes the refitted motion and
-/// mergedLineage. Costs one accumulator pass for the labels' own costs (none when `own_model`, the labels'
-/// LabelStore::costModel under `twists`, is given) and 2 + merge_refit_iterations (batched) passes per round. Throws
-/// InputError on mismatched sizes.
+/// evaluations over `valid_pixels`, the label level's: at full depth coverage 4 at 160x120, 1 from 320x240 on; on the
+/// GPU a round's batches share their launches); pairs refused since the labels last changed are not tested again;
+/// repeated until no candidate is left. No switching cost: a stream's carried segments that one motion explains merge
+/// like any others, with two differences that keep a stream's parts through a brief rest: two carried labels are judged
+/// with merge_refit_tolerance_parts (the stream kept them apart a pair ago), and two that movedApartBefore by
+/// merge_memory_displacement are not tested in this pair (a part merges after a pair at rest, not at the turn of its
+/// motion). The merged label takes the refitted motion and mergedLineage. Costs one accumulator pass for the labels'
+/// own costs (none when `own_model`, the labels' LabelStore::costModel under `twists`, is given) and 2 +
+/// merge_refit_iterations (batched) passes per round. Throws InputError on mismatched sizes.
 AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
                                             bool use_occlusion, const Config& config,
                                             std::vector<LabelLineage>* lineage = nullptr,

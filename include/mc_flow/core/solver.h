@@ -60,7 +60,6 @@ enum class StartKind {
 };
 std::string toString(StartKind start);
 
-/// @brief Everything the solver produces. Images are at the input resolution.
 /// @brief Which of a Result's optional full-resolution images a solve fills; one left out stays 0x0 and, on the GPU, is
 /// neither downloaded nor copied (at 640x480 the soft labels of 7 planes are 8.6 MB, the scene flow 3.7 MB). The
 /// labels, optical flow, moved depth and occlusion mask are always filled: a stream's next pair carries its segments
@@ -70,6 +69,7 @@ struct OutputSelection {
   bool scene_flow = true;   ///< Result::scene_flow
 };
 
+/// @brief Everything the solver produces. Images are at the input resolution.
 struct Result {
   int width = 0, height = 0;
   Intrinsics intrinsics;

@@ -38,11 +38,11 @@ namespace mc_flow_ros {
 
 /// @brief One synchronised RGB-D frame, converted and resized to the processing resolution.
 struct FrameInput {
-  mc_flow::RgbdFrame frame;               ///< intensity [0, 1], depth [m] (0 = invalid)
-  cv::Mat colour;                         ///< CV_8UC3 RGB at the processing resolution (for display outputs)
-  mc_flow::Intrinsics K;                  ///< [px] at the processing resolution
-  std_msgs::Header header;                ///< stamp and frame_id of the RGB image
-  int downsample = 1;                     ///< input pixels per processing pixel (per axis)
+  mc_flow::RgbdFrame frame;  ///< intensity [0, 1], depth [m] (0 = invalid); 0x0 once toStreamFrame moved it out
+  cv::Mat colour;           ///< CV_8UC3 RGB at the processing resolution (for display outputs; its size is the frame's)
+  mc_flow::Intrinsics K;    ///< [px] at the processing resolution
+  std_msgs::Header header;  ///< stamp and frame_id of the RGB image
+  int downsample = 1;       ///< input pixels per processing pixel (per axis)
   int input_width = 0, input_height = 0;  ///< RGB image size
   int valid_depth = 0;                    ///< pixels with valid depth at the processing resolution
 };
