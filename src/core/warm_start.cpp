@@ -4,7 +4,10 @@
 #include "mc_flow/core/warm_start.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <tuple>
@@ -104,6 +107,9 @@ IdOverlap countOverlap(const ImageI32& id_image, const ImageI32& other, int slot
 
 // std::lround for |v| < 2^23 without the library call (the splat rounds every pixel's target): v - trunc(v) is exact in
 // float there, so the result is lround's.
+// No point has landed on the pixel (above every key of a finite depth).
+constexpr std::uint64_t kNoWinner = ~std::uint64_t(0);
+
 int roundHalfAway(float v) {
   const float t = std::trunc(v);
   return int(t) + (std::fabs(v - t) >= 0.5f ? (v < 0.f ? -1 : 1) : 0);
@@ -130,23 +136,42 @@ ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& dep
       previous.moved_depth.data.size() != std::size_t(W) * H)
     throw InputError("warm start: the previous result has no labels or flow at its " + std::to_string(W) + "x" +
                      std::to_string(H) + " resolution");
-  // Forward splat with a depth buffer: the nearest moved point wins a pixel.
-  ImageF nearest(W, H, 1, std::numeric_limits<float>::infinity());
-  ImageI32 splat(W, H, 1, 0);
+  // Forward splat with a depth buffer: the nearest moved point wins a pixel, and of equally near ones the first in
+  // raster order (as a serial splat that replaces only on a nearer point). On the threads: each pixel keeps the minimum
+  // of (depth bits, source index), a positive float's bits ordering as the float.
+  const std::size_t pixels = std::size_t(W) * std::size_t(H);
+  std::vector<std::atomic<std::uint64_t>> winner(pixels);
+#pragma omp parallel for schedule(static)
+  for (long k = 0; k < long(pixels); ++k) winner[std::size_t(k)].store(kNoWinner, std::memory_order_relaxed);
+#pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
-      const int id = ids(x, y);
-      if (id <= 0) continue;
+      if (ids(x, y) <= 0) continue;
       const float u = float(x) + previous.optical_flow(x, y, 0), v = float(y) + previous.optical_flow(x, y, 1);
       // Off the image (NaN fails too) before rounding: a point within half a pixel of the border still lands.
       if (!(u > -1.f && u < float(W) && v > -1.f && v < float(H))) continue;
       const int tx = roundHalfAway(u), ty = roundHalfAway(v);
       if (tx < 0 || ty < 0 || tx >= W || ty >= H) continue;
       const float z_moved = previous.moved_depth(x, y);  // where the point is in frame 2, seen from frame 2's camera
-      if (!(z_moved > 0) || z_moved >= nearest(tx, ty)) continue;
-      nearest(tx, ty) = z_moved;
-      splat(tx, ty) = id;
+      if (!(z_moved > 0) || !(z_moved < std::numeric_limits<float>::infinity())) continue;
+      std::uint32_t bits;
+      std::memcpy(&bits, &z_moved, sizeof bits);
+      const std::uint64_t key = (std::uint64_t(bits) << 32) | std::uint64_t(std::size_t(y) * std::size_t(W) + x);
+      std::atomic<std::uint64_t>& best = winner[std::size_t(ty) * std::size_t(W) + std::size_t(tx)];
+      std::uint64_t seen = best.load(std::memory_order_relaxed);
+      while (key < seen && !best.compare_exchange_weak(seen, key, std::memory_order_relaxed)) {
+      }
     }
+  ImageF nearest(W, H, 1, std::numeric_limits<float>::infinity());
+  ImageI32 splat(W, H, 1, 0);
+#pragma omp parallel for schedule(static)
+  for (long k = 0; k < long(pixels); ++k) {
+    const std::uint64_t key = winner[std::size_t(k)].load(std::memory_order_relaxed);
+    if (key == kNoWinner) continue;
+    const std::uint32_t bits = std::uint32_t(key >> 32);
+    std::memcpy(&nearest.data[std::size_t(k)], &bits, sizeof bits);
+    splat.data[std::size_t(k)] = ids.data[std::size_t(key & 0xffffffffu)];
+  }
   ImageI32 carried(W, H, 1, 0);
   // The depth the pyramid's level 0 holds there (pyramid_pixel.h's rule), NaN where none.
   auto observed = [&](int x, int y) {

@@ -83,6 +83,27 @@ TEST(WarmStart, CarriesIdsAlongTheFlowWhereTheDepthAgrees) {
   EXPECT_EQ(carrySegmentIds(previous, depth, kMinDepth, kMaxDepth, 0.6)(10, 5), 7);
 }
 
+// Two points landing on one pixel: the nearer wins; of two equally near ones, the first in raster order (the splat runs
+// on several threads; the result must be a serial splat's).
+TEST(WarmStart, TheNearestPointWinsAPixelAndOfEquallyNearOnesTheFirst) {
+  const int W = 8, H = 3;
+  Result previous = shiftedPrevious(W, H, 0);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) previous.labels(x, y) = 0;
+  previous.labels(0, 1) = 7;  // lands on (2, 1)
+  previous.labels(1, 1) = 9;  // lands on (2, 1) too
+  previous.optical_flow(0, 1, 0) = 2.f;
+  previous.optical_flow(1, 1, 0) = 1.f;
+  const ImageF depth = planeDepth(W, H, 2.f);
+  previous.moved_depth(0, 1) = 2.f;
+  previous.moved_depth(1, 1) = 2.f;
+  EXPECT_EQ(carrySegmentIds(previous, depth, kMinDepth, kMaxDepth, 0.2)(2, 1), 7) << "a tie: the first in raster order";
+  previous.moved_depth(1, 1) = 1.9f;
+  EXPECT_EQ(carrySegmentIds(previous, depth, kMinDepth, kMaxDepth, 0.2)(2, 1), 9) << "the nearer one";
+  previous.moved_depth(1, 1) = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(carrySegmentIds(previous, depth, kMinDepth, kMaxDepth, 0.2)(2, 1), 7) << "an infinite depth lands nowhere";
+}
+
 TEST(WarmStart, ClosesOnePixelGapsOfASurfaceThatComesCloser) {
   const int W = 40, H = 20;
   Result previous = shiftedPrevious(W, H, 0);
