@@ -626,6 +626,8 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
     }
     const std::vector<UnionFit> fits =
         refitUnions(labels, twists, groups, starts, config.merge_refit_iterations, use_occlusion, config);
+    ++stats.rounds;
+    stats.pairs_tested += int(groups.size());
     // Merges of this round, most alike first, each label in one at most: each pair into its larger label, which takes
     // the union's motion. An explained pair with a label already merged is tested again on the merged labels.
     std::vector<int> group(static_cast<std::size_t>(n));

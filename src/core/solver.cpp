@@ -494,9 +494,13 @@ void Solver::Impl::iterate(const Prepared& p, Start start, Result& result) {
     // segments too (no switching cost), so that a stream's splits cannot accumulate.
     // The update's cost model is the labels' own where it changed nothing: the merge test needs no pass for it.
     const bool unchanged = as.merged + as.removed == 0;
+    const auto merge_start = Clock::now();
     const AdaptationStats explained = mergeWhereOneMotionExplains(
         labels, twists, p.valid_label_level, occlusions, config, lineage_or_null, unchanged ? &model : nullptr);
+    result.timings.merge_test += elapsedMs(merge_start);
     stats.merged += explained.merged;
+    stats.merge_rounds = explained.rounds;
+    stats.merge_pairs_tested = explained.pairs_tested;
     if (k + 1 < most_outer) {
       stats.split = proposeSplits(labels, twists, occlusions, p.valid_label_level, config).split;
       lineage.resize(twists.size());  // split-off halves are new segments

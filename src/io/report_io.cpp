@@ -119,6 +119,7 @@ std::string reportJson(const Result& result, const Config& config, const RunInfo
                           {"motion", number(t.motion)},
                           {"labels", number(t.labels)},
                           {"adaptation", number(t.adaptation)},
+                          {"merge_test", number(t.merge_test)},
                           {"occlusion", number(t.occlusion)},
                           {"outputs", number(t.outputs)},
                           {"solver_total", number(t.total)},

@@ -168,6 +168,8 @@ int partsBench(const Config& base, const std::vector<Regularizer>& regs, int wid
 struct StageMedians {
   double total = 0, cpu = 0, pyr = 0, init = 0, motion = 0, labels = 0, adapt = 0, occl = 0, output = 0, launches = 0,
          waits = 0;
+  // The one-motion merge test (a part of adapt): its time, and its rounds and refitted pairs over the outer iterations.
+  double merge = 0, merge_rounds = 0, merge_pairs = 0;
   // The motion step's split (outer iterations): time in the accumulator, in the host's step control and solves,
   // and the IRLS iterations (each one accumulation and, on a GPU, one host round trip).
   double motion_accumulate = 0, motion_solve = 0, irls = 0;
@@ -176,7 +178,7 @@ struct StageMedians {
 StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const RgbdFrame& frame2, const Intrinsics& K,
                              int repeat, Result& r) {
   std::vector<double> total, cpu, pyr, init, motion, labels, adapt, occl, output, launches, waits, accumulate, solve,
-      irls;
+      irls, merge, merge_rounds, merge_pairs;
   for (int rep = 0; rep < repeat; ++rep) {
     const std::clock_t cpu_start = std::clock();
     const CudaCounters before = cudaCounters();
@@ -193,7 +195,14 @@ StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const Rgbd
     adapt.push_back(r.timings.adaptation);
     occl.push_back(r.timings.occlusion);
     output.push_back(r.timings.outputs);
-    double acc = 0, sol = 0, its = 0;
+    merge.push_back(r.timings.merge_test);
+    double acc = 0, sol = 0, its = 0, rounds = 0, pairs = 0;
+    for (const OuterIterationStats& it : r.iterations) {
+      rounds += it.merge_rounds;
+      pairs += it.merge_pairs_tested;
+    }
+    merge_rounds.push_back(rounds);
+    merge_pairs.push_back(pairs);
     for (const OuterIterationStats& it : r.iterations)
       for (const MotionLevelStats& level : it.motion_levels) {
         acc += level.accumulate_ms;
@@ -219,6 +228,9 @@ StageMedians solveRepeatedly(Solver& solver, const RgbdFrame& frame1, const Rgbd
   m.motion_accumulate = median(accumulate);
   m.motion_solve = median(solve);
   m.irls = median(irls);
+  m.merge = median(merge);
+  m.merge_rounds = median(merge_rounds);
+  m.merge_pairs = median(merge_pairs);
   return m;
 }
 
@@ -244,9 +256,10 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
       "# mcflow_bench --real %s: regularizer %s, repeat %d (median times); residuals: RMSE after warping frame 2 "
       "back, occluded pixels excluded\n",
       dir.c_str(), base.regularizer == Regularizer::Quadratic ? "quad" : "tv", repeat);
-  std::printf("%-28s %6s %7s %7s | %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %6s %7s %7s %5s\n", "pair", "segs", "rmseI",
-              "rmseZ_mm", "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "adapt", "occl", "output",
-              "launches", "waits", "m_acc", "m_lm", "irls");
+  std::printf("%-28s %6s %7s %7s | %8s %8s %8s %8s %8s %8s %8s %6s %8s %8s %8s %6s %7s %7s %5s %5s %5s\n", "pair",
+              "segs", "rmseI", "rmseZ_mm", "total_ms", "cpu_ms", "pyr", "init", "motion", "labels", "adapt", "merge",
+              "occl", "output", "launches", "waits", "m_acc", "m_lm", "irls", "mrnd", "mprs");
+  std::printf("# merge: the one-motion merge test's time (a part of adapt), mrnd / mprs its rounds / refitted pairs\n");
   std::printf("# last column: motion labels over the outer iterations, K-means > after each (merged, split)\n");
   std::map<std::string, std::vector<double>> totals_by_size;
   for (const std::filesystem::path& folder : folders) {
@@ -259,11 +272,11 @@ int realBench(const std::string& dir, const std::string& match, const Config& ba
     const ResidualRmse rr = warpResidualRmse(frame1, frame2, K, &r.scene_flow, &r.occlusion);
     const std::string counts = labelCountTrace(r, true);
     std::printf(
-        "%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.2f %8.1f %8.1f %8.0f %6.0f %7.2f %7.2f %5.0f  "
-        "%s\n",
+        "%-28s %6zu %7.4f %7.2f | %8.1f %8.1f %8.1f %8.1f %8.1f %8.1f %8.2f %6.2f %8.1f %8.1f %8.0f %6.0f %7.2f %7.2f "
+        "%5.0f %5.0f %5.0f  %s\n",
         folder.filename().string().c_str(), r.segments.size(), rr.photometric, 1000.0 * rr.geometric, m.total, m.cpu,
-        m.pyr, m.init, m.motion, m.labels, m.adapt, m.occl, m.output, m.launches, m.waits, m.motion_accumulate,
-        m.motion_solve, m.irls, counts.c_str());
+        m.pyr, m.init, m.motion, m.labels, m.adapt, m.merge, m.occl, m.output, m.launches, m.waits, m.motion_accumulate,
+        m.motion_solve, m.irls, m.merge_rounds, m.merge_pairs, counts.c_str());
     std::fflush(stdout);
     totals_by_size[std::to_string(frame1.width()) + "x" + std::to_string(frame1.height())].push_back(m.total);
   }

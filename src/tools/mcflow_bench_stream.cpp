@@ -245,6 +245,7 @@ ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& con
       st.stages.motion += s.motion;
       st.stages.labels += s.labels;
       st.stages.adaptation += s.adaptation;
+      st.stages.merge_test += s.merge_test;
       st.stages.occlusion += s.occlusion;
       st.stages.outputs += s.outputs;
       st.warm += r.start == StartKind::Warm;
@@ -384,7 +385,7 @@ int main(int argc, char** argv) {
   }
   std::printf("%-8s %-5s %6s %9s %9s %9s %8s %9s %9s %6s   %s\n", "variant", "mode", "pairs", "mean_ms", "median_ms",
               "mean_epe", "id_keep", "late_pairs", "fallbacks", "warm",
-              "mean stage ms: pyramid init motion labels count occl outputs");
+              "mean stage ms: pyramid init motion labels count occl outputs merge");
   std::vector<WorldRow> world_rows;
   for (const int variant : opt.variants) {
     const std::vector<SyntheticPair> pairs = renderSequence(opt, variant, false);
@@ -409,11 +410,11 @@ int main(int argc, char** argv) {
       }
       const double n = std::max<double>(1.0, double(st.ms.size()));
       const StageTimings& s = st.stages;
-      std::printf("%-8d %-5s %6zu %9.1f %9.1f %9.4f %8.3f %9d %9d %6d   %.1f %.1f %.1f %.1f %.1f %.1f %.1f\n", variant,
-                  warm ? "warm" : "cold", pairs.size(), mean(st.ms), median(st.ms), mean(st.epe),
+      std::printf("%-8d %-5s %6zu %9.1f %9.1f %9.4f %8.3f %9d %9d %6d   %.1f %.1f %.1f %.1f %.1f %.1f %.1f %.2f\n",
+                  variant, warm ? "warm" : "cold", pairs.size(), mean(st.ms), median(st.ms), mean(st.epe),
                   st.judged ? double(st.kept) / double(st.judged) : 0.0, st.late_delay, st.fallbacks, st.warm,
                   s.preprocessing / n, s.initialisation / n, s.motion / n, s.labels / n, s.adaptation / n,
-                  s.occlusion / n, s.outputs / n);
+                  s.occlusion / n, s.outputs / n, s.merge_test / n);
       std::fflush(stdout);
     }
   }

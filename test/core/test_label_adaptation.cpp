@@ -577,6 +577,9 @@ TEST(OneMotionMerge, TheHalvesOfTheStaticWorldMergeAndTheSmallMovingBoxStaysApar
   const AdaptationStats st =
       mergeWhereOneMotionExplains(store, twists, s.pyr1[s.level].validCount(), false, config, &lineage);
   EXPECT_EQ(st.merged, 1);
+  EXPECT_GE(st.rounds, 1);  // the halves' pair was refitted in a round of its own or with the box's pairs
+  EXPECT_GE(st.pairs_tested, 1);
+  EXPECT_LE(st.pairs_tested, 3 * st.rounds);  // at most the three pairs of three labels per round
   ASSERT_EQ(u.count, 3);
   ASSERT_EQ(twists.size(), 2u);
   ASSERT_EQ(lineage.size(), 2u);
@@ -594,7 +597,11 @@ TEST(OneMotionMerge, TheHalvesOfTheStaticWorldMergeAndTheSmallMovingBoxStaysApar
   std::vector<Vector6d> twists2{off, truth, trueTwist(s.pair, "box")};
   config.merge_refit_tolerance = 0;
   HostLabelStore store2(u2, s.pyr1[s.level], s.pyr2[s.level], nullptr);
-  EXPECT_EQ(mergeWhereOneMotionExplains(store2, twists2, s.pyr1[s.level].validCount(), false, config).merged, 0);
+  const AdaptationStats off_stats =
+      mergeWhereOneMotionExplains(store2, twists2, s.pyr1[s.level].validCount(), false, config);
+  EXPECT_EQ(off_stats.merged, 0);
+  EXPECT_EQ(off_stats.rounds, 0);
+  EXPECT_EQ(off_stats.pairs_tested, 0);
   EXPECT_EQ(u2.count, 4);
 }
 

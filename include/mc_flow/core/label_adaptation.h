@@ -27,6 +27,8 @@ struct AdaptationStats {
   int merged = 0;
   int removed = 0;
   int split = 0;
+  int rounds = 0;        ///< mergeWhereOneMotionExplains: rounds that refitted pairs
+  int pairs_tested = 0;  ///< mergeWhereOneMotionExplains: pairs refitted on their union
   /// Smallest predicted data-cost increase of a merge that was refused (infinity when none was left)
   /// [normalised Cauchy cost, summed over the label level's pixels].
   double smallest_refused_merge = 0;

@@ -33,10 +33,11 @@ struct Segment {
   Matrix6d covariance = Matrix6d::Zero();  ///< of `twist` (twistCovariance of its pixels' fit at the processing level)
 };
 
-/// @brief Wall-clock time per stage [ms].
+/// @brief Wall-clock time per stage [ms]. merge_test is the part of adaptation spent in the one-motion merge test
+/// (mergeWhereOneMotionExplains).
 struct StageTimings {
   double preprocessing = 0, initialisation = 0, motion = 0, labels = 0, adaptation = 0, occlusion = 0, outputs = 0,
-         total = 0;
+         total = 0, merge_test = 0;
 };
 
 struct OuterIterationStats {
@@ -44,12 +45,13 @@ struct OuterIterationStats {
   int labels_before = 0;  ///< motion labels at the start (outlier label not counted)
   int labels_after = 0;   ///< after merging / removal
   int merged = 0, removed = 0, split = 0;
-  double smallest_refused_merge = 0;            ///< predicted data-cost increase of the cheapest merge not taken
-  int motion_iterations = 0;                    ///< IRLS iterations summed over levels
-  std::vector<MotionLevelStats> motion_levels;  ///< the motion step per level, coarse to fine
-  int label_iterations = 0;                     ///< primal-dual iterations
-  double label_change = 0;                      ///< mean |u_k+1 - u_k| at the label level
-  double energy = 0;                            ///< E(u) of eq. 4 after the label step
+  int merge_rounds = 0, merge_pairs_tested = 0;  ///< the one-motion merge test's rounds and refitted pairs
+  double smallest_refused_merge = 0;             ///< predicted data-cost increase of the cheapest merge not taken
+  int motion_iterations = 0;                     ///< IRLS iterations summed over levels
+  std::vector<MotionLevelStats> motion_levels;   ///< the motion step per level, coarse to fine
+  int label_iterations = 0;                      ///< primal-dual iterations
+  double label_change = 0;                       ///< mean |u_k+1 - u_k| at the label level
+  double energy = 0;                             ///< E(u) of eq. 4 after the label step
 };
 
 /// @brief How a solve started.
