@@ -203,6 +203,21 @@ void launchSceneFlowOutputs(const DeviceImage& points, float* u, int count, cons
 void launchLabelCentroidSums(const float* u, const DeviceImage& points, int motion_labels,
                              DeviceBuffer<double>& scratch, double* out, cudaStream_t stream);
 
+// ---------------------------------------------------------------- stream mode (warm_start.cu)
+/// @brief carryIds of warm_start.h on the device: `ids` (the previous pair's ids on its frame 1), its optical flow (2
+/// channels) and moved depth, and this frame 1's cleaned level-0 `depth` (0 = none), all width x height; `winner` is
+/// the splat's scratch (one per pixel), `carried` the kept ids before the gaps are closed, `closed` the answer.
+void launchCarryIds(const int* ids, const float* optical_flow, const float* moved_depth, const float* depth, int width,
+                    int height, double tolerance, unsigned long long* winner, int* carried, int* closed,
+                    cudaStream_t stream);
+/// @brief The largest scale (input pixels per level pixel, per side) launchCarriedMajority takes.
+constexpr int kMaxMajorityScale = 8;
+/// @brief carriedLabelsAtLevel's majority ids on the device: per pixel of the level of `level_points`, -1 where it has
+/// no point, else the id most of its scale x scale pixels of `carried` (input_width wide) hold when at least half of
+/// them do, else 0. Throws InputError for a scale outside [1, kMaxMajorityScale].
+void launchCarriedMajority(const int* carried, int input_width, const DeviceImage& level_points, int scale,
+                           int* majority, cudaStream_t stream);
+
 // ---------------------------------------------------------------- motion step (motion_estimation.cu)
 /// @brief The motion step's accumulator on device-resident data (no uploads but the twists).
 class DeviceMotionAccumulator : public MotionAccumulator {

@@ -126,6 +126,66 @@ class CudaSolveBackend final : public SolveBackend {
 
   const std::vector<int>& validCounts() const override { return valid_counts_; }
 
+  CarriedSegments carrySegments(const Result& previous, const ImageF& /*frame1_depth: level 0 is on the device*/,
+                                int label_level, const Config& config) override {
+    const DeviceLevel& L0 = levelAt(0);
+    const int W = L0.width, H = L0.height;
+    const bool dormant = !previous.dormant_ids.empty();
+    checkCarryInputs(previous.labels, previous, W, H);
+    if (dormant) checkCarryInputs(previous.dormant_regions, previous, W, H);
+    const std::size_t pixels = std::size_t(W) * std::size_t(H);
+    cudaStream_t s = stream_.stream;
+    // Up: the previous pair's ids, optical flow and moved depth (and dormant regions); its frame 1 was this pair's.
+    carry_ids_.reserve(pixels * (dormant ? 2 : 1));
+    carry_flow_.reserve(pixels * 2);
+    carry_moved_depth_.reserve(pixels);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(carry_ids_.get(), previous.labels.data.data(), pixels * sizeof(int),
+                                      cudaMemcpyHostToDevice, s));
+    if (dormant)
+      MCFLOW_CUDA_CHECK(cudaMemcpyAsync(carry_ids_.get() + pixels, previous.dormant_regions.data.data(),
+                                        pixels * sizeof(int), cudaMemcpyHostToDevice, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(carry_flow_.get(), previous.optical_flow.data.data(), pixels * 2 * sizeof(float),
+                                      cudaMemcpyHostToDevice, s));
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(carry_moved_depth_.get(), previous.moved_depth.data.data(),
+                                      pixels * sizeof(float), cudaMemcpyHostToDevice, s));
+    // The carries, into consecutive planes of carry_out_: the ids, the dormant regions, then the level's majority ids.
+    const bool majority_here = label_level >= 0 && (1 << label_level) <= cuda_detail::kMaxMajorityScale;
+    const std::size_t level_pixels =
+        majority_here ? std::size_t(levelAt(label_level).width) * std::size_t(levelAt(label_level).height) : 0;
+    const std::size_t planes = dormant ? 2 : 1, out_values = planes * pixels + level_pixels;
+    carry_winner_.reserve(pixels);
+    carry_kept_.reserve(pixels);
+    carry_out_.reserve(out_values);
+    const float* depth = buffers_[0]->depth1.get();  // cleaned by the pyramid (0 = none)
+    for (std::size_t plane = 0; plane < planes; ++plane)
+      cuda_detail::launchCarryIds(carry_ids_.get() + plane * pixels, carry_flow_.get(), carry_moved_depth_.get(), depth,
+                                  W, H, config.warm_depth_tolerance, carry_winner_.get(), carry_kept_.get(),
+                                  carry_out_.get() + plane * pixels, s);
+    if (majority_here)
+      cuda_detail::launchCarriedMajority(carry_out_.get(), W, levelAt(label_level).points1, 1 << label_level,
+                                         carry_out_.get() + planes * pixels, s);
+    // Down in one wait.
+    int* staged = staged_carry_.reserve(out_values);
+    MCFLOW_CUDA_CHECK(cudaMemcpyAsync(staged, carry_out_.get(), out_values * sizeof(int), cudaMemcpyDeviceToHost, s));
+    MCFLOW_CUDA_WAIT(s);
+    CarriedSegments out;
+    out.ids = ImageI32(W, H, 1);
+    std::copy_n(staged, pixels, out.ids.data.data());
+    if (dormant) {
+      out.dormant = ImageI32(W, H, 1);
+      std::copy_n(staged + pixels, pixels, out.dormant.data.data());
+    }
+    if (majority_here) {
+      const DeviceLevel& L = levelAt(label_level);
+      ImageI32 majority(L.width, L.height, 1);
+      std::copy_n(staged + planes * pixels, level_pixels, majority.data.data());
+      out.labels = carriedLabelsFromMajority(majority);
+    } else if (label_level >= 0) {  // coarser than the device's majority takes: on the host
+      out.labels = carriedLabelsAtLevel(out.ids, framePoints(label_level), 1 << label_level);
+    }
+    return out;
+  }
+
   void initialiseLabels(int level, const ImageI32& hard, int motion_labels) override {
     const DeviceLevel& L = levelAt(level);
     validateHardLabels(hard, motion_labels, L.width, L.height);
@@ -703,6 +763,12 @@ class CudaSolveBackend final : public SolveBackend {
   bool carried_held_ = false;
   int hard_level_ = -1;  // the level of hard_labels_
   int* carried() { return carried_[carried_slot_].get(); }
+  // carrySegments: the previous pair's ids (and dormant regions), flow and moved depth; the splat's scratch; the
+  // carried ids (and dormant regions) and the label level's majority ids, downloaded together.
+  DeviceBuffer<int> carry_ids_, carry_kept_, carry_out_;
+  DeviceBuffer<float> carry_flow_, carry_moved_depth_;
+  DeviceBuffer<unsigned long long> carry_winner_;
+  PinnedBuffer<int> staged_carry_;
   DeviceBuffer<long long> targets_;
   DeviceBuffer<unsigned long long> moved_;
   int current_ = 0, count_ = 0, level_ = 0, weights_level_ = -1;

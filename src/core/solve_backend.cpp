@@ -35,6 +35,12 @@ std::vector<Eigen::Vector3f> SolveBackend::kmeansCentres(int level, int k, int m
   return kmeansPoints(framePoints(level), k, max_iterations, tolerance_m, seed).centres;
 }
 
+CarriedSegments SolveBackend::carrySegments(const Result& previous, const ImageF& frame1_depth, int label_level,
+                                            const Config& config) {
+  return mc_flow::carrySegments(previous, frame1_depth, label_level >= 0 ? &framePoints(label_level) : nullptr,
+                                1 << std::max(0, label_level), config);
+}
+
 void SolveBackend::initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres) {
   if (centres.empty()) throw InputError("initial labels from K-means: no centre given");
   initialiseLabels(level, assignToNearestCentre(framePoints(level), centres), int(centres.size()));

@@ -225,25 +225,23 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   Result result = emptyResult(p, K);
   result.timings.preprocessing = elapsedMs(t);
 
-  // Stream mode: the previous pair's segments on this frame 1 (for the warm start, or only for the ids).
+  // Stream mode: the previous pair's segments on this frame 1 (for the warm start, or only for the ids), where the
+  // backend has frame 1 (the CUDA backend on the device, the CPU one on the host's frame), with the label level's hard
+  // labels for a warm start.
   ImageI32 carried_ids, carried_dormant;
+  CarriedLabels carried;
   if (previous) {
     t = Clock::now();
-    // On frame 1's depth as the host has it (the points at level 0 would be a download on the GPU).
-    const float min_depth = float(config.min_depth), max_depth = float(config.max_depth);
-    carried_ids = carrySegmentIds(*previous, frame1.depth, min_depth, max_depth, config.warm_depth_tolerance);
-    if (!previous->dormant_ids.empty())
-      carried_dormant = carryIds(previous->dormant_regions, *previous, frame1.depth, min_depth, max_depth,
-                                 config.warm_depth_tolerance);
+    CarriedSegments c = backend->carrySegments(*previous, frame1.depth, config.warm_start ? p.label_level : -1, config);
+    carried_ids = std::move(c.ids);
+    carried_dormant = std::move(c.dormant);
+    carried = std::move(c.labels);
     result.timings.initialisation += elapsedMs(t);
   }
 
   auto solveCold = [&](Result& r) { iterate(p, coldStart(p, r), r); };
 
   if (previous && config.warm_start) {
-    t = Clock::now();
-    CarriedLabels carried = carriedLabelsAtLevel(carried_ids, backend->framePoints(p.label_level), 1 << p.label_level);
-    result.timings.initialisation += elapsedMs(t);
     if (carried.coverage() < config.warm_min_coverage) {
       result.start = StartKind::ColdFallback;
       result.start_note = "the previous segments cover " + std::to_string(carried.coverage()) +

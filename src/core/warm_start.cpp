@@ -15,6 +15,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/pyramid_pixel.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/core/warm_start_pixel.h"
 
 namespace mc_flow {
 
@@ -105,16 +106,6 @@ IdOverlap countOverlap(const ImageI32& id_image, const ImageI32& other, int slot
   return out;
 }
 
-// std::lround for |v| < 2^23 without the library call (the splat rounds every pixel's target): v - trunc(v) is exact in
-// float there, so the result is lround's.
-// No point has landed on the pixel (above every key of a finite depth).
-constexpr std::uint64_t kNoWinner = ~std::uint64_t(0);
-
-int roundHalfAway(float v) {
-  const float t = std::trunc(v);
-  return int(t) + (std::fabs(v - t) >= 0.5f ? (v < 0.f ? -1 : 1) : 0);
-}
-
 }  // namespace
 
 ImageI32 carrySegmentIds(const Result& previous, const ImageF& depth, float min_depth, float max_depth,
@@ -122,23 +113,29 @@ ImageI32 carrySegmentIds(const Result& previous, const ImageF& depth, float min_
   return carryIds(previous.labels, previous, depth, min_depth, max_depth, depth_tolerance);
 }
 
+void checkCarryInputs(const ImageI32& ids, const Result& previous, int width, int height) {
+  if (previous.width != width || previous.height != height)
+    throw InputError("warm start: the previous result is " + std::to_string(previous.width) + "x" +
+                     std::to_string(previous.height) + " but the frame is " + std::to_string(width) + "x" +
+                     std::to_string(height));
+  const std::size_t pixels = std::size_t(width) * std::size_t(height);
+  if (ids.data.size() != pixels || previous.optical_flow.data.size() != pixels * 2 ||
+      previous.moved_depth.data.size() != pixels)
+    throw InputError("warm start: the previous result has no labels or flow at its " + std::to_string(width) + "x" +
+                     std::to_string(height) + " resolution");
+}
+
 ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& depth, float min_depth, float max_depth,
                   double depth_tolerance) {
+  using namespace warm_start_pixel;
   const int W = depth.width, H = depth.height;
   if (depth.channels != 1 || depth.data.size() != std::size_t(W) * H)
     throw InputError("warm start: the frame's depth has " + std::to_string(depth.channels) + " channels and " +
                      std::to_string(depth.data.size()) + " values for " + imageSizeText(W, H));
-  if (previous.width != W || previous.height != H)
-    throw InputError("warm start: the previous result is " + std::to_string(previous.width) + "x" +
-                     std::to_string(previous.height) + " but the frame is " + std::to_string(W) + "x" +
-                     std::to_string(H));
-  if (ids.data.size() != std::size_t(W) * H || previous.optical_flow.data.size() != std::size_t(W) * H * 2 ||
-      previous.moved_depth.data.size() != std::size_t(W) * H)
-    throw InputError("warm start: the previous result has no labels or flow at its " + std::to_string(W) + "x" +
-                     std::to_string(H) + " resolution");
+  checkCarryInputs(ids, previous, W, H);
   // Forward splat with a depth buffer: the nearest moved point wins a pixel, and of equally near ones the first in
-  // raster order (as a serial splat that replaces only on a nearer point). On the threads: each pixel keeps the minimum
-  // of (depth bits, source index), a positive float's bits ordering as the float.
+  // raster order (as a serial splat that replaces only on a nearer point). On the threads: each pixel keeps the
+  // minimum key (warm_start_pixel.h's splatKey).
   const std::size_t pixels = std::size_t(W) * std::size_t(H);
   std::vector<std::atomic<std::uint64_t>> winner(pixels);
 #pragma omp parallel for schedule(static)
@@ -146,73 +143,37 @@ ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& dep
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
-      if (ids(x, y) <= 0) continue;
-      const float u = float(x) + previous.optical_flow(x, y, 0), v = float(y) + previous.optical_flow(x, y, 1);
-      // Off the image (NaN fails too) before rounding: a point within half a pixel of the border still lands.
-      if (!(u > -1.f && u < float(W) && v > -1.f && v < float(H))) continue;
-      const int tx = roundHalfAway(u), ty = roundHalfAway(v);
-      if (tx < 0 || ty < 0 || tx >= W || ty >= H) continue;
-      const float z_moved = previous.moved_depth(x, y);  // where the point is in frame 2, seen from frame 2's camera
-      if (!(z_moved > 0) || !(z_moved < std::numeric_limits<float>::infinity())) continue;
-      std::uint32_t bits;
-      std::memcpy(&bits, &z_moved, sizeof bits);
-      const std::uint64_t key = (std::uint64_t(bits) << 32) | std::uint64_t(std::size_t(y) * std::size_t(W) + x);
+      int tx = 0, ty = 0;
+      std::uint64_t key = 0;
+      if (ids(x, y) <= 0 ||
+          !splatTarget(x, y, previous.optical_flow(x, y, 0), previous.optical_flow(x, y, 1), W, H, tx, ty) ||
+          !splatKey(previous.moved_depth(x, y), std::uint32_t(std::size_t(y) * std::size_t(W) + x), key))
+        continue;
       std::atomic<std::uint64_t>& best = winner[std::size_t(ty) * std::size_t(W) + std::size_t(tx)];
       std::uint64_t seen = best.load(std::memory_order_relaxed);
       while (key < seen && !best.compare_exchange_weak(seen, key, std::memory_order_relaxed)) {
       }
     }
-  ImageF nearest(W, H, 1, std::numeric_limits<float>::infinity());
-  ImageI32 splat(W, H, 1, 0);
+  // The depth the pyramid's level 0 holds (pyramid_pixel.h's rule, 0 where none): a GPU solve has it on the device.
+  ImageF observed(W, H, 1);
+#pragma omp parallel for schedule(static)
+  for (long k = 0; k < long(pixels); ++k)
+    observed.data[std::size_t(k)] = pyramid_pixel::cleanDepth(depth.data[std::size_t(k)], min_depth, max_depth);
+  ImageI32 carried(W, H, 1, 0);
 #pragma omp parallel for schedule(static)
   for (long k = 0; k < long(pixels); ++k) {
     const std::uint64_t key = winner[std::size_t(k)].load(std::memory_order_relaxed);
     if (key == kNoWinner) continue;
-    const std::uint32_t bits = std::uint32_t(key >> 32);
-    std::memcpy(&nearest.data[std::size_t(k)], &bits, sizeof bits);
-    splat.data[std::size_t(k)] = ids.data[std::size_t(key & 0xffffffffu)];
+    const int id = ids.data[keySource(key)];
+    if (keepsId(keyDepth(key), observed.data[std::size_t(k)], depth_tolerance)) carried.data[std::size_t(k)] = id;
   }
-  ImageI32 carried(W, H, 1, 0);
-  // The depth the pyramid's level 0 holds there (pyramid_pixel.h's rule), NaN where none.
-  auto observed = [&](int x, int y) {
-    const float z = pyramid_pixel::cleanDepth(depth(x, y), min_depth, max_depth);
-    return isValidDepth(z) ? z : std::numeric_limits<float>::quiet_NaN();
-  };
-  // The splat above stays serial (the nearest point wins a pixel); the passes below write one pixel each.
+  // Close the one-pixel gaps that rounding leaves where a surface comes closer (it covers more pixels).
+  ImageI32 closed(W, H, 1, 0);
+  const auto id_at = [&](int x, int y) { return carried(x, y); };
+  const auto depth_at = [&](int x, int y) { return observed(x, y); };
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x)
-      if (splat(x, y) > 0 && std::isfinite(observed(x, y)) &&
-          std::abs(nearest(x, y) - observed(x, y)) <= depth_tolerance)
-        carried(x, y) = splat(x, y);
-  // Close the one-pixel gaps that rounding leaves where a surface comes closer (it covers more pixels):
-  // a pixel without an id takes the most common id of its 8 neighbours whose observed depth is close.
-  ImageI32 closed = carried;
-#pragma omp parallel for schedule(static)
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      if (carried(x, y) > 0 || !std::isfinite(observed(x, y))) continue;
-      int best_id = 0, best_count = 0;
-      int ids[8], counts[8], n = 0;
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-          const int nx = x + dx, ny = y + dy;
-          if ((dx == 0 && dy == 0) || nx < 0 || ny < 0 || nx >= W || ny >= H) continue;
-          const int id = carried(nx, ny);
-          if (id <= 0 || !(std::abs(observed(nx, ny) - observed(x, y)) <= depth_tolerance)) continue;
-          int k = 0;
-          while (k < n && ids[k] != id) ++k;
-          if (k == n) {
-            ids[n] = id;
-            counts[n++] = 0;
-          }
-          if (++counts[k] > best_count) {
-            best_count = counts[k];
-            best_id = id;
-          }
-        }
-      if (best_count >= 2) closed(x, y) = best_id;
-    }
+    for (int x = 0; x < W; ++x) closed(x, y) = closedGapId(id_at, depth_at, W, H, x, y, depth_tolerance);
   return closed;
 }
 
@@ -224,10 +185,7 @@ CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& le
     throw InputError("carried labels: a " + std::to_string(carried_ids.width) + "x" +
                      std::to_string(carried_ids.height) + " id image cannot cover a " + std::to_string(w) + "x" +
                      std::to_string(h) + " level at scale " + std::to_string(scale));
-  CarriedLabels out;
-  out.hard = ImageI32(w, h, 1, -1);
-  // Each level pixel's majority id (0: none, -1: no depth), in parallel; then the label indices in raster order, so
-  // that they do not depend on the threads.
+  // Each level pixel's majority id (0: none, -1: no depth), in parallel.
   ImageI32 majority(w, h, 1, 0);
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < h; ++y) {
@@ -249,13 +207,19 @@ CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& le
             ++it->second;
         }
       if (counts.empty()) continue;
-      // The most common id; ties go to the smaller id, so the result does not depend on the visiting order.
-      const auto best = std::max_element(counts.begin(), counts.end(), [](const auto& a, const auto& b) {
-        return a.second < b.second || (a.second == b.second && a.first > b.first);
+      const auto best = std::min_element(counts.begin(), counts.end(), [](const auto& a, const auto& b) {
+        return warm_start_pixel::beforeInMajority(a.second, a.first, b.second, b.first);
       });
-      if (2 * best->second >= scale * scale) majority(x, y) = best->first;
+      if (warm_start_pixel::holdsLevelPixel(best->second, scale)) majority(x, y) = best->first;
     }
   }
+  return carriedLabelsFromMajority(majority);
+}
+
+CarriedLabels carriedLabelsFromMajority(const ImageI32& majority) {
+  CarriedLabels out;
+  out.hard = ImageI32(majority.width, majority.height, 1, -1);
+  // The label indices in raster order, so that they do not depend on the threads that found the majorities.
   std::map<int, int> index_of_id;
   for (std::size_t k = 0; k < majority.data.size(); ++k) {
     const int id = majority.data[k];
@@ -267,6 +231,18 @@ CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& le
     out.hard.data[k] = it->second;
     ++out.covered;
   }
+  return out;
+}
+
+CarriedSegments carrySegments(const Result& previous, const ImageF& depth, const ImageF* level_points, int scale,
+                              const Config& config) {
+  CarriedSegments out;
+  const float min_depth = float(config.min_depth), max_depth = float(config.max_depth);
+  out.ids = carrySegmentIds(previous, depth, min_depth, max_depth, config.warm_depth_tolerance);
+  if (!previous.dormant_ids.empty())
+    out.dormant =
+        carryIds(previous.dormant_regions, previous, depth, min_depth, max_depth, config.warm_depth_tolerance);
+  if (level_points) out.labels = carriedLabelsAtLevel(out.ids, *level_points, scale);
   return out;
 }
 

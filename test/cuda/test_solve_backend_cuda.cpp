@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <thread>
 #include <tuple>
@@ -638,6 +639,53 @@ TEST(CudaSolveBackend, NoAllocationAfterTheFirstPairsOfASize) {
   EXPECT_EQ(after.pinned_allocations, before.pinned_allocations);
   EXPECT_GT(after.kernel_launches, before.kernel_launches);
   std::printf("kernel launches per solve: %.0f\n", double(after.kernel_launches - before.kernel_launches) / 3.0);
+}
+
+// Stream mode's carry on the device (cuda/warm_start.cu) against the host's (warm_start.cpp): the same carried ids and
+// dormant regions and the same hard labels at every label level, bit for bit (the device's majority up to 8 x 8 input
+// pixels per level pixel, the host's beyond).
+TEST(CudaSolveBackend, CarriedSegmentsMatchTheHostBitForBit) {
+  SKIP_WITHOUT_GPU();
+  SyntheticSceneOptions options;
+  options.variant = 2;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Config config;
+  config.backend = Backend::Cpu;
+  Result previous = Solver(config).solve(pair.frame1, pair.frame2, pair.intrinsics);
+  ASSERT_GE(previous.segments.size(), 2u);
+  // Dormant regions: every segment's pixels under another id, so that the second carry differs from the first.
+  previous.dormant_ids = {{100, 1}};
+  previous.dormant_regions = previous.labels;
+  for (int& id : previous.dormant_regions.data)
+    if (id > 0) id += 99;
+  // The next pair starts at the previous pair's frame 2.
+  const int levels = pyramidLevelCount(pair.frame2.width(), pair.frame2.height(), config.coarsest_min_width);
+  ASSERT_GE(levels, 5);
+  std::unique_ptr<SolveBackend> cpu = makeCpuSolveBackend(), gpu = makeCudaSolveBackend();
+  cpu->buildPyramids(pair.frame2, pair.frame1, pair.intrinsics, levels, config);
+  gpu->buildPyramids(pair.frame2, pair.frame1, pair.intrinsics, levels, config);
+  for (int level = -1; level < levels; ++level) {
+    const CarriedSegments a = cpu->carrySegments(previous, pair.frame2.depth, level, config);
+    const CarriedSegments b = gpu->carrySegments(previous, pair.frame2.depth, level, config);
+    const std::string what = "label level " + std::to_string(level);
+    EXPECT_EQ(a.ids.data, b.ids.data) << what;
+    EXPECT_EQ(a.dormant.data, b.dormant.data) << what;
+    EXPECT_EQ(a.labels.hard.width, b.labels.hard.width) << what;
+    EXPECT_EQ(a.labels.hard.data, b.labels.hard.data) << what;
+    EXPECT_EQ(a.labels.ids, b.labels.ids) << what;
+    EXPECT_EQ(a.labels.covered, b.labels.covered) << what;
+    EXPECT_EQ(a.labels.valid, b.labels.valid) << what;
+    if (level == 1) {  // the carry is not empty: most of frame 2 continues the previous segments
+      const long carried = std::count_if(a.ids.data.begin(), a.ids.data.end(), [](int id) { return id > 0; });
+      EXPECT_GT(carried, long(a.ids.data.size() / 2));
+      EXPECT_GT(a.labels.coverage(), 0.5);
+      EXPECT_GT(std::count_if(a.dormant.data.begin(), a.dormant.data.end(), [](int id) { return id > 99; }), 0);
+    }
+  }
+  // Sizes that do not fit are refused with the sizes named.
+  Result small = previous;
+  small.width = 10;
+  EXPECT_THROW(gpu->carrySegments(small, pair.frame2.depth, 1, config), InputError);
 }
 
 // Whole solves on both backends: the same number of segments and EPE within 0.01 px on the synthetic scenes.

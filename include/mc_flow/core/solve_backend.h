@@ -29,6 +29,7 @@
 #include "mc_flow/core/se3.h"
 #include "mc_flow/core/soft_labels.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/core/warm_start.h"
 
 namespace mc_flow {
 
@@ -87,6 +88,13 @@ class SolveBackend : public LabelStore {
   /// cost at the pixels that started in one of them (addSwitchingCost). The carried labels follow remap (merged into
   /// the merged label; removed: none) and moveLabels (nearest pixel); buildPyramids and initialiseLabels clear them.
   virtual void holdCarriedLabels(int carried_labels) = 0;
+  /// @brief Stream mode, after buildPyramids: the previous pair's segments carried onto this frame 1
+  /// (warm_start.h's CarriedSegments), with the hard labels of `label_level` when it is >= 0. This default runs
+  /// warm_start.cpp's carrySegments on the host with `frame1_depth` (the input depth buildPyramids was given) and
+  /// framePoints(label_level); the CUDA backend carries on the device from its level-0 depth (the same ids, bit for
+  /// bit) and downloads only the carried ids and the level's majority ids. Throws InputError on mismatched sizes.
+  virtual CarriedSegments carrySegments(const Result& previous, const ImageF& frame1_depth, int label_level,
+                                        const Config& config);
   /// @brief Carries the labels to `level` (up: bilinear and renormalised; down: 2x2 means; the same level:
   /// unchanged), clears the occlusion mask (it is recomputed there) and resets the dual variables.
   virtual void moveLabels(int level) = 0;

@@ -16,6 +16,7 @@
 namespace mc_flow {
 
 struct Result;
+struct Config;
 
 /// @brief The previous pair's segment ids on the next pair's frame-1 pixels (input resolution), 0 where
 /// no segment arrives. Each labelled point of the previous frame 1 is moved by its scene flow and
@@ -41,6 +42,27 @@ struct CarriedLabels {
 /// @brief Each pixel of the level (3D points `level_points`, `scale` input pixels per level pixel, a power
 /// of two) takes the id most of its input pixels carry, when they are at least half of them.
 CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& level_points, int scale);
+
+/// @brief carriedLabelsAtLevel's second half: the label indices of a level's majority ids (-1: no depth, 0: none, else
+/// the id), in raster order of first appearance.
+CarriedLabels carriedLabelsFromMajority(const ImageI32& majority);
+
+/// @brief Checks what carryIds reads of `ids` and `previous` against a frame of width x height; throws InputError
+/// naming the sizes.
+void checkCarryInputs(const ImageI32& ids, const Result& previous, int width, int height);
+
+/// @brief What a stream pair takes over from the previous pair: its segment ids and (where it has dormant ids) its
+/// dormant regions carried onto this frame 1 (carryIds with Config::min_depth, max_depth and warm_depth_tolerance), and
+/// the carried ids as hard labels of the label level (carriedLabelsAtLevel; empty when not asked for).
+struct CarriedSegments {
+  ImageI32 ids, dormant;
+  CarriedLabels labels;
+};
+
+/// @brief CarriedSegments on the host: `depth` is the next frame 1's input depth; `level_points` (null: no labels) the
+/// label level's points, `scale` input pixels per level pixel. SolveBackend::carrySegments' default.
+CarriedSegments carrySegments(const Result& previous, const ImageF& depth, const ImageF* level_points, int scale,
+                              const Config& config);
 
 /// @brief Persistent ids by overlap: segment i (labels 1..m in `labels`, 0 = none) takes the
 /// carried id it overlaps most when the overlap is at least `min_overlap` of the smaller of the two regions
