@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/kmeans.h"
@@ -377,6 +378,31 @@ void stageInputFrames(const RgbdFrame& frame1, const RgbdFrame& frame2, float* s
 #endif
 #pragma omp parallel for schedule(static, 1) num_threads(threads) if (parallel)
   for (int i = 0; i < 4; ++i) std::copy_n(inputs[i]->data(), plane, staged + std::size_t(i) * plane);
+}
+
+std::size_t stageCarryInputs(const Result& previous, bool dormant, unsigned char* staged) {
+  const std::size_t pixels = previous.labels.data.size();
+  const void* sources[4] = {previous.labels.data.data(), previous.optical_flow.data.data(),
+                            previous.moved_depth.data.data(), previous.dormant_regions.data.data()};
+  const std::size_t bytes[4] = {pixels * sizeof(std::int32_t), pixels * 2 * sizeof(float), pixels * sizeof(float),
+                                dormant ? pixels * sizeof(std::int32_t) : 0};
+  std::size_t offsets[4] = {0, 0, 0, 0};
+  for (int i = 1; i < 4; ++i) offsets[i] = offsets[i - 1] + bytes[i - 1];
+  if (staged) {
+    // In slices of 256 KiB over the threads (one thread per image left the 2.4 MB of flow to one of them).
+    constexpr std::size_t kSlice = std::size_t(256) << 10;
+    std::vector<std::pair<int, std::size_t>> slices;  // (image, first byte)
+    for (int i = 0; i < 4; ++i)
+      for (std::size_t at = 0; at < bytes[i]; at += kSlice) slices.emplace_back(i, at);
+    const bool parallel = offsets[3] + bytes[3] >= (std::size_t(2) << 20);
+#pragma omp parallel for schedule(static) if (parallel)
+    for (long j = 0; j < long(slices.size()); ++j) {
+      const auto [i, at] = slices[std::size_t(j)];
+      std::memcpy(staged + offsets[i] + at, static_cast<const unsigned char*>(sources[i]) + at,
+                  std::min(kSlice, bytes[i] - at));
+    }
+  }
+  return offsets[3] + bytes[3];
 }
 
 std::unique_ptr<SolveBackend> makeCpuSolveBackend() { return std::make_unique<CpuSolveBackend>(); }

@@ -376,10 +376,10 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
   // Pixels no carried segment covers (new surfaces, parts entering the view): K-means among them alone, as
   // many clusters as their share of the initial labels; too few of them stay with the outlier label, which
   // the label step hands to their neighbours.
-  const ImageF& points = backend->framePoints(p.label_level);
   const int uncovered = carried.valid - carried.covered;
   const double min_new = std::max(32.0, config.min_support_fraction * double(carried.valid));
   if (uncovered >= min_new) {
+    const ImageF& points = backend->framePoints(p.label_level);  // on the GPU a download: only where K-means needs it
     ImageF open_points(points.width, points.height, 3, std::numeric_limits<float>::quiet_NaN());
     for (std::size_t k = 0; k < start.hard.data.size(); ++k)
       if (start.hard.data[k] < 0)

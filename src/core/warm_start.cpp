@@ -219,18 +219,18 @@ CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& le
 CarriedLabels carriedLabelsFromMajority(const ImageI32& majority) {
   CarriedLabels out;
   out.hard = ImageI32(majority.width, majority.height, 1, -1);
-  // The label indices in raster order, so that they do not depend on the threads that found the majorities.
-  std::map<int, int> index_of_id;
+  // The label indices in order of first appearance in raster order, so that they do not depend on the threads that
+  // found the majorities (IdIndex: a short list, the last hit first, instead of a tree map per pixel).
+  IdIndex index_of_id;
   for (std::size_t k = 0; k < majority.data.size(); ++k) {
     const int id = majority.data[k];
     if (id < 0) continue;
     ++out.valid;
     if (id == 0) continue;
-    auto [it, inserted] = index_of_id.emplace(id, int(index_of_id.size()));
-    if (inserted) out.ids.push_back(id);
-    out.hard.data[k] = it->second;
+    out.hard.data[k] = index_of_id(id);
     ++out.covered;
   }
+  for (int i = 0; i < index_of_id.size(); ++i) out.ids.push_back(index_of_id.id(i));
   return out;
 }
 
@@ -246,14 +246,16 @@ CarriedSegments carrySegments(const Result& previous, const ImageF& depth, const
   return out;
 }
 
-std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, const ImageI32& carried_ids,
-                                 double min_overlap, int& next_id) {
+namespace {
+
+// matchSegmentIds, with the counts it matched on (`counts`: slots the segments 1..segment_count, 0 a label outside).
+std::vector<int> matchSegmentIdsCounted(const ImageI32& labels, int segment_count, const ImageI32& carried_ids,
+                                        double min_overlap, int& next_id, IdOverlap& counts) {
   if (labels.width != carried_ids.width || labels.height != carried_ids.height)
     throw InputError("segment ids: labels are " + std::to_string(labels.width) + "x" + std::to_string(labels.height) +
                      ", carried ids " + std::to_string(carried_ids.width) + "x" + std::to_string(carried_ids.height));
-  // Slots: the segments 1..segment_count (0: a label outside them).
-  const IdOverlap counts = countOverlap(carried_ids, labels, segment_count + 1,
-                                        [segment_count](int s) { return s > 0 && s <= segment_count ? s : 0; });
+  counts = countOverlap(carried_ids, labels, segment_count + 1,
+                        [segment_count](int s) { return s > 0 && s <= segment_count ? s : 0; });
   std::vector<std::tuple<double, int, int>> candidates;  // (overlap, segment, id)
   for (int c = 0; c < int(counts.ids.size()); ++c)
     for (int segment = 1; segment <= segment_count; ++segment) {
@@ -279,28 +281,39 @@ std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, cons
   return ids;
 }
 
+}  // namespace
+
+std::vector<int> matchSegmentIds(const ImageI32& labels, int segment_count, const ImageI32& carried_ids,
+                                 double min_overlap, int& next_id) {
+  IdOverlap counts;
+  return matchSegmentIdsCounted(labels, segment_count, carried_ids, min_overlap, next_id, counts);
+}
+
 void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32& carried_dormant,
                      const Result& previous, double min_overlap, int memory_pairs) {
   const int m = int(result.segments.size());
   const int first_new = std::max(previous.next_id, 1);
   int next_id = first_new;
-  std::vector<int> ids = matchSegmentIds(result.labels, m, carried_ids, min_overlap, next_id);
+  IdOverlap counts;  // carried ids against the segments 1..m
+  std::vector<int> ids = matchSegmentIdsCounted(result.labels, m, carried_ids, min_overlap, next_id, counts);
 
   // Segments that would get a new id: a dormant id whose region they cover takes precedence.
   result.revived_ids.clear();
   if (!previous.dormant_ids.empty() && carried_dormant.sameSize(result.labels)) {
-    ImageI32 fresh(result.width, result.height, 1, 0);
-    std::vector<int> fresh_segment;  // fresh index -> segment index
-    std::map<int, int> fresh_of_label;
+    std::vector<int> fresh_segment;                          // fresh index -> segment index
+    std::vector<int> fresh_of_label(std::size_t(m) + 1, 0);  // label 1..m -> fresh index (1..), 0: not fresh
     for (int i = 0; i < m; ++i)
       if (ids[std::size_t(i)] >= first_new) {
         fresh_segment.push_back(i);
-        fresh_of_label[i + 1] = int(fresh_segment.size());
+        fresh_of_label[std::size_t(i) + 1] = int(fresh_segment.size());
       }
     if (!fresh_segment.empty()) {
-      for (std::size_t k = 0; k < fresh.data.size(); ++k) {
-        const auto it = fresh_of_label.find(result.labels.data[k]);
-        if (it != fresh_of_label.end()) fresh.data[k] = it->second;
+      ImageI32 fresh(result.width, result.height, 1);
+      const long pixels = long(fresh.data.size());
+#pragma omp parallel for schedule(static)
+      for (long k = 0; k < pixels; ++k) {
+        const int label = result.labels.data[std::size_t(k)];
+        fresh.data[std::size_t(k)] = label > 0 && label <= m ? fresh_of_label[std::size_t(label)] : 0;
       }
       const int none = std::numeric_limits<int>::max() / 2;
       int unused = none;
@@ -333,10 +346,24 @@ void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32
   for (const Segment& s : result.segments) now_ids.push_back(s.id);
   std::sort(now_ids.begin(), now_ids.end());
   now_ids.erase(std::unique(now_ids.begin(), now_ids.end()), now_ids.end());
-  const IdOverlap under = countOverlap(carried_ids, result.labels, int(now_ids.size()) + 1, [&now_ids](int id) {
-    const auto it = std::lower_bound(now_ids.begin(), now_ids.end(), id);
-    return id > 0 && it != now_ids.end() && *it == id ? int(it - now_ids.begin()) + 1 : 0;
-  });
+  // The counts of the match above with each segment's slot moved to its new id's (the relabelling maps the segments
+  // one to one onto their ids: the same counts as counting the relabelled image again).
+  IdOverlap under;
+  under.ids = counts.ids;
+  under.id_pixels = counts.id_pixels;
+  under.slots = int(now_ids.size()) + 1;
+  under.slot_pixels.assign(std::size_t(under.slots), 0.0);
+  under.id_slot_pixels.assign(under.ids.size() * std::size_t(under.slots), 0.0);
+  for (int segment = 0; segment <= m; ++segment) {
+    const int slot =
+        segment == 0
+            ? 0
+            : int(std::lower_bound(now_ids.begin(), now_ids.end(), ids[std::size_t(segment - 1)]) - now_ids.begin()) +
+                  1;
+    under.slot_pixels[std::size_t(slot)] += counts.slot_pixels[std::size_t(segment)];
+    for (std::size_t c = 0; c < under.ids.size(); ++c)
+      under.id_slot_pixels[c * std::size_t(under.slots) + std::size_t(slot)] += counts.at(int(c), segment);
+  }
   std::map<int, bool> alive;
   for (const Segment& s : result.segments) alive[s.id] = true;
   result.merged_ids.clear();

@@ -167,6 +167,12 @@ int fillOutputImages(const StagedOutputs& staged, Result& result);
 /// machine, docs/PERFORMANCE.md).
 void stageInputFrames(const RgbdFrame& frame1, const RgbdFrame& frame2, float* staged);
 
+/// @brief Copies what a carry reads of `previous` into `staged` (the CUDA backend's page-locked upload buffer), one
+/// after the other: its labels (int32), optical flow (2 floats per pixel), moved depth (float) and, with `dormant`, its
+/// dormant regions (int32); up to 4 OpenMP threads from a few MB on. Returns the bytes (with `staged` null: only
+/// counts them). The sizes are checkCarryInputs' to check.
+std::size_t stageCarryInputs(const Result& previous, bool dormant, unsigned char* staged);
+
 /// @brief Checks initial hard labels (size, values in [-1, motion_labels), motion_labels >= 1); throws
 /// InputError naming the value.
 void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int height);
