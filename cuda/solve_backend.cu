@@ -133,6 +133,13 @@ class CudaSolveBackend final : public SolveBackend {
     const bool dormant = !previous.dormant_ids.empty();
     checkCarryInputs(previous.labels, previous, W, H);
     if (dormant) checkCarryInputs(previous.dormant_regions, previous, W, H);
+    const DeviceLevel* label_level_images = label_level >= 0 ? &levelAt(label_level) : nullptr;  // throws if absent
+    const int scale = label_level >= 0 ? 1 << label_level : 1;
+    if (label_level_images && (label_level_images->width * scale > W || label_level_images->height * scale > H))
+      throw InputError("CUDA carried labels: a " + std::to_string(W) + "x" + std::to_string(H) +
+                       " id image cannot cover level " + std::to_string(label_level) + " (" +
+                       std::to_string(label_level_images->width) + "x" + std::to_string(label_level_images->height) +
+                       ") at scale " + std::to_string(scale));
     const std::size_t pixels = std::size_t(W) * std::size_t(H);
     cudaStream_t s = stream_.stream;
     // Up, through the page-locked buffer in one copy: the previous pair's ids, optical flow and moved depth (and
@@ -149,9 +156,9 @@ class CudaSolveBackend final : public SolveBackend {
     const auto* in_moved_depth = in_flow + 2 * pixels;
     const auto* in_dormant = reinterpret_cast<const int*>(in_moved_depth + pixels);
     // The carries, into consecutive planes of carry_out_: the ids, the dormant regions, then the level's majority ids.
-    const bool majority_here = label_level >= 0 && (1 << label_level) <= cuda_detail::kMaxMajorityScale;
+    const bool majority_on_device = label_level_images && scale <= cuda_detail::kMaxMajorityScale;
     const std::size_t level_pixels =
-        majority_here ? std::size_t(levelAt(label_level).width) * std::size_t(levelAt(label_level).height) : 0;
+        majority_on_device ? std::size_t(label_level_images->width) * std::size_t(label_level_images->height) : 0;
     const std::size_t planes = dormant ? 2 : 1, out_values = planes * pixels + level_pixels;
     carry_winner_.reserve(pixels);
     carry_kept_.reserve(pixels);
@@ -161,11 +168,11 @@ class CudaSolveBackend final : public SolveBackend {
       cuda_detail::launchCarryIds(plane == 0 ? in_ids : in_dormant, in_flow, in_moved_depth, depth, W, H,
                                   config.warm_depth_tolerance, carry_winner_.get(), carry_kept_.get(),
                                   carry_out_.get() + plane * pixels, s);
-    if (majority_here)
-      cuda_detail::launchCarriedMajority(carry_out_.get(), W, levelAt(label_level).points1, 1 << label_level,
+    if (majority_on_device)
+      cuda_detail::launchCarriedMajority(carry_out_.get(), W, label_level_images->points1, scale,
                                          carry_out_.get() + planes * pixels, s);
     // Down in one wait.
-    int* staged = staged_carry_.reserve(out_values);
+    int* staged = staged_carry_out_.reserve(out_values);
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(staged, carry_out_.get(), out_values * sizeof(int), cudaMemcpyDeviceToHost, s));
     MCFLOW_CUDA_WAIT(s);
     CarriedSegments out;
@@ -177,13 +184,13 @@ class CudaSolveBackend final : public SolveBackend {
     };
     image(out.ids, staged);
     if (dormant) image(out.dormant, staged + pixels);
-    if (majority_here) {
-      const DeviceLevel& L = levelAt(label_level);
+    if (majority_on_device) {
+      const DeviceLevel& L = *label_level_images;
       ImageI32 majority(L.width, L.height, 1);
       std::copy_n(staged + planes * pixels, level_pixels, majority.data.data());
       out.labels = carriedLabelsFromMajority(majority);
-    } else if (label_level >= 0) {  // coarser than the device's majority takes: on the host
-      out.labels = carriedLabelsAtLevel(out.ids, framePoints(label_level), 1 << label_level);
+    } else if (label_level_images) {  // coarser than the device's majority takes: on the host
+      out.labels = carriedLabelsAtLevel(out.ids, framePoints(label_level), scale);
     }
     return out;
   }
@@ -771,7 +778,7 @@ class CudaSolveBackend final : public SolveBackend {
   DeviceBuffer<int> carry_kept_, carry_out_;
   DeviceBuffer<unsigned long long> carry_winner_;
   PinnedBuffer<unsigned char> staged_carry_in_;
-  PinnedBuffer<int> staged_carry_;
+  PinnedBuffer<int> staged_carry_out_;
   DeviceBuffer<long long> targets_;
   DeviceBuffer<unsigned long long> moved_;
   int current_ = 0, count_ = 0, level_ = 0, weights_level_ = -1;

@@ -63,23 +63,9 @@ __global__ void majorityKernel(const int* __restrict__ carried, int input_width,
     return;
   }
   constexpr int kCapacity = kMaxMajorityScale * kMaxMajorityScale;
-  int ids[kCapacity], counts[kCapacity], n = 0;
-  for (int by = 0; by < scale; ++by)
-    for (int bx = 0; bx < scale; ++bx) {
-      const int id = carried[std::size_t(y * scale + by) * input_width + x * scale + bx];
-      if (id <= 0) continue;
-      int i = 0;
-      while (i < n && ids[i] != id) ++i;
-      if (i == n) {
-        ids[n] = id;
-        counts[n++] = 0;
-      }
-      ++counts[i];
-    }
-  int best = -1;
-  for (int i = 0; i < n; ++i)
-    if (best < 0 || warm_start_pixel::beforeInMajority(counts[i], ids[i], counts[best], ids[best])) best = i;
-  majority[k] = best >= 0 && warm_start_pixel::holdsLevelPixel(counts[best], scale) ? ids[best] : 0;
+  int ids[kCapacity], counts[kCapacity];
+  const auto id_at = [&](int px, int py) { return carried[std::size_t(py) * input_width + px]; };
+  majority[k] = warm_start_pixel::blockMajorityId(id_at, x, y, scale, ids, counts);
 }
 
 }  // namespace

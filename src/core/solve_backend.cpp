@@ -38,8 +38,9 @@ std::vector<Eigen::Vector3f> SolveBackend::kmeansCentres(int level, int k, int m
 
 CarriedSegments SolveBackend::carrySegments(const Result& previous, const ImageF& frame1_depth, int label_level,
                                             const Config& config) {
-  return mc_flow::carrySegments(previous, frame1_depth, label_level >= 0 ? &framePoints(label_level) : nullptr,
-                                1 << std::max(0, label_level), config);
+  if (label_level < 0) return mc_flow::carrySegments(previous, frame1_depth, nullptr, 1, config);
+  const ImageF& level_points = framePoints(label_level);  // throws InputError for a level the pyramid lacks
+  return mc_flow::carrySegments(previous, frame1_depth, &level_points, 1 << label_level, config);
 }
 
 void SolveBackend::initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres) {

@@ -372,7 +372,10 @@ Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Re
     start.twists.push_back(lineage.previous_twist);
     start.carried_lineage.push_back(lineage);
   }
-  const Vector6d widest = start.twists[std::size_t(std::max_element(covered.begin(), covered.end()) - covered.begin())];
+  // The widest carried segment's motion for the new clusters; none carried (possible with warm_min_coverage = 0): zero.
+  const Vector6d widest =
+      covered.empty() ? Vector6d::Zero()
+                      : start.twists[std::size_t(std::max_element(covered.begin(), covered.end()) - covered.begin())];
   // Pixels no carried segment covers (new surfaces, parts entering the view): K-means among them alone, as
   // many clusters as their share of the initial labels; too few of them stay with the outlier label, which
   // the label step hands to their neighbours.

@@ -119,10 +119,17 @@ void checkCarryInputs(const ImageI32& ids, const Result& previous, int width, in
                      std::to_string(previous.height) + " but the frame is " + std::to_string(width) + "x" +
                      std::to_string(height));
   const std::size_t pixels = std::size_t(width) * std::size_t(height);
-  if (ids.data.size() != pixels || previous.optical_flow.data.size() != pixels * 2 ||
-      previous.moved_depth.data.size() != pixels)
-    throw InputError("warm start: the previous result has no labels or flow at its " + std::to_string(width) + "x" +
-                     std::to_string(height) + " resolution");
+  // The splat's key holds a pixel's raster index in 32 bits (warm_start_pixel.h).
+  if (pixels > std::size_t(0xffffffffu))
+    throw InputError("warm start: " + std::to_string(pixels) + " pixels, at most 4294967295 can be carried");
+  auto check = [&](const char* what, std::size_t values, std::size_t expected) {
+    if (values != expected)
+      throw InputError(std::string("warm start: the previous result's ") + what + " has " + std::to_string(values) +
+                       " values, expected " + std::to_string(expected) + " for " + imageSizeText(width, height));
+  };
+  check("id image", ids.data.size(), pixels);
+  check("optical flow", previous.optical_flow.data.size(), pixels * 2);
+  check("moved depth", previous.moved_depth.data.size(), pixels);
 }
 
 ImageI32 carryIds(const ImageI32& ids, const Result& previous, const ImageF& depth, float min_depth, float max_depth,
@@ -187,31 +194,16 @@ CarriedLabels carriedLabelsAtLevel(const ImageI32& carried_ids, const ImageF& le
                      std::to_string(h) + " level at scale " + std::to_string(scale));
   // Each level pixel's majority id (0: none, -1: no depth), in parallel.
   ImageI32 majority(w, h, 1, 0);
-#pragma omp parallel for schedule(static)
-  for (int y = 0; y < h; ++y) {
-    std::vector<std::pair<int, int>> counts;  // (id, count) within a block
-    for (int x = 0; x < w; ++x) {
-      if (!std::isfinite(level_points(x, y, 2))) {
-        majority(x, y) = -1;
-        continue;
-      }
-      counts.clear();
-      for (int by = 0; by < scale; ++by)
-        for (int bx = 0; bx < scale; ++bx) {
-          const int id = carried_ids(x * scale + bx, y * scale + by);
-          if (id <= 0) continue;
-          auto it = std::find_if(counts.begin(), counts.end(), [id](const auto& c) { return c.first == id; });
-          if (it == counts.end())
-            counts.emplace_back(id, 1);
-          else
-            ++it->second;
-        }
-      if (counts.empty()) continue;
-      const auto best = std::min_element(counts.begin(), counts.end(), [](const auto& a, const auto& b) {
-        return warm_start_pixel::beforeInMajority(a.second, a.first, b.second, b.first);
-      });
-      if (warm_start_pixel::holdsLevelPixel(best->second, scale)) majority(x, y) = best->first;
-    }
+  const auto id_at = [&](int x, int y) { return carried_ids(x, y); };
+#pragma omp parallel
+  {
+    std::vector<int> ids(std::size_t(scale) * std::size_t(scale)), counts(ids.size());  // per thread
+#pragma omp for schedule(static)
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        majority(x, y) = std::isfinite(level_points(x, y, 2))
+                             ? warm_start_pixel::blockMajorityId(id_at, x, y, scale, ids.data(), counts.data())
+                             : -1;
   }
   return carriedLabelsFromMajority(majority);
 }

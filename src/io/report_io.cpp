@@ -94,6 +94,8 @@ std::string reportJson(const Result& result, const Config& config, const RunInfo
                           {"merged", it.merged},
                           {"removed", it.removed},
                           {"split", it.split},
+                          {"merge_rounds", it.merge_rounds},
+                          {"merge_pairs_tested", it.merge_pairs_tested},
                           {"motion_iterations", it.motion_iterations},
                           {"motion_levels", motion_levels},
                           {"label_iterations", it.label_iterations},

@@ -135,6 +135,7 @@ void NodeStatus::fill(diagnostic_updater::DiagnosticStatusWrapper& status, const
   status.add("stage motion [ms]", last_timings_.motion);
   status.add("stage labels [ms]", last_timings_.labels);
   status.add("stage adaptation [ms]", last_timings_.adaptation);
+  status.add("stage adaptation: merge test [ms]", last_timings_.merge_test);
   status.add("stage occlusion [ms]", last_timings_.occlusion);
   status.add("stage outputs [ms]", last_timings_.outputs);
   status.add("backend", backend_.empty() ? std::string("(no pair solved yet)") : backend_ + ": " + backend_note_);

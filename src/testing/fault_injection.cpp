@@ -35,6 +35,16 @@ class FaultInjectingBackend final : public SolveBackend {
     return inner_->framePoints(level);
   }
   const std::vector<int>& validCounts() const override { return inner_->validCounts(); }
+  std::vector<Eigen::Vector3f> kmeansCentres(int level, int k, int max_iterations, double tolerance_m,
+                                             unsigned seed) override {
+    strike("kmeansCentres");
+    return inner_->kmeansCentres(level, k, max_iterations, tolerance_m, seed);
+  }
+  CarriedSegments carrySegments(const Result& previous, const ImageF& frame1_depth, int label_level,
+                                const Config& config) override {
+    strike("carrySegments");
+    return inner_->carrySegments(previous, frame1_depth, label_level, config);
+  }
   void initialiseLabels(int level, const ImageI32& hard, int motion_labels) override {
     strike("initialiseLabels");
     inner_->initialiseLabels(level, hard, motion_labels);
@@ -123,22 +133,12 @@ class FaultInjectingBackend final : public SolveBackend {
 }  // namespace
 
 const std::vector<std::string>& backendFaultStages() {
-  static const std::vector<std::string> stages{"buildPyramids",
-                                               "framePoints",
-                                               "initialiseLabels",
-                                               "initialiseLabelsFromCentres",
-                                               "holdCarriedLabels",
-                                               "moveLabels",
-                                               "motionAccumulator",
-                                               "updateOcclusion",
-                                               "labelStep",
-                                               "downloadLabels",
-                                               "outputs",
-                                               "supports",
-                                               "remap",
-                                               "ownedMoments",
-                                               "trialCuts",
-                                               "applyCuts",
+  static const std::vector<std::string> stages{"buildPyramids",     "framePoints",      "kmeansCentres",
+                                               "carrySegments",     "initialiseLabels", "initialiseLabelsFromCentres",
+                                               "holdCarriedLabels", "moveLabels",       "motionAccumulator",
+                                               "updateOcclusion",   "labelStep",        "downloadLabels",
+                                               "outputs",           "supports",         "remap",
+                                               "ownedMoments",      "trialCuts",        "applyCuts",
                                                "costModel"};
   return stages;
 }

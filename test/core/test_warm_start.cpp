@@ -123,6 +123,12 @@ TEST(WarmStart, RejectsAPreviousResultOfAnotherSize) {
   empty.width = 40;
   empty.height = 20;
   EXPECT_THROW(carrySegmentIds(empty, planeDepth(40, 20, 2.f), kMinDepth, kMaxDepth, 0.05), InputError);
+  // The message names the image and its size.
+  try {
+    carrySegmentIds(empty, planeDepth(40, 20, 2.f), kMinDepth, kMaxDepth, 0.05);
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("id image has 0 values, expected 800"), std::string::npos) << e.what();
+  }
 }
 
 TEST(WarmStart, LevelLabelsTakeTheMajorityOfTheirBlock) {
@@ -377,6 +383,21 @@ TEST(SolverStream, FallsBackToColdWhenThePreviousSegmentsDoNotFit) {
   const Result cold = fresh.solve(p1.frame1, p1.frame2, p1.intrinsics);
   EXPECT_DOUBLE_EQ(r.energy, cold.energy) << "the fallback is the cold solve";
   EXPECT_GE(r.next_id, previous.next_id) << "ids are not reused";
+}
+
+TEST(SolverStream, AWarmStartWithNothingCarriedStartsFromKMeansAlone) {
+  // warm_min_coverage = 0 admits a warm start that carries no segment (here: the previous result's ids all erased):
+  // every label comes from the K-means of the uncovered pixels, from a zero motion.
+  Config config;
+  config.warm_min_coverage = 0;
+  Solver solver(config);
+  const SyntheticPair p0 = sequencePair(0, 0), p1 = sequencePair(0, 1);
+  Result previous = solver.solve(p0.frame1, p0.frame2, p0.intrinsics);
+  std::fill(previous.labels.data.begin(), previous.labels.data.end(), 0);
+  const Result r = solver.solve(p1.frame1, p1.frame2, p1.intrinsics, previous);
+  EXPECT_EQ(r.start, StartKind::Warm) << r.start_note;
+  EXPECT_GE(r.segments.size(), 1u);
+  for (const Segment& segment : r.segments) EXPECT_GE(segment.id, previous.next_id) << "no id was carried";
 }
 
 TEST(SolverStream, DetectsAJumpInTheSequence) {

@@ -14,7 +14,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <memory>
+#include <random>
 #include <string>
 #include <thread>
 #include <tuple>
@@ -686,6 +688,86 @@ TEST(CudaSolveBackend, CarriedSegmentsMatchTheHostBitForBit) {
   Result small = previous;
   small.width = 10;
   EXPECT_THROW(gpu->carrySegments(small, pair.frame2.depth, 1, config), InputError);
+}
+
+// The same at an awkward size with a made-up previous result: ids <= 0, flow off the image, NaN and infinite, moved
+// depths of 0, NaN, infinity and below zero, points that land on one pixel at the same depth (a tie: the first in
+// raster order wins) and frame 1's depth outside [min_depth, max_depth], NaN or 0.
+TEST(CudaSolveBackend, CarriedSegmentsOfAwkwardInputMatchTheHostBitForBit) {
+  SKIP_WITHOUT_GPU();
+  const int W = 317, H = 239;
+  Config config;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> unit(0.f, 1.f);
+  RgbdFrame frame1, frame2;
+  frame1.intensity = ImageF(W, H, 1);
+  frame1.depth = ImageF(W, H, 1);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      frame1.intensity(x, y) = unit(rng);
+      const float r = unit(rng);
+      frame1.depth(x, y) = r < 0.05f   ? 0.f
+                           : r < 0.08f ? std::numeric_limits<float>::quiet_NaN()
+                           : r < 0.1f  ? float(config.max_depth) + 1.f
+                                       : 1.f + 0.02f * float((x / 40 + y / 30) % 3);  // steps of 2 cm
+    }
+  frame2 = frame1;
+  Result previous;
+  previous.width = W;
+  previous.height = H;
+  previous.labels = ImageI32(W, H, 1);
+  previous.optical_flow = ImageF(W, H, 2);
+  previous.moved_depth = ImageF(W, H, 1);
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float r = unit(rng);
+      previous.labels(x, y) = r < 0.05f ? -3 : r < 0.1f ? 0 : 1 + (x / 50) + 7 * (y / 60);
+      float fu = 1.5f * unit(rng) - 0.5f, fv = 1.5f * unit(rng) - 0.5f;
+      if (x % 7 == 0) fu = 0.5f;               // exactly half a pixel: rounds away from zero
+      if (x % 11 == 0) fu = -float(x) - 0.7f;  // off the left border
+      if (y % 13 == 0) fv = nan;
+      if (y % 17 == 0) fu = inf;
+      const float m = unit(rng);
+      float moved = m < 0.03f   ? 0.f
+                    : m < 0.05f ? nan
+                    : m < 0.07f ? inf
+                    : m < 0.09f ? -1.f
+                                : frame1.depth(std::min(W - 1, x + 1), y) + 0.03f * (m - 0.5f);
+      if (y % 4 == 0 && x % 5 < 2) {  // pixels 5k and 5k + 1 land on 5k at the same depth: a tie
+        fu = x % 5 == 0 ? 0.f : -1.f;
+        fv = 0.f;
+        moved = frame1.depth(x - x % 5, y);
+        if (x % 5 == 1) previous.labels(x, y) = 99;  // the loser of the tie, so that a wrong winner shows
+      }
+      previous.optical_flow(x, y, 0) = fu;
+      previous.optical_flow(x, y, 1) = fv;
+      previous.moved_depth(x, y) = moved;
+    }
+  previous.dormant_ids = {{500, 2}};
+  previous.dormant_regions = ImageI32(W, H, 1);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) previous.dormant_regions(x, y) = (x + y) % 9 == 0 ? 500 : (x * y) % 5 == 0 ? -1 : 0;
+  const int levels = pyramidLevelCount(W, H, config.coarsest_min_width);
+  std::unique_ptr<SolveBackend> cpu = makeCpuSolveBackend(), gpu = makeCudaSolveBackend();
+  const Intrinsics K{300.0, 300.0, 158.0, 119.0};
+  cpu->buildPyramids(frame1, frame2, K, levels, config);
+  gpu->buildPyramids(frame1, frame2, K, levels, config);
+  long carried_pixels = 0;
+  for (int level = -1; level < levels; ++level) {
+    const CarriedSegments a = cpu->carrySegments(previous, frame1.depth, level, config);
+    const CarriedSegments b = gpu->carrySegments(previous, frame1.depth, level, config);
+    const std::string what = "label level " + std::to_string(level);
+    EXPECT_EQ(a.ids.data, b.ids.data) << what;
+    EXPECT_EQ(a.dormant.data, b.dormant.data) << what;
+    EXPECT_EQ(a.labels.hard.data, b.labels.hard.data) << what;
+    EXPECT_EQ(a.labels.ids, b.labels.ids) << what;
+    EXPECT_EQ(a.labels.covered, b.labels.covered) << what;
+    EXPECT_EQ(a.labels.valid, b.labels.valid) << what;
+    carried_pixels = std::count_if(a.ids.data.begin(), a.ids.data.end(), [](int id) { return id > 0; });
+  }
+  EXPECT_GT(carried_pixels, long(W) * H / 4);                                            // the test carries something
+  EXPECT_THROW(gpu->carrySegments(previous, frame1.depth, levels, config), InputError);  // a level it lacks
 }
 
 // Whole solves on both backends: the same number of segments and EPE within 0.01 px on the synthetic scenes.

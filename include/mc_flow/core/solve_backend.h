@@ -169,8 +169,8 @@ void stageInputFrames(const RgbdFrame& frame1, const RgbdFrame& frame2, float* s
 
 /// @brief Copies what a carry reads of `previous` into `staged` (the CUDA backend's page-locked upload buffer), one
 /// after the other: its labels (int32), optical flow (2 floats per pixel), moved depth (float) and, with `dormant`, its
-/// dormant regions (int32); up to 4 OpenMP threads from a few MB on. Returns the bytes (with `staged` null: only
-/// counts them). The sizes are checkCarryInputs' to check.
+/// dormant regions (int32); in 256 KiB slices over the OpenMP threads from 2 MiB on. Returns the bytes (with `staged`
+/// null: only counts them). The sizes are checkCarryInputs' to check.
 std::size_t stageCarryInputs(const Result& previous, bool dormant, unsigned char* staged);
 
 /// @brief Checks initial hard labels (size, values in [-1, motion_labels), motion_labels >= 1); throws

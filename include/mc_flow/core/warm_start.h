@@ -22,8 +22,10 @@ struct Config;
 /// no segment arrives. Each labelled point of the previous frame 1 is moved by its scene flow and
 /// projected (the nearest point wins a pixel); a pixel keeps the id only where the moved point's depth is
 /// within `depth_tolerance` [m] of the depth observed there (`depth`: the next frame 1's input depth [m], observed
-/// where within [min_depth, max_depth], as the solver's pyramid takes it: the host's frame, so that a GPU solve
-/// downloads nothing for it). One-pixel gaps between splatted points are closed from neighbours at a similar depth.
+/// where within [min_depth, max_depth], as the solver's pyramid takes it). One-pixel gaps between splatted points are
+/// closed from neighbours at a similar depth. The CPU's carry (SolveBackend::carrySegments' default); the CUDA
+/// backend's is cuda/warm_start.cu on its level-0 depth, with the same rules (warm_start_pixel.h). Throws InputError on
+/// mismatched sizes.
 ImageI32 carrySegmentIds(const Result& previous, const ImageF& depth, float min_depth, float max_depth,
                          double depth_tolerance);
 /// @brief The same for another id image on the previous pair's frame-1 pixels (e.g. its dormant regions).

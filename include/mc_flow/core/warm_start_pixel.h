@@ -109,5 +109,29 @@ MCFLOW_HOST_DEVICE inline bool beforeInMajority(int count_a, int id_a, int count
 /// half of them.
 MCFLOW_HOST_DEVICE inline bool holdsLevelPixel(int count, int scale) { return 2 * count >= scale * scale; }
 
+/// @brief The id that holds level pixel (level_x, level_y): of its block of scale x scale input pixels (`id_at(x, y)`
+/// reads the carried ids at the input resolution), the id most of them carry (beforeInMajority) when holdsLevelPixel,
+/// else 0. `ids` and `counts` are the caller's scratch of at least scale * scale entries.
+template <typename IdAt>
+MCFLOW_HOST_DEVICE int blockMajorityId(const IdAt& id_at, int level_x, int level_y, int scale, int* ids, int* counts) {
+  int n = 0;
+  for (int by = 0; by < scale; ++by)
+    for (int bx = 0; bx < scale; ++bx) {
+      const int id = id_at(level_x * scale + bx, level_y * scale + by);
+      if (id <= 0) continue;
+      int i = 0;
+      while (i < n && ids[i] != id) ++i;
+      if (i == n) {
+        ids[n] = id;
+        counts[n++] = 0;
+      }
+      ++counts[i];
+    }
+  int best = -1;
+  for (int i = 0; i < n; ++i)
+    if (best < 0 || beforeInMajority(counts[i], ids[i], counts[best], ids[best])) best = i;
+  return best >= 0 && holdsLevelPixel(counts[best], scale) ? ids[best] : 0;
+}
+
 }  // namespace warm_start_pixel
 }  // namespace mc_flow
