@@ -73,8 +73,8 @@ Rgb8 displayColour(std::uint32_t id, const std::vector<int>& world_ids) {
   return colourForId(id);
 }
 
-ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
-                            double blend, const std::vector<int>& world_ids) {
+void segmentationPictureInto(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
+                             double blend, const std::vector<int>& world_ids, std::uint8_t* rgb) {
   if (labels.count < 1 || int(ids.size()) != labels.count - 1)
     throw InputError("segmentation picture: " + std::to_string(ids.size()) + " segment ids for " +
                      std::to_string(labels.count) + " label planes (expected count - 1)");
@@ -82,15 +82,6 @@ ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& id
   for (const int id : ids) colours.push_back(displayColour(std::uint32_t(std::max(id, 0)), world_ids));
   colours.push_back(colourForId(0));  // the outlier plane
   const bool have_image = intensity && intensity->sameSize(labels.width, labels.height);
-  ImageU8 out(labels.width, labels.height, 3, 0);
-  // std::lround(std::clamp(v, 0, 255)) without the library call (it was most of this function's time): in
-  // [0, 255] truncation is floor and c - floor(c) is exact, so halves go up as lround sends them.
-  auto to8 = [](double v) {
-    const double c = std::clamp(v, 0.0, 255.0);
-    if (!(c >= 0.0)) return std::uint8_t(std::lround(c));  // NaN, as before
-    const int whole = int(c);
-    return std::uint8_t(whole + (c - whole >= 0.5 ? 1 : 0));
-  };
   // A row at a time, plane after plane: each pixel's sums take their terms in plane order, as a loop over the
   // planes per pixel would (the same bits), but the row loop has no dependency from pixel to pixel and
   // vectorises. Planes with no positive weight add +0, which leaves the (non-negative) sums as they are. Rows in
@@ -98,13 +89,14 @@ ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& id
   const int w = labels.width;
 #pragma omp parallel
   {
-    std::vector<double> sums(3 * std::size_t(w));
+    std::vector<double> sums(4 * std::size_t(w));
     double* const r = sums.data();
     double* const g = r + w;
     double* const b = g + w;
+    double* const grey = b + w;
 #pragma omp for schedule(static)
     for (int y = 0; y < labels.height; ++y) {
-      std::fill(sums.begin(), sums.end(), 0.0);
+      std::fill(sums.begin(), sums.begin() + 3 * std::ptrdiff_t(w), 0.0);
       for (int i = 0; i < labels.count; ++i) {
         const float* u = labels.plane(i) + std::size_t(y) * std::size_t(w);
         const double cr = colours[std::size_t(i)].r, cg = colours[std::size_t(i)].g, cb = colours[std::size_t(i)].b;
@@ -121,14 +113,34 @@ ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& id
           b[x] += weight * cb;
         }
       }
+      if (have_image) {
+        const float* row = &(*intensity)(0, y);
+        for (int x = 0; x < w; ++x) grey[x] = 255.0 * std::clamp(double(row[x]), 0.0, 1.0);
+      } else {
+        std::fill(grey, grey + w, 128.0);
+      }
+      // lround(clamp(v, 0, 255)) without branches, so that the loop vectorises: in [0, 255] truncation is floor and
+      // c - floor(c) is exact, so halves go up as lround sends them. NaN (only from a NaN intensity or blend) gives 0,
+      // as lround's LONG_MIN cast to 8 bits did.
+      std::uint8_t* out = rgb + std::size_t(y) * std::size_t(w) * 3;
       for (int x = 0; x < w; ++x) {
-        const double grey = have_image ? 255.0 * std::clamp(double((*intensity)(x, y)), 0.0, 1.0) : 128.0;
-        out(x, y, 0) = to8(blend * r[x] + (1 - blend) * grey);
-        out(x, y, 1) = to8(blend * g[x] + (1 - blend) * grey);
-        out(x, y, 2) = to8(blend * b[x] + (1 - blend) * grey);
+        const double mix[3] = {blend * r[x] + (1 - blend) * grey[x], blend * g[x] + (1 - blend) * grey[x],
+                               blend * b[x] + (1 - blend) * grey[x]};
+        for (int c = 0; c < 3; ++c) {
+          double v = mix[c] >= 0.0 ? mix[c] : 0.0;  // NaN too
+          v = v <= 255.0 ? v : 255.0;
+          const int whole = int(v);
+          out[3 * x + c] = std::uint8_t(whole + int(v - double(whole) >= 0.5));
+        }
       }
     }
   }
+}
+
+ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
+                            double blend, const std::vector<int>& world_ids) {
+  ImageU8 out(labels.width, labels.height, 3);
+  segmentationPictureInto(labels, ids, intensity, blend, world_ids, out.data.data());
   return out;
 }
 

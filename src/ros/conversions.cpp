@@ -394,17 +394,36 @@ sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const Pa
   return msg;
 }
 
+namespace {
+
+// The segment ids of the soft-label planes (0 for a plane without a segment) and the grey they are blended with: the
+// previous frame's (the solver's intensity).
+std::vector<int> planeIds(const mc_flow::Result& result) {
+  std::vector<int> ids;
+  for (int c = 0; c + 1 < result.soft_labels.count; ++c)
+    ids.push_back(std::size_t(c) < result.segments.size() ? result.segments[std::size_t(c)].id : 0);
+  return ids;
+}
+
+const mc_flow::ImageF* pictureGrey(const PairContext& pair) {
+  return pair.firstFrame() ? &pair.firstFrame()->intensity : nullptr;
+}
+
+}  // namespace
+
 cv::Mat segmentationPicture(const mc_flow::Result& result, const PairContext& pair, double blend) {
   const mc_flow::SoftLabels& u = result.soft_labels;
-  std::vector<int> ids;
-  for (int c = 0; c + 1 < u.count; ++c)
-    ids.push_back(std::size_t(c) < result.segments.size() ? result.segments[std::size_t(c)].id : 0);
-  // The grey of the pixels the labels belong to: the previous frame's (the solver's intensity).
-  const mc_flow::ImageF* grey = pair.firstFrame() ? &pair.firstFrame()->intensity : nullptr;
-  const mc_flow::ImageU8 rgb = mc_flow::segmentationPicture(u, ids, grey, blend, result.world.ids);
-  cv::Mat picture(rgb.height, rgb.width, CV_8UC3);
-  std::copy(rgb.data.begin(), rgb.data.end(), picture.data);
+  cv::Mat picture(u.height, u.width, CV_8UC3);  // continuous: rows of width * 3 bytes
+  mc_flow::segmentationPictureInto(u, planeIds(result), pictureGrey(pair), blend, result.world.ids, picture.data);
   return picture;
+}
+
+sensor_msgs::ImagePtr makeSegmentationImage(const mc_flow::Result& result, const PairContext& pair, double blend,
+                                            ImagePool* pool) {
+  const mc_flow::SoftLabels& u = result.soft_labels;
+  auto msg = emptyImage(pair, u.width, u.height, enc::RGB8, 3, pool);
+  mc_flow::segmentationPictureInto(u, planeIds(result), pictureGrey(pair), blend, result.world.ids, msg->data.data());
+  return msg;
 }
 
 sensor_msgs::ImagePtr makeSegmentationImage(const cv::Mat& picture, const PairContext& pair, ImagePool* pool) {

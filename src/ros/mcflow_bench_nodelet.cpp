@@ -284,8 +284,8 @@ int run(int argc, char** argv) {
       own.time("~labels", [&] { labels = mc_flow_ros::makeLabelsImage(result, pair, &labels_pool); });
       own.time("~occlusion", [&] { occlusion = mc_flow_ros::makeOcclusionImage(result, pair, &occlusion_pool); });
       own.time("~segmentation (picture + message)", [&] {
-        const cv::Mat picture = mc_flow_ros::segmentationPicture(result, pair, defaults.segmentation_blend);
-        segmentation = mc_flow_ros::makeSegmentationImage(picture, pair, &segmentation_pool);
+        segmentation =
+            mc_flow_ros::makeSegmentationImage(result, pair, defaults.segmentation_blend, &segmentation_pool);
       });
       own.time("~scene_flow cloud", [&] {
         cloud = mc_flow_ros::makeSceneFlowCloud(result, pair, mc_flow_ros::CloudColour::Segment, &cloud_pool);

@@ -80,12 +80,18 @@ void OutputPublishers::publish(const mc_flow::Result& result, const PairContext&
     soft_labels_.publish(makeSoftLabelsImage(result, pair, &soft_labels_pool_));
   if (labels_.getNumSubscribers() > 0) labels_.publish(makeLabelsImage(result, pair, &labels_pool_));
   if (occlusion_.getNumSubscribers() > 0) occlusion_.publish(makeOcclusionImage(result, pair, &occlusion_pool_));
+  // The picture is rendered into the message; save_dir reads it there (or, without a subscriber, from a picture of its
+  // own).
   cv::Mat segmentation;
-  if ((segmentation_.getNumSubscribers() > 0 || !params_.save_dir.empty()) && have_soft_labels) {
+  sensor_msgs::ImagePtr segmentation_message;  // held to the end: `segmentation` may read its data
+  if (segmentation_.getNumSubscribers() > 0 && have_soft_labels) {
+    segmentation_message = makeSegmentationImage(result, pair, params_.segmentation_blend, &segmentation_pool_);
+    segmentation_.publish(segmentation_message);
+    segmentation = cv::Mat(int(segmentation_message->height), int(segmentation_message->width), CV_8UC3,
+                           segmentation_message->data.data(), segmentation_message->step);
+  } else if (!params_.save_dir.empty() && have_soft_labels) {
     segmentation = segmentationPicture(result, pair, params_.segmentation_blend);
   }
-  if (segmentation_.getNumSubscribers() > 0 && have_soft_labels)
-    segmentation_.publish(makeSegmentationImage(segmentation, pair, &segmentation_pool_));
   if (cloud_.getNumSubscribers() > 0 && have_scene_flow)
     cloud_.publish(makeSceneFlowCloud(result, pair, cloud_colour_, &cloud_pool_));
   if (markers_.getNumSubscribers() > 0) markers_.publish(makeMotionMarkers(result, pair, params_.marker_seconds_ahead));

@@ -441,6 +441,19 @@ TEST(Conversions, LabelAndOcclusionImages) {
   EXPECT_EQ(segmentation->encoding, "rgb8");
   const auto c7 = mc_flow::colourForId(7), c0 = mc_flow::colourForId(0);
   EXPECT_NEAR(segmentation->data[(4 + 1) * 3], 0.75 * c7.r + 0.25 * c0.r, 1.0);  // soft blend of the labels
+  // Rendered straight into the message (the nodelet's way, from a pool): the same message.
+  mc_flow_ros::ImagePool pool;
+  for (const double blend : {1.0, 0.6}) {
+    const auto direct = mc_flow_ros::makeSegmentationImage(f.result, f.pair, blend, &pool);
+    const auto copied =
+        mc_flow_ros::makeSegmentationImage(mc_flow_ros::segmentationPicture(f.result, f.pair, blend), f.pair);
+    EXPECT_EQ(direct->data, copied->data) << "blend " << blend;
+    EXPECT_EQ(direct->encoding, copied->encoding);
+    EXPECT_EQ(direct->step, copied->step);
+    EXPECT_EQ(direct->width, copied->width);
+    EXPECT_EQ(direct->height, copied->height);
+    EXPECT_EQ(direct->header.stamp, copied->header.stamp);
+  }
 }
 
 TEST(Conversions, SceneFlowCloudHasTheDocumentedFields) {

@@ -35,5 +35,9 @@ Rgb8 displayColour(std::uint32_t id, const std::vector<int>& world_ids);
 /// pictures.
 ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
                             double blend, const std::vector<int>& world_ids = {});
+/// @brief segmentationPicture into caller memory: `rgb` holds labels.width * labels.height * 3 bytes, rows top to
+/// bottom, R G B per pixel (a ROS image message's data, say).
+void segmentationPictureInto(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
+                             double blend, const std::vector<int>& world_ids, std::uint8_t* rgb);
 
 }  // namespace mc_flow

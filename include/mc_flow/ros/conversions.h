@@ -134,6 +134,10 @@ sensor_msgs::ImagePtr makeOcclusionImage(const mc_flow::Result& result, const Pa
                                          ImagePool* pool = nullptr);
 /// @brief ~segmentation: rgb8 message of a segmentationPicture (CV_8UC3, below) with the pair's header.
 sensor_msgs::ImagePtr makeSegmentationImage(const cv::Mat& picture, const PairContext& pair, ImagePool* pool = nullptr);
+/// @brief ~segmentation rendered straight into the message (from `pool` when given): the same bytes as
+/// makeSegmentationImage(segmentationPicture(result, pair, blend), pair) without the picture's copies.
+sensor_msgs::ImagePtr makeSegmentationImage(const mc_flow::Result& result, const PairContext& pair, double blend,
+                                            ImagePool* pool = nullptr);
 
 /// @brief How the ~scene_flow cloud's rgb field is filled.
 enum class CloudColour { Segment, Image };
