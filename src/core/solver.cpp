@@ -200,6 +200,9 @@ Result Solver::Impl::emptyResult(const Prepared& p, const Intrinsics& K) {
   result.scene_flow.data.swap(spare.scene_flow.data);
   result.optical_flow.data.swap(spare.optical_flow.data);
   result.moved_depth.data.swap(spare.moved_depth.data);
+  // The dormant regions' memory too, empty: only a stream pair's ids fill them (assignStreamIds).
+  result.dormant_regions.data.swap(spare.dormant_regions.data);
+  result.dormant_regions.data.clear();
   // 0x0 images (their sizes stay 0 until the outputs stage fills them) whose data keeps the recycled size, so that the
   // CUDA outputs can copy into it in chunks on several threads where the size is the same (fillOutputImages).
   result.width = p.width;

@@ -382,7 +382,11 @@ void assignStreamIds(Result& result, const ImageI32& carried_ids, const ImageI32
 
   // Dormant ids: the earlier ones one pair older (not revived, not expired), then the ones that went now.
   result.dormant_ids.clear();
-  result.dormant_regions = ImageI32(result.width, result.height, 1, 0);
+  // Zeros in the memory the result came with (a recycled result's: no fresh pages per pair).
+  result.dormant_regions.width = result.width;
+  result.dormant_regions.height = result.height;
+  result.dormant_regions.channels = 1;
+  result.dormant_regions.data.assign(std::size_t(result.width) * std::size_t(result.height), 0);
   if (memory_pairs <= 0) return;
   std::map<int, bool> keep;
   for (const auto& [id, age] : previous.dormant_ids)
