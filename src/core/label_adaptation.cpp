@@ -503,6 +503,46 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
   return fits;
 }
 
+std::vector<UnionFit> refitPairsFromTheBetterMotion(LabelStore& labels, const std::vector<Vector6d>& twists,
+                                                    const std::vector<std::vector<int>>& pairs,
+                                                    const std::vector<int>& batches,
+                                                    const std::vector<double>& own_cost, int iterations,
+                                                    bool use_occlusion, const Config& config) {
+  const int n = labels.labelCount() - 1;
+  if (int(twists.size()) != n || int(own_cost.size()) != n || batches.size() != pairs.size())
+    throw InputError("refitPairsFromTheBetterMotion: " + std::to_string(twists.size()) + " twists and " +
+                     std::to_string(own_cost.size()) + " costs for " + std::to_string(n) + " motion labels, " +
+                     std::to_string(batches.size()) + " batch numbers for " + std::to_string(pairs.size()) + " pairs");
+  for (std::size_t p = 0; p < pairs.size(); ++p) {
+    const std::vector<int>& pair = pairs[p];
+    if (pair.size() != 2 || pair[0] == pair[1] || std::min(pair[0], pair[1]) < 0 || std::max(pair[0], pair[1]) >= n)
+      throw InputError("refitPairsFromTheBetterMotion: pair " + std::to_string(p) +
+                       " is not two distinct labels in [0, " + std::to_string(n) + ")");
+  }
+  std::vector<UnionFit> fits;
+  if (pairs.empty()) return fits;
+  if (labels.refitPairsWhereTheSumsAre(twists, pairs, batches, own_cost, iterations, use_occlusion, config, fits))
+    return fits;
+  // Each side under the other's motion (one pass per batch): the union's cost at either start.
+  std::vector<std::vector<Vector6d>> swapped(std::size_t(*std::max_element(batches.begin(), batches.end()) + 1),
+                                             twists);
+  for (std::size_t p = 0; p < pairs.size(); ++p) {
+    const int a = pairs[p][0], b = pairs[p][1];
+    swapped[std::size_t(batches[p])][std::size_t(a)] = twists[std::size_t(b)];
+    swapped[std::size_t(batches[p])][std::size_t(b)] = twists[std::size_t(a)];
+  }
+  const std::vector<LabelCostModel> cross = labels.costModels(swapped, use_occlusion, config);
+  std::vector<Vector6d> starts;
+  for (std::size_t p = 0; p < pairs.size(); ++p) {
+    const int a = pairs[p][0], b = pairs[p][1];
+    const LabelCostModel& other = cross[std::size_t(batches[p])];
+    const double at_a = own_cost[std::size_t(a)] + other.cost[std::size_t(b)];
+    const double at_b = other.cost[std::size_t(a)] + own_cost[std::size_t(b)];
+    starts.push_back(at_a <= at_b ? twists[std::size_t(a)] : twists[std::size_t(b)]);
+  }
+  return refitUnions(labels, twists, pairs, starts, iterations, use_occlusion, config);
+}
+
 LabelLineage mergedLineage(const LabelLineage& keep, const LabelLineage& drop) {
   return keep.carried || !drop.carried ? keep : drop;
 }
@@ -608,24 +648,8 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
         groups.push_back(all[p]);
         batch.push_back(all_batches[p]);
       }
-    // Each side under the other's motion (one pass per batch): the union's cost at either start.
-    std::vector<std::vector<Vector6d>> swapped(std::size_t(*std::max_element(batch.begin(), batch.end()) + 1), twists);
-    for (std::size_t p = 0; p < groups.size(); ++p) {
-      const int a = groups[p][0], b = groups[p][1];
-      swapped[std::size_t(batch[p])][std::size_t(a)] = twists[std::size_t(b)];
-      swapped[std::size_t(batch[p])][std::size_t(b)] = twists[std::size_t(a)];
-    }
-    const std::vector<LabelCostModel> cross = labels.costModels(swapped, use_occlusion, config);
-    std::vector<Vector6d> starts;
-    for (std::size_t p = 0; p < groups.size(); ++p) {
-      const int a = groups[p][0], b = groups[p][1];
-      const LabelCostModel& other = cross[std::size_t(batch[p])];
-      const double at_a = own.cost[std::size_t(a)] + other.cost[std::size_t(b)];
-      const double at_b = other.cost[std::size_t(a)] + own.cost[std::size_t(b)];
-      starts.push_back(at_a <= at_b ? twists[std::size_t(a)] : twists[std::size_t(b)]);
-    }
-    const std::vector<UnionFit> fits =
-        refitUnions(labels, twists, groups, starts, config.merge_refit_iterations, use_occlusion, config);
+    const std::vector<UnionFit> fits = refitPairsFromTheBetterMotion(
+        labels, twists, groups, batch, own.cost, config.merge_refit_iterations, use_occlusion, config);
     ++stats.rounds;
     stats.pairs_tested += int(groups.size());
     // Merges of this round, most alike first, each label in one at most: each pair into its larger label, which takes

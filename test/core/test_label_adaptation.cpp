@@ -561,6 +561,26 @@ TEST(OneMotionMerge, GroupsThatShareALabelAreRefittedInSeparateBatchesAsEachAlon
   }
 }
 
+TEST(OneMotionMerge, PairsRefittedFromTheBetterMotionRefuseWhatIsNotAPair) {
+  const ArmScene s = renderArmScene();
+  int background = -1, box = -1;
+  SoftLabels u = backgroundHalvesAndBox(s, background, box);
+  const Vector6d truth = trueTwist(s.pair, "background");
+  std::vector<Vector6d> twists{truth, truth, trueTwist(s.pair, "box")};
+  HostLabelStore store(u, s.pyr1[s.level], s.pyr2[s.level], nullptr);
+  const std::vector<double> own = store.costModel(twists, false, Config()).cost;
+  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 0}}, {0}, own, 2, false, Config()), InputError);
+  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 3}}, {0}, own, 2, false, Config()), InputError);
+  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 1, 2}}, {0}, own, 2, false, Config()), InputError);
+  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 1}}, {0}, {1.0}, 2, false, Config()), InputError);
+  // The halves share one motion: whichever start, the union's fit is the one motion's.
+  const std::vector<UnionFit> fits =
+      refitPairsFromTheBetterMotion(store, twists, {{0, 1}}, {0}, own, 2, false, Config());
+  ASSERT_EQ(fits.size(), 1u);
+  EXPECT_LT((fits[0].twist - truth).norm(), 1e-3);
+  EXPECT_EQ(fits[0].member_cost.size(), 2u);
+}
+
 TEST(OneMotionMerge, TheHalvesOfTheStaticWorldMergeAndTheSmallMovingBoxStaysApart) {
   const ArmScene s = renderArmScene();
   int background = -1, box = -1;

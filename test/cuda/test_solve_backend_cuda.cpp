@@ -161,6 +161,37 @@ class HostLoopOf final : public LabelStore {
   LabelStore& store_;
 };
 
+// A label store that forwards to a backend but for refitPairsWhereTheSumsAre: refitPairsFromTheBetterMotion then
+// chooses the starts on the host from the backend's batched swapped pass and refits through the backend's refitUnions.
+class ChoiceOnTheHostOf final : public LabelStore {
+ public:
+  explicit ChoiceOnTheHostOf(LabelStore& store) : store_(store) {}
+  int labelCount() const override { return store_.labelCount(); }
+  std::vector<double> supports() override { return store_.supports(); }
+  void remap(const std::vector<int>& target, int new_count) override { store_.remap(target, new_count); }
+  std::vector<LabelMoments> ownedMoments() override { return store_.ownedMoments(); }
+  CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
+                     const Config& config) override {
+    return store_.trialCuts(cuts, twists, use_occlusion, config);
+  }
+  void applyCuts(const std::vector<LabelCut>& cuts) override { store_.applyCuts(cuts); }
+  LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
+    return store_.costModel(twists, use_occlusion, config);
+  }
+  std::vector<LabelCostModel> costModels(const std::vector<std::vector<Vector6d>>& twist_sets, bool use_occlusion,
+                                         const Config& config) override {
+    return store_.costModels(twist_sets, use_occlusion, config);
+  }
+  bool refitUnionsWhereTheSumsAre(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
+                                  const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
+                                  bool use_occlusion, const Config& config, std::vector<UnionFit>& fits) override {
+    return store_.refitUnionsWhereTheSumsAre(twists, groups, batches, starts, iterations, use_occlusion, config, fits);
+  }
+
+ private:
+  LabelStore& store_;
+};
+
 // The whole sequence of stage calls a solve makes, on both backends, compared after each.
 // With `carried_labels` > 0 the first labels are held as carried from a previous pair (a warm start): every label step
 // adds the switching cost, and the carried labels follow the remap and the moves between levels.
@@ -286,6 +317,38 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
       EXPECT_NEAR(device[g].cost, cpu_fits[g].cost, 1e-4 * std::fabs(cpu_fits[g].cost));
     }
     EXPECT_GT(device[0].iterations, 0) << "the union's fit took no step: the test shows little";
+
+    // refitPairsFromTheBetterMotion: the device's choice of each pair's start (no wait between the passes) against the
+    // host's choice over the same backend's passes, bit for bit, and against the CPU backend. Three pairs of three
+    // labels: three batches; label 2's twist moved so that the starts differ.
+    std::vector<Vector6d> moved = twists;
+    moved[2] += Vector6d::Constant(0.003);
+    const std::vector<std::vector<int>> pairs = {{0, 1}, {1, 2}, {2, 0}};
+    const std::vector<int> pair_batches = unionBatches(pairs);
+    EXPECT_EQ(pair_batches, (std::vector<int>{0, 1, 2}));
+    const std::vector<double> own = gpu->costModel(moved, true, config).cost;
+    const std::vector<UnionFit> on_device =
+        refitPairsFromTheBetterMotion(*gpu, moved, pairs, pair_batches, own, 2, true, config);
+    const std::vector<UnionFit> chosen_on_host = [&] {
+      ChoiceOnTheHostOf forward(*gpu);
+      return refitPairsFromTheBetterMotion(forward, moved, pairs, pair_batches, own, 2, true, config);
+    }();
+    const std::vector<UnionFit> on_cpu = refitPairsFromTheBetterMotion(
+        *cpu, moved, pairs, pair_batches, cpu->costModel(moved, true, config).cost, 2, true, config);
+    ASSERT_EQ(on_device.size(), pairs.size());
+    ASSERT_EQ(chosen_on_host.size(), pairs.size());
+    for (std::size_t p = 0; p < pairs.size(); ++p) {
+      SCOPED_TRACE("pair " + std::to_string(p));
+      EXPECT_EQ(on_device[p].twist, chosen_on_host[p].twist);
+      EXPECT_EQ(on_device[p].cost, chosen_on_host[p].cost);
+      EXPECT_EQ(on_device[p].iterations, chosen_on_host[p].iterations);
+      EXPECT_EQ(on_device[p].member_cost, chosen_on_host[p].member_cost);
+      EXPECT_EQ(on_device[p].curvature, chosen_on_host[p].curvature);
+      EXPECT_EQ(on_device[p].iterations, on_cpu[p].iterations);
+      EXPECT_LT((on_device[p].twist - on_cpu[p].twist).cwiseAbs().maxCoeff(), 1e-5) << on_cpu[p].twist.transpose();
+      EXPECT_NEAR(on_device[p].cost, on_cpu[p].cost, 1e-4 * std::fabs(on_cpu[p].cost));
+    }
+    EXPECT_THROW(refitPairsFromTheBetterMotion(*gpu, moved, {{1, 1}}, {0}, own, 2, true, config), InputError);
   }
 
   // Remap: labels 0 and 1 merge, label 2 goes to the outlier label, the others shift down.

@@ -140,6 +140,17 @@ class LabelStore {
         (void)fits;
     return false;
   }
+  /// @brief refitPairsFromTheBetterMotion (below; its arguments checked there) where the sums are: the CUDA backend
+  /// runs the swapped pass, the choice of each pair's start and the refit's passes and steps on the device and waits
+  /// once. False (the default): the store cannot, and the host chooses between the passes.
+  virtual bool refitPairsWhereTheSumsAre(const std::vector<Vector6d>& twists,
+                                         const std::vector<std::vector<int>>& pairs, const std::vector<int>& batches,
+                                         const std::vector<double>& own_cost, int iterations, bool use_occlusion,
+                                         const Config& config, std::vector<UnionFit>& fits) {
+    (void)twists, (void)pairs, (void)batches, (void)own_cost, (void)iterations, (void)use_occlusion, (void)config,
+        (void)fits;
+    return false;
+  }
 };
 
 /// @brief Which pass each group of refitUnions shares: groups are taken in order, each into the first batch none of
@@ -210,6 +221,18 @@ AdaptationStats mergeOcclusionAbsorbers(SolveBackend& backend, std::vector<Vecto
 std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d>& twists,
                                   const std::vector<std::vector<int>>& groups, const std::vector<Vector6d>& starts,
                                   int iterations, bool use_occlusion, const Config& config);
+
+/// @brief For each pair {a, b} of motion labels, one motion refitted on the union of their pixels (refitUnions,
+/// `iterations` steps) from the better of the two motions: a's where own_cost[a] plus what b's pixels pay under a's
+/// motion is at most what a's pixels pay under b's motion plus own_cost[b], else b's (each side under the other's
+/// motion: one pass per batch, the batch's pairs swapped). `batches` = unionBatches(pairs) (the pairs of a batch are
+/// disjoint); `own_cost` holds each motion label's cost under its own twist. Throws InputError on mismatched sizes or a
+/// pair that is not two distinct labels.
+std::vector<UnionFit> refitPairsFromTheBetterMotion(LabelStore& labels, const std::vector<Vector6d>& twists,
+                                                    const std::vector<std::vector<int>>& pairs,
+                                                    const std::vector<int>& batches,
+                                                    const std::vector<double>& own_cost, int iterations,
+                                                    bool use_occlusion, const Config& config);
 
 /// @brief mergeWhereOneMotionExplains refits a pair (and estimateStaticWorld tests a segment under the world's motion)
 /// only where the quadratic model predicts an increase below this many times what may be paid: the model is exact near
