@@ -139,33 +139,14 @@ void expectSameEquations(SolveBackend& cpu, SolveBackend& gpu, int level, Motion
   expectRelativelyClose(a.label_cost, b.label_cost, 1e-6, what + " label costs");
 }
 
-// A label store that forwards to a backend but for refitUnionsWhereTheSumsAre: refitUnions then runs its host loop over
-// the backend's passes.
-class HostLoopOf final : public LabelStore {
+// A label store that forwards to a backend but for its device-only shortcuts. HostLoop: refitUnions runs its host loop
+// over the backend's single passes (neither refitUnionsWhereTheSumsAre nor the batched costModels forwarded).
+// ChoiceOnTheHost: both forwarded, but not refitPairsWhereTheSumsAre, so refitPairsFromTheBetterMotion chooses the
+// starts on the host from the backend's batched swapped pass and refits through the backend's refitUnions.
+class ForwardingStore final : public LabelStore {
  public:
-  explicit HostLoopOf(LabelStore& store) : store_(store) {}
-  int labelCount() const override { return store_.labelCount(); }
-  std::vector<double> supports() override { return store_.supports(); }
-  void remap(const std::vector<int>& target, int new_count) override { store_.remap(target, new_count); }
-  std::vector<LabelMoments> ownedMoments() override { return store_.ownedMoments(); }
-  CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
-                     const Config& config) override {
-    return store_.trialCuts(cuts, twists, use_occlusion, config);
-  }
-  void applyCuts(const std::vector<LabelCut>& cuts) override { store_.applyCuts(cuts); }
-  LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
-    return store_.costModel(twists, use_occlusion, config);
-  }
-
- private:
-  LabelStore& store_;
-};
-
-// A label store that forwards to a backend but for refitPairsWhereTheSumsAre: refitPairsFromTheBetterMotion then
-// chooses the starts on the host from the backend's batched swapped pass and refits through the backend's refitUnions.
-class ChoiceOnTheHostOf final : public LabelStore {
- public:
-  explicit ChoiceOnTheHostOf(LabelStore& store) : store_(store) {}
+  enum class Mode { HostLoop, ChoiceOnTheHost };
+  ForwardingStore(LabelStore& store, Mode mode) : store_(store), batched_(mode == Mode::ChoiceOnTheHost) {}
   int labelCount() const override { return store_.labelCount(); }
   std::vector<double> supports() override { return store_.supports(); }
   void remap(const std::vector<int>& target, int new_count) override { store_.remap(target, new_count); }
@@ -180,16 +161,19 @@ class ChoiceOnTheHostOf final : public LabelStore {
   }
   std::vector<LabelCostModel> costModels(const std::vector<std::vector<Vector6d>>& twist_sets, bool use_occlusion,
                                          const Config& config) override {
-    return store_.costModels(twist_sets, use_occlusion, config);
+    return batched_ ? store_.costModels(twist_sets, use_occlusion, config)
+                    : LabelStore::costModels(twist_sets, use_occlusion, config);
   }
   bool refitUnionsWhereTheSumsAre(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
                                   const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
                                   bool use_occlusion, const Config& config, std::vector<UnionFit>& fits) override {
-    return store_.refitUnionsWhereTheSumsAre(twists, groups, batches, starts, iterations, use_occlusion, config, fits);
+    return batched_ &&
+           store_.refitUnionsWhereTheSumsAre(twists, groups, batches, starts, iterations, use_occlusion, config, fits);
   }
 
  private:
   LabelStore& store_;
+  bool batched_;
 };
 
 // The whole sequence of stage calls a solve makes, on both backends, compared after each.
@@ -296,7 +280,7 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
     const std::vector<std::vector<int>> groups = {{0, 1}, {2}, {1, 2}};
     const std::vector<Vector6d> starts = {twists[1], twists[2] + Vector6d::Constant(0.002), twists[2]};
     const std::vector<UnionFit> host_loop = [&] {
-      HostLoopOf forward(*gpu);
+      ForwardingStore forward(*gpu, ForwardingStore::Mode::HostLoop);
       return refitUnions(forward, twists, groups, starts, 3, true, config);
     }();
     const std::vector<UnionFit> device = refitUnions(*gpu, twists, groups, starts, 3, true, config);
@@ -330,7 +314,7 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
     const std::vector<UnionFit> on_device =
         refitPairsFromTheBetterMotion(*gpu, moved, pairs, pair_batches, own, 2, true, config);
     const std::vector<UnionFit> chosen_on_host = [&] {
-      ChoiceOnTheHostOf forward(*gpu);
+      ForwardingStore forward(*gpu, ForwardingStore::Mode::ChoiceOnTheHost);
       return refitPairsFromTheBetterMotion(forward, moved, pairs, pair_batches, own, 2, true, config);
     }();
     const std::vector<UnionFit> on_cpu = refitPairsFromTheBetterMotion(
