@@ -111,6 +111,23 @@ class FaultInjectingBackend final : public SolveBackend {
     strike("costModel");
     return inner_->costModel(twists, use_occlusion, config);
   }
+  std::vector<LabelCostModel> costModels(const std::vector<std::vector<Vector6d>>& twist_sets, bool use_occlusion,
+                                         const Config& config) override {
+    strike("costModels");
+    return inner_->costModels(twist_sets, use_occlusion, config);
+  }
+  bool refitUnionsWhereTheSumsAre(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
+                                  const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
+                                  bool use_occlusion, const Config& config, std::vector<UnionFit>& fits) override {
+    strike("refitUnionsWhereTheSumsAre");
+    return inner_->refitUnionsWhereTheSumsAre(twists, groups, batches, starts, iterations, use_occlusion, config, fits);
+  }
+  bool refitPairsWhereTheSumsAre(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& pairs,
+                                 const std::vector<int>& batches, const std::vector<double>& own_cost, int iterations,
+                                 bool use_occlusion, const Config& config, std::vector<UnionFit>& fits) override {
+    strike("refitPairsWhereTheSumsAre");
+    return inner_->refitPairsWhereTheSumsAre(twists, pairs, batches, own_cost, iterations, use_occlusion, config, fits);
+  }
 
  private:
   void strike(const char* stage) {
@@ -133,13 +150,28 @@ class FaultInjectingBackend final : public SolveBackend {
 }  // namespace
 
 const std::vector<std::string>& backendFaultStages() {
-  static const std::vector<std::string> stages{"buildPyramids",     "framePoints",      "kmeansCentres",
-                                               "carrySegments",     "initialiseLabels", "initialiseLabelsFromCentres",
-                                               "holdCarriedLabels", "moveLabels",       "motionAccumulator",
-                                               "updateOcclusion",   "labelStep",        "downloadLabels",
-                                               "outputs",           "supports",         "remap",
-                                               "ownedMoments",      "trialCuts",        "applyCuts",
-                                               "costModel"};
+  static const std::vector<std::string> stages{"buildPyramids",
+                                               "framePoints",
+                                               "kmeansCentres",
+                                               "carrySegments",
+                                               "initialiseLabels",
+                                               "initialiseLabelsFromCentres",
+                                               "holdCarriedLabels",
+                                               "moveLabels",
+                                               "motionAccumulator",
+                                               "updateOcclusion",
+                                               "labelStep",
+                                               "downloadLabels",
+                                               "outputs",
+                                               "supports",
+                                               "remap",
+                                               "ownedMoments",
+                                               "trialCuts",
+                                               "applyCuts",
+                                               "costModel",
+                                               "costModels",
+                                               "refitUnionsWhereTheSumsAre",
+                                               "refitPairsWhereTheSumsAre"};
   return stages;
 }
 

@@ -114,6 +114,30 @@ TEST(BackendFault, MalformedFaultTextsAreRefusedByName) {
   EXPECT_THROW(withBackendFault(nullptr, BackendFault{}), ConfigError);
 }
 
+TEST(BackendFault, TheBatchedPassesAndTheUnionRefitsAreStagesToo) {
+  // A cold solve with several segments calls the batched passes, the merge test's pair refits and the world's union
+  // fit: a fault named after each strikes there (the CPU backend answers the refits on the host, but the wrapper is
+  // asked).
+  SyntheticSceneOptions o;
+  o.width = kWidth;
+  o.height = kHeight;
+  o.variant = 1;
+  const SyntheticPair pair = renderSyntheticPair(o);
+  Config config;
+  config.backend = Backend::Cpu;
+  config.threads = 1;
+  for (const char* stage : {"costModels", "refitUnionsWhereTheSumsAre", "refitPairsWhereTheSumsAre"}) {
+    std::vector<std::string> struck;
+    BackendFault fault;
+    fault.solve = 1;
+    fault.stage = stage;
+    fault.action = [&](const std::string& name) { struck.push_back(name); };
+    Solver wrapped(config, withBackendFault(makeCpuSolveBackend(), fault), "wrapped");
+    wrapped.solve(pair.frame1, pair.frame2, pair.intrinsics);
+    EXPECT_EQ(struck, std::vector<std::string>{stage});
+  }
+}
+
 TEST(BackendFault, TheFaultingBackendForwardsEveryStageUnchanged) {
   // With an action that does not throw, the wrapped backend must give the plain backend's results bit for bit
   // (every stage forwarded with its arguments), and the action runs once, in the named solve.
