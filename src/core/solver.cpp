@@ -115,7 +115,7 @@ struct Solver::Impl {
   // A result with the sizes, levels and backend of a solve filled in.
   Result emptyResult(const Prepared& p, const Intrinsics& K);
   Start coldStart(const Prepared& p, Result& result);
-  Start warmStart(const Prepared& p, CarriedLabels carried, const Result& previous, Result& result);
+  Start warmStart(const Prepared& p, const CarriedLabels& carried, const Result& previous, Result& result);
   // Algorithm 1 from `start`, the final label step and the outputs (segments numbered 1..m).
   void iterate(const Prepared& p, Start start, Result& result);
 };
@@ -231,27 +231,23 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   // Stream mode: the previous pair's segments on this frame 1 (for the warm start, or only for the ids), where the
   // backend has frame 1 (the CUDA backend on the device, the CPU one on the host's frame), with the label level's hard
   // labels for a warm start.
-  ImageI32 carried_ids, carried_dormant;
-  CarriedLabels carried;
+  CarriedSegments carried;
   if (previous) {
     t = Clock::now();
-    CarriedSegments c = backend->carrySegments(*previous, frame1.depth, config.warm_start ? p.label_level : -1, config);
-    carried_ids = std::move(c.ids);
-    carried_dormant = std::move(c.dormant);
-    carried = std::move(c.labels);
+    carried = backend->carrySegments(*previous, frame1.depth, config.warm_start ? p.label_level : -1, config);
     result.timings.initialisation += elapsedMs(t);
   }
 
   auto solveCold = [&](Result& r) { iterate(p, coldStart(p, r), r); };
 
   if (previous && config.warm_start) {
-    if (carried.coverage() < config.warm_min_coverage) {
+    if (carried.labels.coverage() < config.warm_min_coverage) {
       result.start = StartKind::ColdFallback;
-      result.start_note = "the previous segments cover " + std::to_string(carried.coverage()) +
+      result.start_note = "the previous segments cover " + std::to_string(carried.labels.coverage()) +
                           " of the valid pixels, below warm_min_coverage = " + std::to_string(config.warm_min_coverage);
       solveCold(result);
     } else {
-      iterate(p, warmStart(p, std::move(carried), *previous, result), result);
+      iterate(p, warmStart(p, carried.labels, *previous, result), result);
       result.start = StartKind::Warm;
       const double warm_per_pixel = result.energy / std::max(1, result.valid_pixels);
       const double previous_per_pixel = previous->energy / std::max(1, previous->valid_pixels);
@@ -273,11 +269,7 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
           // a jump whose cold solve did no better.
           Result again = emptyResult(p, K);
           again.timings = cold.timings;
-          t = Clock::now();
-          CarriedLabels recarried =
-              carriedLabelsAtLevel(carried_ids, backend->framePoints(p.label_level), 1 << p.label_level);
-          again.timings.initialisation += elapsedMs(t);
-          iterate(p, warmStart(p, std::move(recarried), *previous, again), again);
+          iterate(p, warmStart(p, carried.labels, *previous, again), again);
           again.start = StartKind::Warm;
           again.start_note = why + "; a cold solve did not do better, the warm result is kept";
           result = std::move(again);
@@ -291,7 +283,7 @@ Result Solver::Impl::run(const RgbdFrame& frame1, const RgbdFrame& frame2, const
   // Persistent ids: by overlap with the previous pair's segments carried into this frame 1, warm or cold.
   // (The labels themselves merge and split during the solve; what persists is the region a person sees.)
   if (previous)
-    assignStreamIds(result, carried_ids, carried_dormant, *previous, config.id_min_overlap, config.id_memory_pairs);
+    assignStreamIds(result, carried.ids, carried.dormant, *previous, config.id_min_overlap, config.id_memory_pairs);
 
   // The static world (by the stream's world ids, which need the ids above) and its motion on the union of its segments,
   // on the labels the outputs came from.
@@ -356,10 +348,10 @@ Start Solver::Impl::coldStart(const Prepared& p, Result& result) {
   return start;
 }
 
-Start Solver::Impl::warmStart(const Prepared& p, CarriedLabels carried, const Result& previous, Result& result) {
+Start Solver::Impl::warmStart(const Prepared& p, const CarriedLabels& carried, const Result& previous, Result& result) {
   const auto t = Clock::now();
   Start start;
-  start.hard = std::move(carried.hard);
+  start.hard = carried.hard;  // a copy: a warm start solved again after a cold one starts from it too
   // Constant velocity: each carried segment starts from its previous motion.
   std::vector<double> covered(carried.ids.size(), 0.0);
   for (const int h : start.hard.data)

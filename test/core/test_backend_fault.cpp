@@ -114,25 +114,40 @@ TEST(BackendFault, MalformedFaultTextsAreRefusedByName) {
   EXPECT_THROW(withBackendFault(nullptr, BackendFault{}), ConfigError);
 }
 
-TEST(BackendFault, TheBatchedPassesAndTheUnionRefitsAreStagesToo) {
-  // A cold solve with several segments calls the batched passes, the merge test's pair refits and the world's union
-  // fit: a fault named after each strikes there (the CPU backend answers the refits on the host, but the wrapper is
-  // asked).
+// The pair and the one-thread CPU config the forwarding tests solve, and a fault whose action records the stages it
+// struck instead of throwing.
+SyntheticPair forwardingPair() {
   SyntheticSceneOptions o;
   o.width = kWidth;
   o.height = kHeight;
   o.variant = 1;
-  const SyntheticPair pair = renderSyntheticPair(o);
+  return renderSyntheticPair(o);
+}
+
+Config oneThreadCpu() {
   Config config;
   config.backend = Backend::Cpu;
   config.threads = 1;
+  return config;
+}
+
+BackendFault recordingFault(int solve, const std::string& stage, std::vector<std::string>& struck) {
+  BackendFault fault;
+  fault.solve = solve;
+  fault.stage = stage;
+  fault.action = [&struck](const std::string& name) { struck.push_back(name); };
+  return fault;
+}
+
+TEST(BackendFault, TheBatchedPassesAndTheUnionRefitsAreStagesToo) {
+  // A cold solve with several segments calls the batched passes, the merge test's pair refits and the world's union
+  // fit: a fault named after each strikes there (the CPU backend answers the refits on the host, but the wrapper is
+  // asked).
+  const SyntheticPair pair = forwardingPair();
+  const Config config = oneThreadCpu();
   for (const char* stage : {"costModels", "refitUnionsWhereTheSumsAre", "refitPairsWhereTheSumsAre"}) {
     std::vector<std::string> struck;
-    BackendFault fault;
-    fault.solve = 1;
-    fault.stage = stage;
-    fault.action = [&](const std::string& name) { struck.push_back(name); };
-    Solver wrapped(config, withBackendFault(makeCpuSolveBackend(), fault), "wrapped");
+    Solver wrapped(config, withBackendFault(makeCpuSolveBackend(), recordingFault(1, stage, struck)), "wrapped");
     wrapped.solve(pair.frame1, pair.frame2, pair.intrinsics);
     EXPECT_EQ(struck, std::vector<std::string>{stage});
   }
@@ -141,21 +156,11 @@ TEST(BackendFault, TheBatchedPassesAndTheUnionRefitsAreStagesToo) {
 TEST(BackendFault, TheFaultingBackendForwardsEveryStageUnchanged) {
   // With an action that does not throw, the wrapped backend must give the plain backend's results bit for bit
   // (every stage forwarded with its arguments), and the action runs once, in the named solve.
-  SyntheticSceneOptions o;
-  o.width = kWidth;
-  o.height = kHeight;
-  o.variant = 1;
-  const SyntheticPair pair = renderSyntheticPair(o);
-  Config config;
-  config.backend = Backend::Cpu;
-  config.threads = 1;
+  const SyntheticPair pair = forwardingPair();
+  const Config config = oneThreadCpu();
   std::vector<std::string> struck;
-  BackendFault fault;
-  fault.solve = 2;
-  fault.stage = "remap";
-  fault.action = [&](const std::string& stage) { struck.push_back(stage); };
   Solver plain(config);
-  Solver wrapped(config, withBackendFault(makeCpuSolveBackend(), fault), "wrapped");
+  Solver wrapped(config, withBackendFault(makeCpuSolveBackend(), recordingFault(2, "remap", struck)), "wrapped");
   for (int solve = 1; solve <= 3; ++solve) {
     const Result a = plain.solve(pair.frame1, pair.frame2, pair.intrinsics);
     const Result b = wrapped.solve(pair.frame1, pair.frame2, pair.intrinsics);
