@@ -436,7 +436,11 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     }
   }
 
-  static constexpr int kPrimalLabelThreads = 8;
+  // Threads per pixel of the primal step. While one of them projects onto the simplex the others wait at the barrier
+  // (ncu, H100, 13 labels at a 320x240 label level: barrier stalls half the kernel's, DRAM throughput 18 %); four per
+  // pixel leave fewer warps waiting and more blocks per multiprocessor than eight: the label step of real 640x480
+  // pairs 5-10 % faster (two rounds against eight and two; docs/decisions/0015). The results do not depend on it.
+  static constexpr int kPrimalLabelThreads = 4;
   cudaStream_t stream_;
   cuda_detail::PinnedBuffer<PinnedScalars> pinned_;
   PinnedScalars* scalars_;  // what the host reads back: the loop state and the energy

@@ -444,26 +444,30 @@ __device__ __forceinline__ void accumulatePairInChunk(const KernelParams& p, int
   for (int k = 0; k < kUpper; ++k) acc[k] = 0.0;
   const std::size_t begin = std::size_t(blockIdx.x) * std::size_t(chunk_pixels);
   const std::size_t end = begin + std::size_t(chunk_pixels) < plane ? begin + std::size_t(chunk_pixels) : plane;
-  bool any = false;
+  bool any = false;  // this thread added a pixel in which both labels are active
   for (std::size_t idx = begin + threadIdx.x; idx < end; idx += blockDim.x) {
     if (!p.blended[idx]) continue;
-    any = true;
     const float mass = p.mass[idx];
     const float wa_raw = rawWeight(p, plane, idx, a, mass), wb_raw = rawWeight(p, plane, idx, b, mass);
     if (!(wa_raw >= p.min_weight && wb_raw >= p.min_weight)) continue;
+    any = true;
     const float active_mass = p.active_mass[idx];
     const double wab = double(divRn(wa_raw, active_mass)) * double(divRn(wb_raw, active_mass));
 #pragma unroll
     for (int k = 0; k < kUpper; ++k) acc[k] += wab * double(p.blended_hessian[k * plane + idx]);
   }
-  if (__syncthreads_or(any) == 0) {  // no blended pixel in the chunk: zeros, no reduction
+  // Sums that nothing was added to are +0.0, as the shuffle tree over zeros would leave them. Both labels are in the
+  // chunk's mask far more often than they share a pixel (a chunk across the boundaries a|c and b|c has a and b in its
+  // mask): the block, or a warp, whose pixels never have both skips the reduction.
+  if (__syncthreads_or(any) == 0) {
     if (threadIdx.x < kUpper) out[threadIdx.x] = 0.0;
     return;
   }
   const int lane = threadIdx.x & 31, warp = threadIdx.x >> 5;
+  const bool warp_any = __any_sync(0xffffffffu, any);  // warp-uniform
 #pragma unroll
   for (int k = 0; k < kUpper; ++k) {
-    const double s = warpSum(acc[k]);
+    const double s = warp_any ? warpSum(acc[k]) : 0.0;
     if (lane == 0) warp_sums[warp][k] = s;
   }
   __syncthreads();
