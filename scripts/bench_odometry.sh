@@ -34,13 +34,18 @@ echo "compositing ${BOXES:-2} moving box(es) into $DATA" >&2
 
 rows=""
 notes=""
-# score SEQUENCE METHOD TRAJECTORY: one table row from mcflow eval-traj.
+# score SEQUENCE METHOD TRAJECTORY [ODOMETRY_CSV]: one table row from mcflow eval-traj (with run-seq's odometry.csv:
+# the NEES of each pair's camera motion, median / mean; 5.35 / 6 when the covariances are right).
 score() {
   local metrics
-  metrics=$("$MCFLOW" eval-traj --gt "$DATA/groundtruth.txt" --est "$3" --offset -0.015)
+  local odometry=()
+  [ -n "${4:-}" ] && odometry=(--odometry "$4")
+  metrics=$("$MCFLOW" eval-traj --gt "$DATA/groundtruth.txt" --est "$3" --offset -0.015 "${odometry[@]}")
   rows+=$(echo "$metrics" | awk -v s="$1" -v m="$2" '
     $1 == "ate_rmse_m" { ate = $2 } $1 == "rpe_frame_trans_m" { t = $2 } $1 == "rpe_frame_rot_deg" { r = $2 }
-    END { printf "| %s | %s | %.4f | %.4f | %.3f |\n", s, m, ate, t, r }')$'\n'
+    $1 == "nees_median" { nm = $2 } $1 == "nees_mean" { ne = $2 }
+    END { nees = nm == "" ? "-" : sprintf("%.2f / %.2f", nm, ne)
+          printf "| %s | %s | %.4f | %.4f | %.3f | %s |\n", s, m, ate, t, r, nees }')$'\n'
 }
 
 for sequence in static composited; do
@@ -52,7 +57,7 @@ for sequence in static composited; do
     echo "$sequence: mc_flow $variant" >&2
     summary=$("$MCFLOW" run-seq --tum "$dir" --intrinsics "$INTRINSICS" --out "$work/run" "${settings[@]}" 2>/dev/null)
     notes+="$sequence, mc_flow $variant: ${summary%; wrote *}"$'\n'
-    score "$sequence" "mc_flow $variant" "$work/run/trajectory.txt"
+    score "$sequence" "mc_flow $variant" "$work/run/trajectory.txt" "$work/run/odometry.csv"
     rm -rf "$work/run"
   done
   for method in rgbd icp rgbdicp; do
@@ -63,8 +68,8 @@ for sequence in static composited; do
   done
 done
 
-echo "| sequence | method | ATE m | RPE trans m/frame | RPE rot deg/frame |"
-echo "|---|---|---|---|---|"
+echo "| sequence | method | ATE m | RPE trans m/frame | RPE rot deg/frame | NEES median / mean |"
+echo "|---|---|---|---|---|---|"
 printf "%s" "$rows"
 echo
 grep "box pixels" "$work/composited/composite.txt" | sed 's/^/composited: /'

@@ -22,8 +22,12 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
   const double dof = std::max(1.0, 2.0 * pixels - 6.0);
   const double variance = std::max(0.0, cost) / dof;
   const Matrix6d inverse = withRidge(curvature).ldlt().solve(Matrix6d::Identity());
-  const Matrix6d covariance = config.world_covariance_scale * variance * inverse;
-  return 0.5 * (covariance + covariance.transpose());
+  Matrix6d covariance = config.world_covariance_scale * variance * inverse;
+  covariance = 0.5 * (covariance + covariance.transpose());
+  // The floor: independent of the fit, what it cannot see (twist_floor_translation, twist_floor_rotation).
+  const double t = config.twist_floor_translation, r = config.twist_floor_rotation;
+  covariance.diagonal() += (Vector6d() << t * t, t * t, t * t, r * r, r * r, r * r).finished();
+  return covariance;
 }
 
 namespace {

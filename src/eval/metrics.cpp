@@ -260,22 +260,37 @@ double chiSquareQuantile(double dof, double probability) {
   return 0.5 * (lo + hi);
 }
 
+namespace {
+
+StampedPoses sortedByStamp(const StampedPoses& poses, double max_difference) {
+  if (!(max_difference >= 0)) throw InputError("max difference must be >= 0 s, got " + std::to_string(max_difference));
+  StampedPoses sorted = poses;
+  std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  return sorted;
+}
+
+// The pose of `sorted` (by stamp) nearest to stamp t, or null when none lies within max_difference.
+const Eigen::Matrix4d* nearestPose(const StampedPoses& sorted, double t, double max_difference) {
+  auto it = std::lower_bound(sorted.begin(), sorted.end(), t, [](const auto& a, double v) { return a.first < v; });
+  const auto* best = it != sorted.end() ? &*it : nullptr;
+  if (it != sorted.begin() && (!best || t - std::prev(it)->first < best->first - t)) best = &*std::prev(it);
+  if (!best || std::fabs(best->first - t) > max_difference) return nullptr;
+  return &best->second;
+}
+
+}  // namespace
+
 TrajectoryErrors evaluateTrajectory(const StampedPoses& ground_truth, const StampedPoses& estimate,
                                     double max_difference, double time_offset) {
-  if (!(max_difference >= 0)) throw InputError("max difference must be >= 0 s, got " + std::to_string(max_difference));
-  StampedPoses gt = ground_truth;
-  std::sort(gt.begin(), gt.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  const StampedPoses gt = sortedByStamp(ground_truth, max_difference);
   std::vector<std::pair<Eigen::Matrix4d, Eigen::Matrix4d>> matched;  // (ground truth, estimate)
   std::vector<double> stamps;
   StampedPoses est = estimate;  // in time order: the RPE pairs consecutive and one-second-apart poses
   std::stable_sort(est.begin(), est.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   for (const auto& [stamp, pose] : est) {
-    const double t = stamp + time_offset;
-    auto it = std::lower_bound(gt.begin(), gt.end(), t, [](const auto& a, double v) { return a.first < v; });
-    const auto* best = it != gt.end() ? &*it : nullptr;
-    if (it != gt.begin() && (!best || t - std::prev(it)->first < best->first - t)) best = &*std::prev(it);
-    if (!best || std::fabs(best->first - t) > max_difference) continue;
-    matched.emplace_back(best->second, pose);
+    const Eigen::Matrix4d* truth = nearestPose(gt, stamp + time_offset, max_difference);
+    if (!truth) continue;
+    matched.emplace_back(*truth, pose);
     stamps.push_back(stamp);
   }
   if (matched.size() < 3)
@@ -321,6 +336,48 @@ TrajectoryErrors evaluateTrajectory(const StampedPoses& ground_truth, const Stam
     e.rpe_second_rot_deg = std::sqrt(r_sum_s / e.rpe_second_pairs);
   }
   return e;
+}
+
+OdometryConsistency odometryConsistency(const StampedPoses& ground_truth, const std::vector<OdometryStep>& steps,
+                                        double max_difference, double time_offset) {
+  const StampedPoses gt = sortedByStamp(ground_truth, max_difference);
+  std::vector<double> values;
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const OdometryStep& step = steps[i];
+    const Eigen::Matrix4d* g1 = nearestPose(gt, step.first + time_offset, max_difference);
+    const Eigen::Matrix4d* g2 = nearestPose(gt, step.second + time_offset, max_difference);
+    if (!g1 || !g2) continue;
+    const Eigen::LLT<Matrix6d> llt(step.covariance);
+    if (llt.info() != Eigen::Success || !step.covariance.isApprox(step.covariance.transpose(), 1e-9) ||
+        !step.covariance.allFinite())
+      throw InputError("odometry consistency: step " + std::to_string(i) + " (stamps " + std::to_string(step.first) +
+                       ", " + std::to_string(step.second) +
+                       ") has a covariance that is not symmetric positive definite");
+    const Vector6d error = step.twist - se3Log(Eigen::Matrix4d(g1->inverse() * *g2));
+    values.push_back(error.dot(llt.solve(error)));
+  }
+  if (values.empty())
+    throw InputError("odometry consistency: none of " + std::to_string(steps.size()) +
+                     " steps has ground-truth poses within " + std::to_string(max_difference) + " s of both stamps (" +
+                     std::to_string(ground_truth.size()) + " ground-truth poses)");
+  OdometryConsistency c;
+  c.matched = int(values.size());
+  double sum = 0;
+  int inside = 0;
+  const double low = chiSquareQuantile(6, 0.025), high = chiSquareQuantile(6, 0.975);
+  for (const double v : values) {
+    sum += v;
+    inside += v >= low && v <= high ? 1 : 0;
+  }
+  c.nees_mean = sum / c.matched;
+  c.inside95 = double(inside) / c.matched;
+  std::sort(values.begin(), values.end());
+  const std::size_t mid = values.size() / 2;
+  c.nees_median = values.size() % 2 ? values[mid] : 0.5 * (values[mid - 1] + values[mid]);
+  // The sum of N consistent NEES values is chi-square with 6 N degrees of freedom.
+  c.mean_low = chiSquareQuantile(6.0 * c.matched, 0.025) / c.matched;
+  c.mean_high = chiSquareQuantile(6.0 * c.matched, 0.975) / c.matched;
+  return c;
 }
 
 }  // namespace mc_flow

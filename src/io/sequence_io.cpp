@@ -2,6 +2,7 @@
 #include "mc_flow/io/sequence_io.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -157,6 +158,60 @@ std::string trajectoryCsvRows(long pair, double stamp, const Result& result, con
     out << '\n';
   }
   return out.str();
+}
+
+std::string odometryCsvHeader() {
+  std::string header = "pair,stamp_first,stamp_second,vx,vy,vz,wx,wy,wz";
+  for (int r = 0; r < 6; ++r)
+    for (int c = r; c < 6; ++c) header += ",c" + std::to_string(r + 1) + std::to_string(c + 1);
+  return header + "\n";
+}
+
+std::string odometryCsvRow(long pair, const OdometryStep& step) {
+  std::ostringstream out;
+  out.precision(9);
+  out << pair << ',' << std::fixed << step.first << ',' << step.second << std::defaultfloat;
+  for (int k = 0; k < 6; ++k) out << ',' << step.twist[k];
+  out.precision(12);
+  for (int r = 0; r < 6; ++r)
+    for (int c = r; c < 6; ++c) out << ',' << step.covariance(r, c);
+  out << '\n';
+  return out.str();
+}
+
+std::vector<OdometryStep> readOdometryCsv(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError("odometry '" + path + "': cannot be opened");
+  std::vector<OdometryStep> steps;
+  std::string line;
+  int number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    if (number == 1 || line.find_first_not_of(" \t\r") == std::string::npos) continue;  // the header
+    std::vector<double> v;
+    std::istringstream fields(line);
+    for (std::string field; std::getline(fields, field, ',');) {
+      char* end = nullptr;
+      const double x = std::strtod(field.c_str(), &end);
+      if (end == field.c_str() || !std::isfinite(x)) {
+        v.clear();
+        break;
+      }
+      v.push_back(x);
+    }
+    if (v.size() != 30)
+      throw InputError("odometry '" + path + "', line " + std::to_string(number) +
+                       ": expected 30 numbers (pair, two stamps, the twist, 21 covariance values), got '" + line + "'");
+    OdometryStep step;
+    step.first = v[1];
+    step.second = v[2];
+    for (int k = 0; k < 6; ++k) step.twist[k] = v[3 + std::size_t(k)];
+    std::size_t k = 9;
+    for (int r = 0; r < 6; ++r)
+      for (int c = r; c < 6; ++c, ++k) step.covariance(r, c) = step.covariance(c, r) = v[k];
+    steps.push_back(step);
+  }
+  return steps;
 }
 
 std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose) {

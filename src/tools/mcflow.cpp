@@ -101,7 +101,8 @@ std::vector<Command> commands() {
       "segments that move relative to the static world), DIR/trajectories.csv (pair, stamp, id, vx, vy, "
       "vz, wx, wy, wz, support per segment and pair, then world, moving and the velocity relative to the "
       "static world), DIR/trajectory.txt (the camera's path in the TUM RGB-D format, the first frame at "
-      "the identity: `mcflow eval-traj` scores it), DIR/ids_over_time.png and "
+      "the identity: `mcflow eval-traj` scores it), DIR/odometry.csv (per pair the camera's motion, "
+      "C2 = C1 exp(twist), and its covariance: `mcflow eval-traj --odometry` checks it), DIR/ids_over_time.png and "
       "DIR/sequence.json (per pair: start kind, timings, ids, merges, resets). A rosbag (--bag, ROS build "
       "only) is read as the nodelet reads its topics: colour and depth paired by the nearest header stamp, "
       "intrinsics from the first camera_info, frames with no valid depth skipped.",
@@ -200,19 +201,23 @@ std::vector<Command> commands() {
         {"verbose", false, "progress of the solver on stderr"},
         {"help", false, "this help"}}});
 
-  list.push_back({"eval-traj",
-                  "mcflow eval-traj --gt FILE --est FILE [--max-difference S] [--offset S] [--plot PNG]",
-                  "Scores a camera trajectory (TUM RGB-D format: 'stamp tx ty tz qx qy qz qw' per line, e.g. run-seq's "
-                  "trajectory.txt) against ground truth (e.g. a TUM groundtruth.txt) as the TUM RGB-D benchmark does: "
-                  "ATE (RMSE of the positions after the rigid alignment that minimises it) and RPE (translation and "
-                  "rotation of the relative motion per frame and over about one second, RMSE). Estimated poses are "
-                  "matched to the nearest ground-truth stamp.",
-                  {{"gt", true, "ground-truth trajectory file"},
-                   {"est", true, "estimated trajectory file"},
-                   {"max-difference", true, "[s] largest stamp difference of a match (default 0.02)"},
-                   {"offset", true, "[s] added to the estimate's stamps before matching (default 0)"},
-                   {"plot", true, "PNG of both paths seen from above (x, z), the estimate aligned"},
-                   {"help", false, "this help"}}});
+  list.push_back(
+      {"eval-traj",
+       "mcflow eval-traj --gt FILE --est FILE [--odometry FILE] [--max-difference S] [--offset S] [--plot PNG]",
+       "Scores a camera trajectory (TUM RGB-D format: 'stamp tx ty tz qx qy qz qw' per line, e.g. run-seq's "
+       "trajectory.txt) against ground truth (e.g. a TUM groundtruth.txt) as the TUM RGB-D benchmark does: "
+       "ATE (RMSE of the positions after the rigid alignment that minimises it) and RPE (translation and "
+       "rotation of the relative motion per frame and over about one second, RMSE). Estimated poses are "
+       "matched to the nearest ground-truth stamp.",
+       {{"gt", true, "ground-truth trajectory file"},
+        {"est", true, "estimated trajectory file"},
+        {"max-difference", true, "[s] largest stamp difference of a match (default 0.02)"},
+        {"offset", true, "[s] added to the estimate's stamps before matching (default 0)"},
+        {"plot", true, "PNG of both paths seen from above (x, z), the estimate aligned"},
+        {"odometry", true,
+         "run-seq's odometry.csv: also the NEES of each pair's camera motion against the ground truth's "
+         "(chi-square with 6 degrees of freedom when the covariances are right)"},
+        {"help", false, "this help"}}});
 
   list.push_back({"export-real",
                   "mcflow export-real --data DIR --out DIR",
@@ -530,7 +535,8 @@ int cmdRunSeq(const CommandLine& args) {
              pipeline.backendUnavailable() + ")");
 
   std::string csv = io::trajectoryCsvHeader();
-  std::string trajectory;  // TUM RGB-D format: the camera's optical frame in the first frame's
+  std::string odometry = io::odometryCsvHeader();  // each solved pair's camera motion and its covariance
+  std::string trajectory;                          // TUM RGB-D format: the camera's optical frame in the first frame's
   std::vector<std::vector<std::pair<int, double>>> ids_per_pair;
   std::ostringstream log;
   log << "[\n";
@@ -577,6 +583,14 @@ int cmdRunSeq(const CommandLine& args) {
     // The camera's path: its first frame at the identity, then each solved pair's frame 2.
     if (trajectory.empty()) trajectory = io::tumTrajectoryLine(step.first->stamp, Eigen::Matrix4d::Identity());
     trajectory += io::tumTrajectoryLine(step.second->stamp, pipeline.odometry().pose);
+    if (r.world.found) {
+      OdometryStep camera;  // the camera moved by the inverse of the world's motion; the same covariance
+      camera.first = step.first->stamp;
+      camera.second = step.second->stamp;
+      camera.twist = -r.world.twist;
+      camera.covariance = r.world.covariance;
+      odometry += io::odometryCsvRow(step.pair_index, camera);
+    }
     std::vector<std::pair<int, double>> ids;
     for (const Segment& s : r.segments) ids.emplace_back(s.id, s.support);
     ids_per_pair.push_back(ids);
@@ -602,6 +616,7 @@ int cmdRunSeq(const CommandLine& args) {
   std::fprintf(stderr, "\n");
   log << "\n]\n";
   io::writeTextFile((std::filesystem::path(out) / "trajectories.csv").string(), csv);
+  io::writeTextFile((std::filesystem::path(out) / "odometry.csv").string(), odometry);
   io::writeTextFile((std::filesystem::path(out) / "trajectory.txt").string(),
                     "# mcflow run-seq: the colour camera's optical frame (x right, y down, z forward) in the first "
                     "frame's, from the static world's motion per pair\n# timestamp tx ty tz qx qy qz qw\n" +
@@ -813,6 +828,14 @@ int cmdEvalTraj(const CommandLine& args) {
       e.ate_rmse_m, e.rpe_frame_trans_m, e.rpe_frame_rot_deg, e.rpe_second_trans_m, e.rpe_second_rot_deg);
   if (e.rpe_second_pairs == 0) std::printf("# the trajectory spans less than 1 s: no per-second RPE\n");
   if (args.has("plot")) io::writeImage(args.text("plot", ""), io::trajectoryPlot(e));
+  if (args.has("odometry")) {
+    const OdometryConsistency c =
+        odometryConsistency(gt, io::readOdometryCsv(args.text("odometry", "")), max_difference, offset);
+    std::printf(
+        "# odometry covariance: %d steps matched; consistent: median near 5.35, mean within [%.2f, %.2f], 0.95 inside "
+        "chi2_6's central 95 %%\nnees_median %.2f\nnees_mean %.2f\nnees_inside95 %.2f\n",
+        c.matched, c.mean_low, c.mean_high, c.nees_median, c.nees_mean, c.inside95);
+  }
   return 0;
 }
 

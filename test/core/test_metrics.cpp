@@ -192,5 +192,48 @@ TEST(Metrics, TheAbsoluteTrajectoryErrorOfAKnownTrajectory) {
   EXPECT_THROW(evaluateTrajectory(truth, estimate, 1e-3, 1.0), InputError);  // nothing matches
 }
 
+TEST(Metrics, OdometryConsistencyIsTheNeesOfEachStepAgainstTheTruth) {
+  // The camera turns and moves along a known path (ground truth every 10 ms); the odometry's steps (every 30 ms) are
+  // the true motions plus known errors, each with a diagonal covariance: NEES = the squared errors in standard
+  // deviations.
+  StampedPoses truth;
+  Vector6d velocity;
+  velocity << 0.3, -0.1, 0.2, 0.2, 0.5, -0.1;  // [m/s, rad/s]
+  for (int k = 0; k <= 100; ++k) truth.emplace_back(0.01 * k, se3Exp(Vector6d(velocity * 0.01 * k)));
+  Matrix6d covariance = Matrix6d::Zero();
+  covariance.diagonal() << 1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4;
+  std::vector<OdometryStep> steps;
+  const double errors[4] = {1e-3, 2e-3, 3e-3, 4e-3};  // along x: NEES 1, 4, 9, 16
+  for (int i = 0; i < 4; ++i) {
+    OdometryStep step;
+    step.first = 0.03 * i;
+    step.second = 0.03 * (i + 1);
+    step.twist = velocity * 0.03;  // a constant velocity: the true step is this twist exactly
+    step.twist(0) += errors[i];
+    step.covariance = covariance;
+    steps.push_back(step);
+  }
+  OdometryStep unmatched = steps[0];  // no ground truth near 5 s: left out
+  unmatched.first = 5.0;
+  unmatched.second = 5.03;
+  steps.push_back(unmatched);
+  const OdometryConsistency c = odometryConsistency(truth, steps, 0.002, 0.0);
+  EXPECT_EQ(c.matched, 4);
+  EXPECT_NEAR(c.nees_mean, (1.0 + 4.0 + 9.0 + 16.0) / 4.0, 1e-6);
+  EXPECT_NEAR(c.nees_median, (4.0 + 9.0) / 2.0, 1e-6);
+  EXPECT_DOUBLE_EQ(c.inside95, 0.5);  // 4 and 9 lie in [1.24, 14.45]; 1 and 16 do not
+  EXPECT_NEAR(c.mean_low, chiSquareQuantile(24, 0.025) / 4.0, 1e-9);
+  EXPECT_NEAR(c.mean_high, chiSquareQuantile(24, 0.975) / 4.0, 1e-9);
+  // A time offset moves the steps' stamps onto the truth's: steps 1 s late match with offset -1.
+  std::vector<OdometryStep> late = steps;
+  late.pop_back();
+  for (OdometryStep& s : late) s.first += 1.0, s.second += 1.0;
+  EXPECT_NEAR(odometryConsistency(truth, late, 0.002, -1.0).nees_mean, 7.5, 1e-6);
+  EXPECT_THROW(odometryConsistency(truth, late, 0.002, 0.0), InputError);  // none matches
+  std::vector<OdometryStep> bad = {steps[0]};
+  bad[0].covariance(0, 0) = -1.0;
+  EXPECT_THROW(odometryConsistency(truth, bad, 0.002, 0.0), InputError);
+}
+
 }  // namespace
 }  // namespace mc_flow

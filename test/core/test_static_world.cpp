@@ -417,3 +417,34 @@ TEST(DepthOrder, CountsTheEdgesWhereOneSegmentIsInFrontOfAnother) {
     EXPECT_NE(std::string(e.what()).find("8x8x3 at step 2"), std::string::npos) << e.what();
   }
 }
+
+TEST(TwistCovariance, TheFloorAddsItsVarianceToEachComponent) {
+  Matrix6d curvature = Matrix6d::Identity();
+  curvature.diagonal() << 4e6, 4e6, 1e6, 9e5, 9e5, 4e5;
+  curvature(0, 4) = curvature(4, 0) = 1e5;
+  const double cost = 30.0, pixels = 1000.0;
+  Config without;
+  without.twist_floor_translation = 0;
+  without.twist_floor_rotation = 0;
+  // The fit alone: (E / (2 N - 6)) H^-1 (the ridge, 1e-6 of the largest diagonal entry, moves the smallest one by
+  // 1e-5).
+  const Matrix6d fit = twistCovariance(curvature, cost, pixels, without);
+  const Matrix6d expected = cost / (2 * pixels - 6) * Matrix6d(curvature.inverse());
+  EXPECT_LT((fit - expected).cwiseAbs().maxCoeff(), 1e-4 * expected.cwiseAbs().maxCoeff());
+  // The floor adds t^2 to each translation's variance and r^2 to each rotation's, and nothing else.
+  Config with = without;
+  with.twist_floor_translation = 0.004;
+  with.twist_floor_rotation = 0.01;
+  const Matrix6d floored = twistCovariance(curvature, cost, pixels, with);
+  Matrix6d added = Matrix6d::Zero();
+  added.diagonal() << 1.6e-5, 1.6e-5, 1.6e-5, 1e-4, 1e-4, 1e-4;
+  EXPECT_LT((floored - fit - added).cwiseAbs().maxCoeff(), 1e-15);
+  // The defaults carry a floor (a real camera's odometry is not 0.1 mm accurate; docs/ACCURACY.md).
+  EXPECT_GT(Config().twist_floor_translation, 0.0);
+  EXPECT_GT(Config().twist_floor_rotation, 0.0);
+  // Too few pixels to fit: 1 m and 1 rad whatever the floor.
+  EXPECT_EQ(twistCovariance(curvature, cost, 5.0, with), Matrix6d::Identity());
+  Config negative;
+  negative.twist_floor_translation = -0.001;
+  EXPECT_THROW(negative.validate(), ConfigError);
+}

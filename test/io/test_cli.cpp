@@ -485,7 +485,7 @@ TEST(Cli, SynthSequenceThenRunSeqKeepsIdsAndWritesTheSequenceFiles) {
   ASSERT_EQ(run.code, 0) << run.err;
   EXPECT_NE(run.out.find("3 pair(s) solved"), std::string::npos) << run.out;
   for (const char* f : {"pair_0000/labels.png", "pair_0002/segments.json", "pair_0002/moving.png", "trajectories.csv",
-                        "sequence.json", "ids_over_time.png", "trajectory.txt"})
+                        "sequence.json", "ids_over_time.png", "trajectory.txt", "odometry.csv"})
     EXPECT_TRUE(fs::exists(out / f)) << f;
   EXPECT_TRUE(pythonJsonValid((out / "sequence.json").string()));
   const std::string csv = io::readTextFile((out / "trajectories.csv").string());
@@ -500,6 +500,15 @@ TEST(Cli, SynthSequenceThenRunSeqKeepsIdsAndWritesTheSequenceFiles) {
   ASSERT_EQ(self.code, 0) << self.err;
   EXPECT_NE(self.out.find("ate_rmse_m 0.0000"), std::string::npos) << self.out;
   EXPECT_TRUE(fs::exists(workDir() / "traj.png"));
+  // Each pair's camera motion with its covariance; scored against the path it integrates to, its NEES is about 0 (the
+  // path's 6 decimals against a covariance of at least the floor's).
+  EXPECT_EQ(io::readOdometryCsv((out / "odometry.csv").string()).size(), 3u);
+  const CliRun consistency =
+      runCli("eval-traj --gt " + quote((out / "trajectory.txt").string()) + " --est " +
+             quote((out / "trajectory.txt").string()) + " --odometry " + quote((out / "odometry.csv").string()));
+  ASSERT_EQ(consistency.code, 0) << consistency.err;
+  EXPECT_NE(consistency.out.find("3 steps matched"), std::string::npos) << consistency.out;
+  EXPECT_NE(consistency.out.find("nees_median 0.00"), std::string::npos) << consistency.out;
   const CliRun no_match = runCli("eval-traj --gt " + quote((out / "trajectory.txt").string()) + " --est " +
                                  quote((out / "trajectory.txt").string()) + " --offset 100");
   EXPECT_EQ(no_match.code, 1) << no_match.out;

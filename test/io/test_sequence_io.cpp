@@ -177,3 +177,32 @@ TEST(SequenceIo, TheMovingMaskHoldsThePixelsOfMovingSegments) {
 }
 
 }  // namespace
+
+TEST(SequenceIo, OdometryCsvRoundTripsAndNamesABadLine) {
+  const test::TempDir dir("mcflow_odometry_io_");
+  OdometryStep step;
+  step.first = 1305031229.528748;
+  step.second = 1305031229.564425;
+  step.twist << 0.0123, -0.004, 0.0007, -0.009, 0.067, 0.0086;
+  Matrix6d a;
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) a(r, c) = std::sin(1.0 + 7 * r + c);  // any full matrix: a a^T is symmetric
+  step.covariance = 1e-6 * (a * a.transpose()) + 1.6e-5 * Matrix6d::Identity();
+  const fs::path file = dir.path() / "odometry.csv";
+  write(file, io::odometryCsvHeader() + io::odometryCsvRow(0, step) + io::odometryCsvRow(1, step));
+  const std::vector<OdometryStep> read = io::readOdometryCsv(file.string());
+  ASSERT_EQ(read.size(), 2u);
+  EXPECT_NEAR(read[1].first, step.first, 1e-6);
+  EXPECT_NEAR(read[1].second, step.second, 1e-6);
+  EXPECT_TRUE(read[1].twist.isApprox(step.twist, 1e-8)) << read[1].twist.transpose();
+  EXPECT_TRUE(read[1].covariance.isApprox(step.covariance, 1e-10)) << read[1].covariance;
+  EXPECT_EQ(read[1].covariance, read[1].covariance.transpose());
+  write(file, io::odometryCsvHeader() + io::odometryCsvRow(0, step) + "1,2,3\n");
+  try {
+    io::readOdometryCsv(file.string());
+    FAIL() << "a line of 3 numbers was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("line 3"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(io::readOdometryCsv((dir.path() / "missing.csv").string()), InputError);
+}

@@ -61,7 +61,9 @@ DepthOrder depthOrderOf(const ImageI32& segment_ids, const std::vector<Segment>&
 /// @brief The covariance of a twist fitted by the motion step's Gauss-Newton model: (E / (2 N - 6)) H^-1 with H the
 /// curvature (the normalised Cauchy cost E(xi + d) ~ E + 2 g^T d + d^T H d), E the cost and N the pixels (two residuals
 /// each): the inverse normal equations scaled by the residual variance, times Config::world_covariance_scale (the
-/// residuals of neighbouring pixels are not independent). A ridge keeps planar scenes' unconstrained directions finite.
+/// residuals of neighbouring pixels are not independent), plus the floor Config::twist_floor_translation² and
+/// twist_floor_rotation² on the diagonal (what real sensors leave that the fit cannot see). A ridge keeps planar
+/// scenes' unconstrained directions finite. Too few pixels (under 6) or no curvature: the identity (1 m, 1 rad).
 Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, const Config& config);
 
 /// @brief Chooses the static world among `segments` (labels 0..n-1 of `labels`, whose twists they hold) and fits its

@@ -102,4 +102,29 @@ struct TrajectoryErrors {
 TrajectoryErrors evaluateTrajectory(const StampedPoses& ground_truth, const StampedPoses& estimate,
                                     double max_difference, double time_offset);
 
+/// @brief One step of an odometry: the camera's motion from its frame at `first` to its frame at `second` [s],
+/// C2 = C1 exp(twist) with twist = (v [m], w [rad]) in the camera frame at `first`, and the twist's covariance.
+struct OdometryStep {
+  double first = 0, second = 0;
+  Vector6d twist = Vector6d::Zero();
+  Matrix6d covariance = Matrix6d::Identity();
+};
+
+/// @brief Whether an odometry's covariances match its errors: the NEES of each step against the ground truth's motion
+/// between the same instants, which chi-square with 6 degrees of freedom describes when the covariances are right.
+struct OdometryConsistency {
+  int matched = 0;                     ///< steps whose both stamps have a ground-truth pose within max_difference
+  double nees_median = 0;              ///< chi2_6's median is 5.35
+  double nees_mean = 0;                ///< 6 when consistent
+  double inside95 = 0;                 ///< the share of steps within chi2_6's central 95 % [1.24, 14.45]
+  double mean_low = 0, mean_high = 0;  ///< the central 95 % of the mean of `matched` consistent NEES values
+};
+
+/// @brief Scores `steps` against `ground_truth` (camera-to-world poses): each step's stamps (+ time_offset) are matched
+/// to the nearest ground-truth stamps within max_difference [s] (as evaluateTrajectory), the true step is
+/// log(G1^-1 G2), and the NEES is (twist - true)^T covariance^-1 (twist - true). Throws InputError when no step
+/// matches, or a covariance is not symmetric positive definite (naming the step).
+OdometryConsistency odometryConsistency(const StampedPoses& ground_truth, const std::vector<OdometryStep>& steps,
+                                        double max_difference, double time_offset);
+
 }  // namespace mc_flow

@@ -12,6 +12,7 @@
 #include <opencv2/core.hpp>
 
 #include "mc_flow/core/solver.h"
+#include "mc_flow/eval/metrics.h"
 
 namespace mc_flow {
 namespace io {
@@ -41,6 +42,19 @@ std::string trajectoryCsvHeader();
 /// `world` (one per segment) those columns are empty.
 std::string trajectoryCsvRows(long pair, double stamp, const Result& result,
                               const std::vector<WorldVelocity>* world = nullptr);
+
+/// @brief The header line of odometry.csv (odometryCsvRow's columns).
+std::string odometryCsvHeader();
+
+/// @brief One line of run-seq's odometry.csv: "pair,stamp_first,stamp_second,vx,vy,vz,wx,wy,wz" and the 21 values of
+/// the upper triangle of the twist's covariance (row by row, "c11,c12,...,c66"): the camera's motion over the pair,
+/// C2 = C1 exp(twist) (the inverse of the static world's motion; v [m], w [rad], camera frame of the first frame), and
+/// its covariance [m^2, m rad, rad^2].
+std::string odometryCsvRow(long pair, const OdometryStep& step);
+
+/// @brief The steps of an odometry.csv (its header line skipped). Throws InputError naming the file and line of a
+/// malformed line.
+std::vector<OdometryStep> readOdometryCsv(const std::string& path);
 
 /// @brief One line of a TUM RGB-D trajectory file: "stamp tx ty tz qx qy qz qw" (the pose's translation [m] and
 /// rotation as a unit quaternion).
