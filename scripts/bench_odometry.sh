@@ -35,7 +35,8 @@ echo "compositing ${BOXES:-2} moving box(es) into $DATA" >&2
 rows=""
 notes=""
 # score SEQUENCE METHOD TRAJECTORY [ODOMETRY_CSV]: one table row from mcflow eval-traj (with run-seq's odometry.csv:
-# the NEES of each pair's camera motion, median / mean; 5.35 / 6 when the covariances are right).
+# the NEES of each pair's camera motion, median / mean / share inside chi2_6's 95 % interval; 5.35 / 6 / 0.95 when the
+# covariances are right).
 score() {
   local metrics
   local odometry=()
@@ -43,8 +44,8 @@ score() {
   metrics=$("$MCFLOW" eval-traj --gt "$DATA/groundtruth.txt" --est "$3" --offset -0.015 "${odometry[@]}")
   rows+=$(echo "$metrics" | awk -v s="$1" -v m="$2" '
     $1 == "ate_rmse_m" { ate = $2 } $1 == "rpe_frame_trans_m" { t = $2 } $1 == "rpe_frame_rot_deg" { r = $2 }
-    $1 == "nees_median" { nm = $2 } $1 == "nees_mean" { ne = $2 }
-    END { nees = nm == "" ? "-" : sprintf("%.2f / %.2f", nm, ne)
+    $1 == "nees_median" { nm = $2 } $1 == "nees_mean" { ne = $2 } $1 == "nees_inside95" { ni = $2 }
+    END { nees = nm == "" ? "-" : sprintf("%.2f / %.2f / %.2f", nm, ne, ni)
           printf "| %s | %s | %.4f | %.4f | %.3f | %s |\n", s, m, ate, t, r, nees }')$'\n'
 }
 
@@ -68,7 +69,7 @@ for sequence in static composited; do
   done
 done
 
-echo "| sequence | method | ATE m | RPE trans m/frame | RPE rot deg/frame | NEES median / mean |"
+echo "| sequence | method | ATE m | RPE trans m/frame | RPE rot deg/frame | NEES median / mean / inside95 |"
 echo "|---|---|---|---|---|---|"
 printf "%s" "$rows"
 echo

@@ -22,12 +22,8 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
   const double dof = std::max(1.0, 2.0 * pixels - 6.0);
   const double variance = std::max(0.0, cost) / dof;
   const Matrix6d inverse = withRidge(curvature).ldlt().solve(Matrix6d::Identity());
-  Matrix6d covariance = config.world_covariance_scale * variance * inverse;
-  covariance = 0.5 * (covariance + covariance.transpose());
-  // The floor: independent of the fit, what it cannot see (twist_floor_translation, twist_floor_rotation).
-  const double t = config.twist_floor_translation, r = config.twist_floor_rotation;
-  covariance.diagonal() += (Vector6d() << t * t, t * t, t * t, r * r, r * r, r * r).finished();
-  return covariance;
+  const Matrix6d covariance = config.world_covariance_scale * variance * inverse;
+  return 0.5 * (covariance + covariance.transpose());
 }
 
 namespace {
@@ -239,6 +235,10 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
   world.twist = fit[0].twist;
   world.pixels = fit[0].pixels;
   world.covariance = twistCovariance(fit[0].curvature, fit[0].cost, fit[0].pixels, config);
+  // What the fit cannot see (world_covariance_floor_*): on the world's motion only, so that a segment's motion relative
+  // to the world (its covariance plus the world's) counts it once.
+  const double t = config.world_covariance_floor_translation, r = config.world_covariance_floor_rotation;
+  world.covariance.diagonal() += (Vector6d() << t * t, t * t, t * t, r * r, r * r, r * r).finished();
   for (const int i : world.labels) world.ids.push_back(segments[std::size_t(i)].id);
   world.found = true;
   return world;

@@ -353,8 +353,7 @@ OdometryConsistency odometryConsistency(const StampedPoses& ground_truth, const 
       throw InputError("odometry consistency: step " + std::to_string(i) + " (stamps " + std::to_string(step.first) +
                        ", " + std::to_string(step.second) +
                        ") has a covariance that is not symmetric positive definite");
-    const Vector6d error = step.twist - se3Log(Eigen::Matrix4d(g1->inverse() * *g2));
-    values.push_back(error.dot(llt.solve(error)));
+    values.push_back(nees(step.twist - se3Log(Eigen::Matrix4d(g1->inverse() * *g2)), step.covariance));
   }
   if (values.empty())
     throw InputError("odometry consistency: none of " + std::to_string(steps.size()) +

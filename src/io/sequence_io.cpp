@@ -187,13 +187,16 @@ std::vector<OdometryStep> readOdometryCsv(const std::string& path) {
   int number = 0;
   while (std::getline(in, line)) {
     ++number;
-    if (number == 1 || line.find_first_not_of(" \t\r") == std::string::npos) continue;  // the header
+    if (line.find_first_not_of(" \t\r") == std::string::npos || (number == 1 && line.rfind("pair", 0) == 0))
+      continue;  // blank, or the header
     std::vector<double> v;
     std::istringstream fields(line);
     for (std::string field; std::getline(fields, field, ',');) {
       char* end = nullptr;
       const double x = std::strtod(field.c_str(), &end);
-      if (end == field.c_str() || !std::isfinite(x)) {
+      const bool only_space_after =
+          field.find_first_not_of(" \t\r", std::size_t(end - field.c_str())) == std::string::npos;
+      if (end == field.c_str() || !only_space_after || !std::isfinite(x)) {
         v.clear();
         break;
       }

@@ -101,8 +101,9 @@ std::vector<Command> commands() {
       "segments that move relative to the static world), DIR/trajectories.csv (pair, stamp, id, vx, vy, "
       "vz, wx, wy, wz, support per segment and pair, then world, moving and the velocity relative to the "
       "static world), DIR/trajectory.txt (the camera's path in the TUM RGB-D format, the first frame at "
-      "the identity: `mcflow eval-traj` scores it), DIR/odometry.csv (per pair the camera's motion, "
-      "C2 = C1 exp(twist), and its covariance: `mcflow eval-traj --odometry` checks it), DIR/ids_over_time.png and "
+      "the identity: `mcflow eval-traj` scores it), DIR/odometry.csv (per pair with a static world the camera's "
+      "motion, C2 = C1 exp(twist), and its covariance: `mcflow eval-traj --odometry` checks it), DIR/ids_over_time.png "
+      "and "
       "DIR/sequence.json (per pair: start kind, timings, ids, merges, resets). A rosbag (--bag, ROS build "
       "only) is read as the nodelet reads its topics: colour and depth paired by the nearest header stamp, "
       "intrinsics from the first camera_info, frames with no valid depth skipped.",

@@ -199,7 +199,11 @@ TEST(Metrics, OdometryConsistencyIsTheNeesOfEachStepAgainstTheTruth) {
   StampedPoses truth;
   Vector6d velocity;
   velocity << 0.3, -0.1, 0.2, 0.2, 0.5, -0.1;  // [m/s, rad/s]
-  for (int k = 0; k <= 100; ++k) truth.emplace_back(0.01 * k, se3Exp(Vector6d(velocity * 0.01 * k)));
+  // The path starts away from the world's origin (start): the step is G1^-1 G2 in the camera's frame, not G2 G1^-1.
+  Vector6d start_twist;
+  start_twist << 1.0, -0.5, 2.0, 0.3, -1.2, 0.7;
+  const Eigen::Matrix4d start = se3Exp(start_twist);
+  for (int k = 0; k <= 100; ++k) truth.emplace_back(0.01 * k, start * se3Exp(Vector6d(velocity * 0.01 * k)));
   Matrix6d covariance = Matrix6d::Zero();
   covariance.diagonal() << 1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4;
   std::vector<OdometryStep> steps;

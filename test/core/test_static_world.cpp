@@ -418,33 +418,49 @@ TEST(DepthOrder, CountsTheEdgesWhereOneSegmentIsInFrontOfAnother) {
   }
 }
 
-TEST(TwistCovariance, TheFloorAddsItsVarianceToEachComponent) {
+TEST(TwistCovariance, IsTheInverseNormalEquationsScaledByTheResidualVariance) {
   Matrix6d curvature = Matrix6d::Identity();
   curvature.diagonal() << 4e6, 4e6, 1e6, 9e5, 9e5, 4e5;
   curvature(0, 4) = curvature(4, 0) = 1e5;
   const double cost = 30.0, pixels = 1000.0;
-  Config without;
-  without.twist_floor_translation = 0;
-  without.twist_floor_rotation = 0;
-  // The fit alone: (E / (2 N - 6)) H^-1 (the ridge, 1e-6 of the largest diagonal entry, moves the smallest one by
-  // 1e-5).
-  const Matrix6d fit = twistCovariance(curvature, cost, pixels, without);
+  // (E / (2 N - 6)) H^-1 (the ridge, 1e-6 of the largest diagonal entry, moves the smallest one by 1e-5).
+  const Matrix6d fit = twistCovariance(curvature, cost, pixels, Config());
   const Matrix6d expected = cost / (2 * pixels - 6) * Matrix6d(curvature.inverse());
   EXPECT_LT((fit - expected).cwiseAbs().maxCoeff(), 1e-4 * expected.cwiseAbs().maxCoeff());
-  // The floor adds t^2 to each translation's variance and r^2 to each rotation's, and nothing else.
+  Config scaled;
+  scaled.world_covariance_scale = 3.0;
+  EXPECT_LT((twistCovariance(curvature, cost, pixels, scaled) - 3.0 * fit).cwiseAbs().maxCoeff(), 1e-20);
+  // Too few pixels to fit: 1 m and 1 rad.
+  EXPECT_EQ(twistCovariance(curvature, cost, 5.0, Config()), Matrix6d::Identity());
+}
+
+TEST(StaticWorld, TheFloorIsAddedToTheWorldsCovarianceOnceAndToNoSegments) {
+  const RoomScene scene;
+  SoftLabels u = scene.labels([](int x, int, bool room) { return room ? (x % 2) : 2; });
+  const std::vector<Segment> segments = scene.roomSegments(20, 21);
+  Config without;
+  without.world_covariance_floor_translation = 0;
+  without.world_covariance_floor_rotation = 0;
   Config with = without;
-  with.twist_floor_translation = 0.004;
-  with.twist_floor_rotation = 0.01;
-  const Matrix6d floored = twistCovariance(curvature, cost, pixels, with);
+  with.world_covariance_floor_translation = 0.004;
+  with.world_covariance_floor_rotation = 0.01;
+  auto solve = [&](const Config& config, std::vector<Matrix6d>& covariances) {
+    SoftLabels labels = u;
+    HostLabelStore store(labels, scene.pyr1[RoomScene::kLevel], scene.pyr2[RoomScene::kLevel], nullptr);
+    return estimateStaticWorld(store, segments, {}, nullptr, false, config, covariances, nullptr);
+  };
+  std::vector<Matrix6d> plain_segments, floored_segments;
+  const StaticWorld plain = solve(without, plain_segments), floored = solve(with, floored_segments);
+  ASSERT_TRUE(plain.found);
+  EXPECT_EQ(plain.twist, floored.twist);
   Matrix6d added = Matrix6d::Zero();
   added.diagonal() << 1.6e-5, 1.6e-5, 1.6e-5, 1e-4, 1e-4, 1e-4;
-  EXPECT_LT((floored - fit - added).cwiseAbs().maxCoeff(), 1e-15);
-  // The defaults carry a floor (a real camera's odometry is not 0.1 mm accurate; docs/ACCURACY.md).
-  EXPECT_GT(Config().twist_floor_translation, 0.0);
-  EXPECT_GT(Config().twist_floor_rotation, 0.0);
-  // Too few pixels to fit: 1 m and 1 rad whatever the floor.
-  EXPECT_EQ(twistCovariance(curvature, cost, 5.0, with), Matrix6d::Identity());
+  EXPECT_LT((floored.covariance - plain.covariance - added).cwiseAbs().maxCoeff(), 1e-15) << floored.covariance;
+  EXPECT_EQ(plain_segments, floored_segments);  // a segment's own fit carries no floor
+  // The defaults carry one (a real camera's odometry is not 0.1 mm accurate; docs/ACCURACY.md), and it is checked.
+  EXPECT_GT(Config().world_covariance_floor_translation, 0.0);
+  EXPECT_GT(Config().world_covariance_floor_rotation, 0.0);
   Config negative;
-  negative.twist_floor_translation = -0.001;
+  negative.world_covariance_floor_translation = -0.001;
   EXPECT_THROW(negative.validate(), ConfigError);
 }

@@ -61,9 +61,8 @@ DepthOrder depthOrderOf(const ImageI32& segment_ids, const std::vector<Segment>&
 /// @brief The covariance of a twist fitted by the motion step's Gauss-Newton model: (E / (2 N - 6)) H^-1 with H the
 /// curvature (the normalised Cauchy cost E(xi + d) ~ E + 2 g^T d + d^T H d), E the cost and N the pixels (two residuals
 /// each): the inverse normal equations scaled by the residual variance, times Config::world_covariance_scale (the
-/// residuals of neighbouring pixels are not independent), plus the floor Config::twist_floor_translation² and
-/// twist_floor_rotation² on the diagonal (what real sensors leave that the fit cannot see). A ridge keeps planar
-/// scenes' unconstrained directions finite. Too few pixels (under 6) or no curvature: the identity (1 m, 1 rad).
+/// residuals of neighbouring pixels are not independent). A ridge keeps planar scenes' unconstrained directions finite.
+/// Too few pixels (under 6) or no curvature: the identity (1 m, 1 rad).
 Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, const Config& config);
 
 /// @brief Chooses the static world among `segments` (labels 0..n-1 of `labels`, whose twists they hold) and fits its
@@ -77,9 +76,11 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
 /// or the second widest when the widest is in front of it ("behind"). `depth_order` null: depth order decides nothing.
 /// Then, unless a prior chose (Config::world_joins_pieces), every other segment that the chosen world's motion (its
 /// widest segment's) explains and that is not in front of the world joins it. The world's motion is fitted on the
-/// union from its widest chosen segment's twist. Also fills each segment's twist covariance (`segment_covariances`, in
-/// `segments` order). Passes over the label level's pixels: one, one more with a prior, one more where a segment is a
-/// candidate to join, and one per fit iteration.
+/// union from its widest chosen segment's twist; its covariance is twistCovariance's plus the floor
+/// Config::world_covariance_floor_translation² and world_covariance_floor_rotation² on the diagonal (what real sensors
+/// leave that the fit cannot see). Also fills each segment's twist covariance (`segment_covariances`, in `segments`
+/// order; twistCovariance's alone). Passes over the label level's pixels: one, one more with a prior, one more where a
+/// segment is a candidate to join, and one per fit iteration.
 StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& segments,
                                 const std::vector<int>& previous_world_ids, const Eigen::Matrix4d* camera_motion_prior,
                                 bool use_occlusion, const Config& config, std::vector<Matrix6d>& segment_covariances,
