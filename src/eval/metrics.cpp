@@ -370,9 +370,7 @@ OdometryConsistency odometryConsistency(const StampedPoses& ground_truth, const 
   }
   c.nees_mean = sum / c.matched;
   c.inside95 = double(inside) / c.matched;
-  std::sort(values.begin(), values.end());
-  const std::size_t mid = values.size() / 2;
-  c.nees_median = values.size() % 2 ? values[mid] : 0.5 * (values[mid - 1] + values[mid]);
+  c.nees_median = median(values);
   // The sum of N consistent NEES values is chi-square with 6 N degrees of freedom.
   c.mean_low = chiSquareQuantile(6.0 * c.matched, 0.025) / c.matched;
   c.mean_high = chiSquareQuantile(6.0 * c.matched, 0.975) / c.matched;

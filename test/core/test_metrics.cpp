@@ -224,8 +224,8 @@ TEST(Metrics, OdometryConsistencyIsTheNeesOfEachStepAgainstTheTruth) {
   const OdometryConsistency c = odometryConsistency(truth, steps, 0.002, 0.0);
   EXPECT_EQ(c.matched, 4);
   EXPECT_NEAR(c.nees_mean, (1.0 + 4.0 + 9.0 + 16.0) / 4.0, 1e-6);
-  EXPECT_NEAR(c.nees_median, (4.0 + 9.0) / 2.0, 1e-6);
-  EXPECT_DOUBLE_EQ(c.inside95, 0.5);  // 4 and 9 lie in [1.24, 14.45]; 1 and 16 do not
+  EXPECT_NEAR(c.nees_median, 9.0, 1e-6);  // median(): the upper middle of an even count
+  EXPECT_DOUBLE_EQ(c.inside95, 0.5);      // 4 and 9 lie in [1.24, 14.45]; 1 and 16 do not
   EXPECT_NEAR(c.mean_low, chiSquareQuantile(24, 0.025) / 4.0, 1e-9);
   EXPECT_NEAR(c.mean_high, chiSquareQuantile(24, 0.975) / 4.0, 1e-9);
   // A time offset moves the steps' stamps onto the truth's: steps 1 s late match with offset -1.

@@ -114,7 +114,7 @@ struct OdometryStep {
 /// between the same instants, which chi-square with 6 degrees of freedom describes when the covariances are right.
 struct OdometryConsistency {
   int matched = 0;                     ///< steps whose both stamps have a ground-truth pose within max_difference
-  double nees_median = 0;              ///< chi2_6's median is 5.35
+  double nees_median = 0;              ///< median(): chi2_6's median is 5.35
   double nees_mean = 0;                ///< 6 when consistent
   double inside95 = 0;                 ///< the share of steps within chi2_6's central 95 % [1.24, 14.45]
   double mean_low = 0, mean_high = 0;  ///< the central 95 % of the mean of `matched` consistent NEES values
