@@ -262,8 +262,11 @@ double chiSquareQuantile(double dof, double probability) {
 
 namespace {
 
-StampedPoses sortedByStamp(const StampedPoses& poses, double max_difference) {
+void requireMaxDifference(double max_difference) {
   if (!(max_difference >= 0)) throw InputError("max difference must be >= 0 s, got " + std::to_string(max_difference));
+}
+
+StampedPoses sortedByStamp(const StampedPoses& poses) {
   StampedPoses sorted = poses;
   std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   return sorted;
@@ -282,7 +285,8 @@ const Eigen::Matrix4d* nearestPose(const StampedPoses& sorted, double t, double 
 
 TrajectoryErrors evaluateTrajectory(const StampedPoses& ground_truth, const StampedPoses& estimate,
                                     double max_difference, double time_offset) {
-  const StampedPoses gt = sortedByStamp(ground_truth, max_difference);
+  requireMaxDifference(max_difference);
+  const StampedPoses gt = sortedByStamp(ground_truth);
   std::vector<std::pair<Eigen::Matrix4d, Eigen::Matrix4d>> matched;  // (ground truth, estimate)
   std::vector<double> stamps;
   StampedPoses est = estimate;  // in time order: the RPE pairs consecutive and one-second-apart poses
@@ -340,7 +344,8 @@ TrajectoryErrors evaluateTrajectory(const StampedPoses& ground_truth, const Stam
 
 OdometryConsistency odometryConsistency(const StampedPoses& ground_truth, const std::vector<OdometryStep>& steps,
                                         double max_difference, double time_offset) {
-  const StampedPoses gt = sortedByStamp(ground_truth, max_difference);
+  requireMaxDifference(max_difference);
+  const StampedPoses gt = sortedByStamp(ground_truth);
   std::vector<double> values;
   for (std::size_t i = 0; i < steps.size(); ++i) {
     const OdometryStep& step = steps[i];
