@@ -210,6 +210,10 @@ void launchLabelCentroidSums(const float* u, const DeviceImage& points, int moti
 void launchCarryIds(const int* ids, const float* optical_flow, const float* moved_depth, const float* depth, int width,
                     int height, double tolerance, unsigned long long* winner, int* carried, int* closed,
                     cudaStream_t stream);
+/// @brief The previous result's ids from the backend's own output labels (`labels`: 0 or label index + 1, as the
+/// outputs stage writes them): `ids` = id_of_label[labels] (id_of_label[0] = 0), 0 outside [0, motion_labels].
+void launchIdsOfLabels(const int* labels, const int* id_of_label, int motion_labels, std::size_t pixels, int* ids,
+                       cudaStream_t stream);
 /// @brief The largest scale (input pixels per level pixel, per side) launchCarriedMajority takes.
 constexpr int kMaxMajorityScale = 8;
 /// @brief carriedLabelsAtLevel's majority ids on the device: per pixel of the level of `level_points`, -1 where it has

@@ -68,7 +68,22 @@ __global__ void majorityKernel(const int* __restrict__ carried, int input_width,
   majority[k] = warm_start_pixel::blockMajorityId(id_at, x, y, scale, ids, counts);
 }
 
+__global__ void idsOfLabelsKernel(const int* __restrict__ labels, const int* __restrict__ id_of_label,
+                                  int motion_labels, std::size_t pixels, int* __restrict__ ids) {
+  const std::size_t k = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (k >= pixels) return;
+  const int label = labels[k];
+  ids[k] = label >= 0 && label <= motion_labels ? id_of_label[label] : 0;
+}
+
 }  // namespace
+
+void launchIdsOfLabels(const int* labels, const int* id_of_label, int motion_labels, std::size_t pixels, int* ids,
+                       cudaStream_t stream) {
+  if (pixels == 0) return;
+  idsOfLabelsKernel<<<blocksFor(pixels), kThreads, 0, stream>>>(labels, id_of_label, motion_labels, pixels, ids);
+  MCFLOW_CUDA_CHECK_LAUNCH("idsOfLabelsKernel");
+}
 
 void launchCarryIds(const int* ids, const float* optical_flow, const float* moved_depth, const float* depth, int width,
                     int height, double tolerance, unsigned long long* winner, int* carried, int* closed,

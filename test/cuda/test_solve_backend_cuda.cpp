@@ -737,6 +737,56 @@ TEST(CudaSolveBackend, CarriedSegmentsMatchTheHostBitForBit) {
   EXPECT_THROW(gpu->carrySegments(small, pair.frame2.depth, 1, config), InputError);
 }
 
+// A stream pair's carry reads the previous result's ids, flow and moved depth where the backend left them (its latest
+// outputs, Result::device_outputs) and uploads only a table of the ids and the dormant regions; a result whose images
+// are no longer the device's (a later solve, or device_outputs cleared by the caller) is uploaded whole. Both give the
+// same result bit for bit.
+TEST(CudaSolveBackend, AStreamPairCarriesThePreviousOutputsLeftOnTheDevice) {
+  SKIP_WITHOUT_GPU();
+  SyntheticSceneOptions options;
+  options.variant = 2;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Config config;
+  config.backend = Backend::Cuda;
+  Solver solver(config);
+  Result first = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  ASSERT_NE(first.device_outputs, 0u);
+  ASSERT_GE(first.segments.size(), 2u);
+  // Dormant regions (always uploaded) and ids that are not the label indices, as a stream's are.
+  first.dormant_ids = {{100, 1}};
+  first.dormant_regions = first.labels;
+  for (int& id : first.dormant_regions.data)
+    if (id > 0) id += 99;
+  std::vector<int> new_id(first.segments.size() + 1, 0);
+  for (std::size_t i = 0; i < first.segments.size(); ++i) new_id[i + 1] = first.segments[i].id = int(7 + 3 * i);
+  for (int& label : first.labels.data) label = new_id[std::size_t(label)];
+  first.next_id = int(7 + 3 * first.segments.size());
+  Result uploaded_prior = first;
+  uploaded_prior.device_outputs = 0;
+
+  const std::size_t pixels = std::size_t(pair.frame1.width()) * std::size_t(pair.frame1.height());
+  const std::uint64_t before = cudaCounters().carry_bytes_uploaded;
+  const Result on_device = solver.solve(pair.frame2, pair.frame1, pair.intrinsics, first);
+  const std::uint64_t between = cudaCounters().carry_bytes_uploaded;
+  const Result uploaded = solver.solve(pair.frame2, pair.frame1, pair.intrinsics, uploaded_prior);
+  const std::uint64_t after = cudaCounters().carry_bytes_uploaded;
+  const Result stale = solver.solve(pair.frame2, pair.frame1, pair.intrinsics, first);  // a later solve replaced them
+  const std::uint64_t last = cudaCounters().carry_bytes_uploaded;
+  // The table and the dormant regions only; then ids, flow, moved depth and dormant regions (5 values a pixel).
+  EXPECT_EQ(between - before, (first.segments.size() + 1 + pixels) * sizeof(int));
+  EXPECT_EQ(after - between, 5 * pixels * sizeof(float));
+  EXPECT_EQ(last - after, 5 * pixels * sizeof(float));
+  EXPECT_EQ(on_device.start, StartKind::Warm);
+  EXPECT_EQ(firstDifference(on_device, uploaded), "");
+  EXPECT_EQ(firstDifference(on_device, stale), "");
+  EXPECT_EQ(on_device.revived_ids, uploaded.revived_ids);
+  // The ids continue the renamed ones: the carry read them through the table.
+  int continued = 0;
+  for (const Segment& s : on_device.segments)
+    continued += std::count(new_id.begin() + 1, new_id.end(), s.id) > 0 ? 1 : 0;
+  EXPECT_GE(continued, 2);
+}
+
 // The same at an awkward size with a made-up previous result: ids <= 0, flow off the image, NaN and infinite, moved
 // depths of 0, NaN, infinity and below zero, points that land on one pixel at the same depth (a tie: the first in
 // raster order wins) and frame 1's depth outside [min_depth, max_depth], NaN or 0.

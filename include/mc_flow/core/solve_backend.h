@@ -132,6 +132,9 @@ struct CudaCounters {
   std::uint64_t device_allocations = 0;  ///< cudaMalloc calls of the grow-only device buffers
   std::uint64_t pinned_allocations = 0;  ///< cudaMallocHost calls of the page-locked staging buffers
   std::uint64_t host_waits = 0;          ///< stream synchronisations: the host waiting for results it needs
+  /// Bytes the carries of stream pairs uploaded: the previous result's ids, flow and moved depth where they were no
+  /// longer on the device (Result::device_outputs), else a table of its ids; its dormant regions when it has any.
+  std::uint64_t carry_bytes_uploaded = 0;
 };
 CudaCounters cudaCounters();
 

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <memory>
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
@@ -82,6 +83,10 @@ struct Result {
   ImageF scene_flow;       ///< 3 channels [m], frame-1 camera frame; NaN where depth is invalid; 0x0 when not selected
   ImageF optical_flow;     ///< 2 channels [px]; NaN where depth is invalid
   ImageF moved_depth;      ///< [m] depth of each frame-1 point after its motion (seen from frame 2); NaN where invalid
+  /// Which solve of the CUDA backend left labels, optical_flow and moved_depth on the device (a serial; 0: none, the
+  /// CPU's): the next pair's carry reads them there while they are still the backend's latest outputs, and uploads
+  /// these images otherwise. A caller that changes those images (or the segments' order) sets it to 0.
+  std::uint64_t device_outputs = 0;
   StageTimings timings;
   std::vector<OuterIterationStats> iterations;
   double energy = 0;     ///< final E(u) (processing level)
