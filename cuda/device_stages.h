@@ -235,6 +235,12 @@ class DeviceMotionAccumulator : public MotionAccumulator {
   virtual void refitUnions(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
                            const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
                            const Config& config, std::vector<UnionFit>& fits) = 0;
+  /// @brief refitPairsFromTheBetterMotion (label_adaptation.h) on the bound level and labels: the swapped pass, each
+  /// pair's start (chosen on the device from `own_cost` and that pass's costs) and the refit, one wait. False (nothing
+  /// done) when the batches exceed one pass: the host then chooses between passes. The arguments are checked there.
+  virtual bool refitPairs(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& pairs,
+                          const std::vector<int>& batches, const std::vector<double>& own_cost, int iterations,
+                          const Config& config, std::vector<UnionFit>& fits) = 0;
   /// @brief accumulateLabelBlocks at each set of twists, the sets as batches of one launch, one wait.
   virtual void accumulateLabelBlockSets(const std::vector<std::vector<Vector6d>>& twist_sets,
                                         std::vector<MotionNormalEquations>& out) = 0;

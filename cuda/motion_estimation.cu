@@ -1044,6 +1044,37 @@ __global__ void unionRefitStep(const UnionRefitParams q) {
     if (group_of_label[i] == g) motions[i] = m;
 }
 
+/// @brief A pair's start choice on the device (refitPairs): its labels, their costs under their own twists and the
+/// twists.
+struct UnionStartChoice {
+  int a = 0, b = 0;
+  double own_a = 0, own_b = 0;
+  double twist_a[6] = {}, twist_b[6] = {};
+};
+
+// After the swapped pass (each batch's pairs with their motions exchanged): each pair starts from a's motion where
+// own_a + (b's cost under a's motion) <= (a's cost under b's motion) + own_b, else from b's (label_adaptation.cpp's
+// refitPairsFromTheBetterMotion, the same doubles in the same order). The swapped table holds a's motion at b and b's
+// at a: the chosen one becomes both members' motion for the refit's first pass.
+__global__ void chooseUnionStarts(const double* __restrict__ sums, std::size_t batch_values,
+                                  const int* __restrict__ batch_of_group, int n, int groups,
+                                  const UnionStartChoice* __restrict__ choices, const LabelMotion* __restrict__ swapped,
+                                  UnionRefitState* __restrict__ state, LabelMotion* __restrict__ motions) {
+  const int g = int(blockIdx.x * blockDim.x + threadIdx.x);
+  if (g >= groups) return;
+  const UnionStartChoice c = choices[g];
+  const std::size_t batch = std::size_t(batch_of_group[g]);
+  const double* batch_sums = sums + batch * batch_values;
+  const double a_under_b = batch_sums[std::size_t(c.a) * kLabelStride + kLabelCost];
+  const double b_under_a = batch_sums[std::size_t(c.b) * kLabelStride + kLabelCost];
+  const bool from_a = c.own_a + b_under_a <= a_under_b + c.own_b;
+  UnionRefitState& st = state[g];
+  for (int k = 0; k < 6; ++k) st.twist[k] = st.proposed[k] = from_a ? c.twist_a[k] : c.twist_b[k];
+  const LabelMotion start = swapped[batch * std::size_t(n) + std::size_t(from_a ? c.b : c.a)];
+  motions[batch * std::size_t(n) + std::size_t(c.a)] = start;
+  motions[batch * std::size_t(n) + std::size_t(c.b)] = start;
+}
+
 // ----------------------------------------------------------------- host side
 
 void requireImage(const char* name, const ImageF& image, int width, int height, int channels) {
@@ -1199,19 +1230,38 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
   void refitUnions(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
                    const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
                    const Config& config, std::vector<UnionFit>& fits) override {
-    refitOnDevice(twists, groups, batches, starts, iterations, config, fits);
+    refitOnDevice(twists, groups, batches, &starts, nullptr, iterations, config, fits);
+  }
+
+  bool refitPairs(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& pairs,
+                  const std::vector<int>& batches, const std::vector<double>& own_cost, int iterations,
+                  const Config& config, std::vector<UnionFit>& fits) override {
+    if (pairs.empty()) {
+      fits.clear();
+      return true;
+    }
+    // More batches than one pass holds: the host chooses (refitPairsFromTheBetterMotion's loop) and refitUnions splits.
+    if (*std::max_element(batches.begin(), batches.end()) + 1 > batchesPerPass()) return false;
+    refitOnDevice(twists, pairs, batches, nullptr, &own_cost, iterations, config, fits);
+    return true;
   }
 
  private:
-  // refitUnions from `starts`: every pass and step on the device, one wait.
+  // refitUnions from `starts`, or (pairs only, `own_cost` given) from the better motion of each pair, chosen on the
+  // device after a swapped pass (chooseUnionStarts): no host wait between the passes.
   void refitOnDevice(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
-                     const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
-                     const Config& config, std::vector<UnionFit>& fits) {
+                     const std::vector<int>& batches, const std::vector<Vector6d>* starts_given,
+                     const std::vector<double>* own_cost, int iterations, const Config& config,
+                     std::vector<UnionFit>& fits) {
     if (level_.width <= 0) throw InputError("CUDA motion step: refitUnions() called before setLevel() or bind()");
+    const std::vector<Vector6d> no_starts;
+    const std::vector<Vector6d>& starts = starts_given ? *starts_given : no_starts;
     const int n = motion_labels_, group_count = int(groups.size());
-    if (int(twists.size()) != n || starts.size() != groups.size() || batches.size() != groups.size())
+    if (int(twists.size()) != n || (starts_given && starts.size() != groups.size()) ||
+        (own_cost && int(own_cost->size()) != n) || batches.size() != groups.size())
       throw InputError("CUDA refitUnions: " + std::to_string(twists.size()) + " twists for " + std::to_string(n) +
-                       " motion labels, " + std::to_string(starts.size()) + " starts and " +
+                       " motion labels, " + std::to_string(starts.size()) + " starts, " +
+                       std::to_string(own_cost ? own_cost->size() : 0) + " own costs and " +
                        std::to_string(batches.size()) + " batch numbers for " + std::to_string(group_count) +
                        " groups");
     fits.assign(groups.size(), UnionFit());
@@ -1225,13 +1275,14 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
         std::vector<Vector6d> part_starts;
         for (int g = 0; g < group_count; ++g)
           if (batches[std::size_t(g)] >= first && batches[std::size_t(g)] < first + per_pass) {
+            if (!starts_given) throw InputError("CUDA refitPairs: more batches than one pass holds");
             part_groups.push_back(groups[std::size_t(g)]);
             part_batches.push_back(batches[std::size_t(g)] - first);
             part_starts.push_back(starts[std::size_t(g)]);
             index.push_back(g);
           }
         std::vector<UnionFit> part;
-        refitOnDevice(twists, part_groups, part_batches, part_starts, iterations, config, part);
+        refitOnDevice(twists, part_groups, part_batches, &part_starts, nullptr, iterations, config, part);
         for (std::size_t k = 0; k < index.size(); ++k) fits[std::size_t(index[k])] = std::move(part[k]);
       }
       return;
@@ -1244,7 +1295,8 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     StagingLayout staged;
     const std::size_t motions_at = staged.add<LabelMotion>(slots), owner_at = staged.add<int>(slots),
                       batch_at = staged.add<int>(group_count), state_at = staged.add<UnionRefitState>(group_count),
-                      cost_at = staged.add<double>(slots);
+                      cost_at = staged.add<double>(slots), swapped_at = own_cost ? staged.add<LabelMotion>(slots) : 0,
+                      choice_at = own_cost ? staged.add<UnionStartChoice>(group_count) : 0;
     unsigned char* host = reserveStaging(staged);
     auto* motions = StagingLayout::at<LabelMotion>(host, motions_at);
     auto* group_of_label = StagingLayout::at<int>(host, owner_at);
@@ -1266,15 +1318,46 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       }
     }
     auto* state = StagingLayout::at<UnionRefitState>(host, state_at);
-    for (int b = 0; b < batch_count; ++b)
-      for (int i = 0; i < n; ++i) {
-        const int g = group_of_label[std::size_t(b) * n + i];
-        motions[std::size_t(b) * n + i] = labelMotion(g >= 0 ? starts[std::size_t(g)] : twists[std::size_t(i)]);
+    if (!own_cost) {
+      for (int b = 0; b < batch_count; ++b)
+        for (int i = 0; i < n; ++i) {
+          const int g = group_of_label[std::size_t(b) * n + i];
+          motions[std::size_t(b) * n + i] = labelMotion(g >= 0 ? starts[std::size_t(g)] : twists[std::size_t(i)]);
+        }
+    } else {
+      // The swapped table (each pair's motions exchanged) is both the cross pass's motions and, but for the members
+      // that chooseUnionStarts overwrites, the refit's first pass's.
+      auto* swapped = StagingLayout::at<LabelMotion>(host, swapped_at);
+      auto* choice = StagingLayout::at<UnionStartChoice>(host, choice_at);
+      std::vector<LabelMotion> own_motion(static_cast<std::size_t>(n));
+      for (int i = 0; i < n; ++i) own_motion[std::size_t(i)] = labelMotion(twists[std::size_t(i)]);
+      for (int b = 0; b < batch_count; ++b)
+        for (int i = 0; i < n; ++i) swapped[std::size_t(b) * n + i] = own_motion[std::size_t(i)];
+      for (int g = 0; g < group_count; ++g) {
+        const std::vector<int>& pair = groups[std::size_t(g)];
+        if (pair.size() != 2) throw InputError("CUDA refitPairs: group " + std::to_string(g) + " is not a pair");
+        const int a = pair[0], b = pair[1];
+        const std::size_t batch = std::size_t(batches[std::size_t(g)]) * n;
+        swapped[batch + std::size_t(a)] = own_motion[std::size_t(b)];
+        swapped[batch + std::size_t(b)] = own_motion[std::size_t(a)];
+        UnionStartChoice& c = choice[g];
+        c = UnionStartChoice{};
+        c.a = a;
+        c.b = b;
+        c.own_a = (*own_cost)[std::size_t(a)];
+        c.own_b = (*own_cost)[std::size_t(b)];
+        for (int k = 0; k < 6; ++k) {
+          c.twist_a[k] = twists[std::size_t(a)](k);
+          c.twist_b[k] = twists[std::size_t(b)](k);
+        }
       }
+      std::copy_n(swapped, slots, motions);
+    }
     for (int g = 0; g < group_count; ++g) {
       UnionRefitState& st = state[g];
       st = UnionRefitState{};
-      for (int k = 0; k < 6; ++k) st.twist[k] = st.proposed[k] = starts[std::size_t(g)](k);
+      if (!own_cost)
+        for (int k = 0; k < 6; ++k) st.twist[k] = st.proposed[k] = starts[std::size_t(g)](k);
       st.damping = config.motion_damping;
     }
     MCFLOW_CUDA_CHECK(cudaMemcpyAsync(level_device_.get(), host, staged.bytes(), cudaMemcpyHostToDevice, s));
@@ -1291,6 +1374,14 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     q.member_cost = StagingLayout::at<double>(device, cost_at);
     q.motions = StagingLayout::at<LabelMotion>(device, motions_at);
     const unsigned blocks = unsigned((group_count + 63) / 64);
+    if (own_cost) {  // the swapped pass, then each pair's start: no wait
+      const auto* swapped_device = StagingLayout::at<LabelMotion>(device, swapped_at);
+      enqueueSums(layout, nullptr, swapped_device, false, batch_count);
+      chooseUnionStarts<<<blocks, 64, 0, s>>>(sums_.get(), layout.block_values, q.batch_of_group, n, group_count,
+                                              StagingLayout::at<UnionStartChoice>(device, choice_at), swapped_device,
+                                              q.state, q.motions);
+      MCFLOW_CUDA_CHECK_LAUNCH("chooseUnionStarts");
+    }
     for (int pass = 0; pass <= iterations; ++pass) {
       enqueueSums(layout, nullptr, q.motions, false, batch_count);
       q.first = pass == 0;

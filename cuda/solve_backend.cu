@@ -635,6 +635,14 @@ class CudaSolveBackend final : public SolveBackend {
     return true;
   }
 
+  bool refitPairsWhereTheSumsAre(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& pairs,
+                                 const std::vector<int>& batches, const std::vector<double>& own_cost, int iterations,
+                                 bool use_occlusion, const Config& config, std::vector<UnionFit>& fits) override {
+    requireTwists("refitPairs", twists);
+    motionAccumulator(level_, MotionLabels::Current, use_occlusion, config);  // binds accumulator_ to the labels
+    return accumulator_->refitPairs(twists, pairs, batches, own_cost, iterations, config, fits);
+  }
+
   std::vector<LabelCostModel> costModels(const std::vector<std::vector<Vector6d>>& twist_sets, bool use_occlusion,
                                          const Config& config) override {
     for (const std::vector<Vector6d>& twists : twist_sets) requireTwists("costModels", twists);

@@ -503,38 +503,42 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
   return fits;
 }
 
-int betterMotionByModel(const LabelCostModel& own, const std::vector<Vector6d>& twists, int a, int b) {
-  const int n = int(twists.size());
-  if (own.cost.size() != twists.size() || own.curvature.size() != twists.size() ||
-      own.gradient.size() != twists.size() || std::min(a, b) < 0 || std::max(a, b) >= n)
-    throw InputError("betterMotionByModel: labels " + std::to_string(a) + " and " + std::to_string(b) + " of " +
-                     std::to_string(n) + " twists and a model of " + std::to_string(own.cost.size()) + " labels");
-  // What label i's pixels are predicted to pay under `at` (the Gauss-Newton model E + 2 g^T d + d^T H d).
-  auto predicted = [&](int i, const Vector6d& at) {
-    const Vector6d d = at - twists[std::size_t(i)];
-    return own.cost[std::size_t(i)] + 2.0 * own.gradient[std::size_t(i)].dot(d) +
-           d.dot(own.curvature[std::size_t(i)] * d);
-  };
-  const double at_a = own.cost[std::size_t(a)] + predicted(b, twists[std::size_t(a)]);
-  const double at_b = predicted(a, twists[std::size_t(b)]) + own.cost[std::size_t(b)];
-  return at_a <= at_b ? a : b;
-}
-
 std::vector<UnionFit> refitPairsFromTheBetterMotion(LabelStore& labels, const std::vector<Vector6d>& twists,
                                                     const std::vector<std::vector<int>>& pairs,
-                                                    const LabelCostModel& own, int iterations, bool use_occlusion,
-                                                    const Config& config) {
+                                                    const std::vector<int>& batches,
+                                                    const std::vector<double>& own_cost, int iterations,
+                                                    bool use_occlusion, const Config& config) {
   const int n = labels.labelCount() - 1;
-  if (int(twists.size()) != n || own.cost.size() != twists.size())
-    throw InputError("refitPairsFromTheBetterMotion: " + std::to_string(twists.size()) + " twists and a model of " +
-                     std::to_string(own.cost.size()) + " labels for " + std::to_string(n) + " motion labels");
-  std::vector<Vector6d> starts;
+  if (int(twists.size()) != n || int(own_cost.size()) != n || batches.size() != pairs.size())
+    throw InputError("refitPairsFromTheBetterMotion: " + std::to_string(twists.size()) + " twists and " +
+                     std::to_string(own_cost.size()) + " costs for " + std::to_string(n) + " motion labels, " +
+                     std::to_string(batches.size()) + " batch numbers for " + std::to_string(pairs.size()) + " pairs");
   for (std::size_t p = 0; p < pairs.size(); ++p) {
     const std::vector<int>& pair = pairs[p];
     if (pair.size() != 2 || pair[0] == pair[1] || std::min(pair[0], pair[1]) < 0 || std::max(pair[0], pair[1]) >= n)
       throw InputError("refitPairsFromTheBetterMotion: pair " + std::to_string(p) +
                        " is not two distinct labels in [0, " + std::to_string(n) + ")");
-    starts.push_back(twists[std::size_t(betterMotionByModel(own, twists, pair[0], pair[1]))]);
+  }
+  std::vector<UnionFit> fits;
+  if (pairs.empty()) return fits;
+  if (labels.refitPairsWhereTheSumsAre(twists, pairs, batches, own_cost, iterations, use_occlusion, config, fits))
+    return fits;
+  // Each side under the other's motion (one pass per batch): the union's cost at either start.
+  std::vector<std::vector<Vector6d>> swapped(std::size_t(*std::max_element(batches.begin(), batches.end()) + 1),
+                                             twists);
+  for (std::size_t p = 0; p < pairs.size(); ++p) {
+    const int a = pairs[p][0], b = pairs[p][1];
+    swapped[std::size_t(batches[p])][std::size_t(a)] = twists[std::size_t(b)];
+    swapped[std::size_t(batches[p])][std::size_t(b)] = twists[std::size_t(a)];
+  }
+  const std::vector<LabelCostModel> cross = labels.costModels(swapped, use_occlusion, config);
+  std::vector<Vector6d> starts;
+  for (std::size_t p = 0; p < pairs.size(); ++p) {
+    const int a = pairs[p][0], b = pairs[p][1];
+    const LabelCostModel& other = cross[std::size_t(batches[p])];
+    const double at_a = own_cost[std::size_t(a)] + other.cost[std::size_t(b)];
+    const double at_b = other.cost[std::size_t(a)] + own_cost[std::size_t(b)];
+    starts.push_back(at_a <= at_b ? twists[std::size_t(a)] : twists[std::size_t(b)]);
   }
   return refitUnions(labels, twists, pairs, starts, iterations, use_occlusion, config);
 }
@@ -637,12 +641,15 @@ AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vect
     std::vector<std::vector<int>> all;
     for (const auto& c : candidates) all.push_back({c.second.first, c.second.second});
     const std::vector<int> all_batches = unionBatches(all);
-    // (refitUnions batches the round's pairs the same way: a pair's first fit depends only on the pairs before it.)
     std::vector<std::vector<int>> groups;
+    std::vector<int> batch;
     for (std::size_t p = 0; p < all.size(); ++p)
-      if (all_batches[p] < batches_per_round) groups.push_back(all[p]);
+      if (all_batches[p] < batches_per_round) {
+        groups.push_back(all[p]);
+        batch.push_back(all_batches[p]);
+      }
     const std::vector<UnionFit> fits = refitPairsFromTheBetterMotion(
-        labels, twists, groups, own, config.merge_refit_iterations, use_occlusion, config);
+        labels, twists, groups, batch, own.cost, config.merge_refit_iterations, use_occlusion, config);
     ++stats.rounds;
     stats.pairs_tested += int(groups.size());
     // Merges of this round, most alike first, each label in one at most: each pair into its larger label, which takes

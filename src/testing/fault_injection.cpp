@@ -122,6 +122,12 @@ class FaultInjectingBackend final : public SolveBackend {
     strike("refitUnionsWhereTheSumsAre");
     return inner_->refitUnionsWhereTheSumsAre(twists, groups, batches, starts, iterations, use_occlusion, config, fits);
   }
+  bool refitPairsWhereTheSumsAre(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& pairs,
+                                 const std::vector<int>& batches, const std::vector<double>& own_cost, int iterations,
+                                 bool use_occlusion, const Config& config, std::vector<UnionFit>& fits) override {
+    strike("refitPairsWhereTheSumsAre");
+    return inner_->refitPairsWhereTheSumsAre(twists, pairs, batches, own_cost, iterations, use_occlusion, config, fits);
+  }
 
  private:
   void strike(const char* stage) {
@@ -144,13 +150,28 @@ class FaultInjectingBackend final : public SolveBackend {
 }  // namespace
 
 const std::vector<std::string>& backendFaultStages() {
-  static const std::vector<std::string> stages{"buildPyramids",     "framePoints",      "kmeansCentres",
-                                               "carrySegments",     "initialiseLabels", "initialiseLabelsFromCentres",
-                                               "holdCarriedLabels", "moveLabels",       "motionAccumulator",
-                                               "updateOcclusion",   "labelStep",        "downloadLabels",
-                                               "outputs",           "supports",         "remap",
-                                               "ownedMoments",      "trialCuts",        "applyCuts",
-                                               "costModel",         "costModels",       "refitUnionsWhereTheSumsAre"};
+  static const std::vector<std::string> stages{"buildPyramids",
+                                               "framePoints",
+                                               "kmeansCentres",
+                                               "carrySegments",
+                                               "initialiseLabels",
+                                               "initialiseLabelsFromCentres",
+                                               "holdCarriedLabels",
+                                               "moveLabels",
+                                               "motionAccumulator",
+                                               "updateOcclusion",
+                                               "labelStep",
+                                               "downloadLabels",
+                                               "outputs",
+                                               "supports",
+                                               "remap",
+                                               "ownedMoments",
+                                               "trialCuts",
+                                               "applyCuts",
+                                               "costModel",
+                                               "costModels",
+                                               "refitUnionsWhereTheSumsAre",
+                                               "refitPairsWhereTheSumsAre"};
   return stages;
 }
 

@@ -140,12 +140,12 @@ BackendFault recordingFault(int solve, const std::string& stage, std::vector<std
 }
 
 TEST(BackendFault, TheBatchedPassesAndTheUnionRefitsAreStagesToo) {
-  // A cold solve with several segments calls the batched passes and the union refits (the merge test's pairs and the
-  // world's fit): a fault named after each strikes there (the CPU backend answers the refits on the host, but the
-  // wrapper is asked).
+  // A cold solve with several segments calls the batched passes, the merge test's pair refits and the world's union
+  // fit: a fault named after each strikes there (the CPU backend answers the refits on the host, but the wrapper is
+  // asked).
   const SyntheticPair pair = forwardingPair();
   const Config config = oneThreadCpu();
-  for (const char* stage : {"costModels", "refitUnionsWhereTheSumsAre"}) {
+  for (const char* stage : {"costModels", "refitUnionsWhereTheSumsAre", "refitPairsWhereTheSumsAre"}) {
     std::vector<std::string> struck;
     Solver wrapped(config, withBackendFault(makeCpuSolveBackend(), recordingFault(1, stage, struck)), "wrapped");
     wrapped.solve(pair.frame1, pair.frame2, pair.intrinsics);

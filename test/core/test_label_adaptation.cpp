@@ -568,45 +568,17 @@ TEST(OneMotionMerge, PairsRefittedFromTheBetterMotionRefuseWhatIsNotAPair) {
   const Vector6d truth = trueTwist(s.pair, "background");
   std::vector<Vector6d> twists{truth, truth, trueTwist(s.pair, "box")};
   HostLabelStore store(u, s.pyr1[s.level], s.pyr2[s.level], nullptr);
-  const LabelCostModel own = store.costModel(twists, false, Config());
-  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 0}}, own, 2, false, Config()), InputError);
-  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 3}}, own, 2, false, Config()), InputError);
-  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 1, 2}}, own, 2, false, Config()), InputError);
-  LabelCostModel short_model = own;
-  short_model.cost.pop_back();
-  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 1}}, short_model, 2, false, Config()), InputError);
-  EXPECT_THROW(betterMotionByModel(own, twists, 0, 3), InputError);
-  EXPECT_THROW(betterMotionByModel(short_model, twists, 0, 1), InputError);
+  const std::vector<double> own = store.costModel(twists, false, Config()).cost;
+  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 0}}, {0}, own, 2, false, Config()), InputError);
+  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 3}}, {0}, own, 2, false, Config()), InputError);
+  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 1, 2}}, {0}, own, 2, false, Config()), InputError);
+  EXPECT_THROW(refitPairsFromTheBetterMotion(store, twists, {{0, 1}}, {0}, {1.0}, 2, false, Config()), InputError);
   // The halves share one motion: whichever start, the union's fit is the one motion's.
-  const std::vector<UnionFit> fits = refitPairsFromTheBetterMotion(store, twists, {{0, 1}}, own, 2, false, Config());
+  const std::vector<UnionFit> fits =
+      refitPairsFromTheBetterMotion(store, twists, {{0, 1}}, {0}, own, 2, false, Config());
   ASSERT_EQ(fits.size(), 1u);
   EXPECT_LT((fits[0].twist - truth).norm(), 1e-3);
   EXPECT_EQ(fits[0].member_cost.size(), 2u);
-}
-
-// The start the quadratic models choose is the one a pass of each side under the other's motion chooses (what the
-// merge test measured before the models chose it): the background's for the background and the box, whichever is a.
-TEST(OneMotionMerge, TheModelsChooseTheStartThatThePixelsPayLessUnder) {
-  const ArmScene s = renderArmScene();
-  int background = -1, box = -1;
-  SoftLabels u = backgroundHalvesAndBox(s, background, box);
-  const Vector6d truth = trueTwist(s.pair, "background");
-  Vector6d off = truth;
-  off(3) += 0.004;
-  const std::vector<Vector6d> twists{off, truth, trueTwist(s.pair, "box")};
-  HostLabelStore store(u, s.pyr1[s.level], s.pyr2[s.level], nullptr);
-  const LabelCostModel own = store.costModel(twists, false, Config());
-  for (const auto& [a, b] : std::vector<std::pair<int, int>>{{0, 2}, {2, 0}, {1, 2}, {2, 1}, {0, 1}, {1, 0}}) {
-    std::vector<Vector6d> swapped = twists;
-    swapped[std::size_t(a)] = twists[std::size_t(b)];
-    swapped[std::size_t(b)] = twists[std::size_t(a)];
-    const LabelCostModel cross = store.costModel(swapped, false, Config());
-    const double at_a = own.cost[std::size_t(a)] + cross.cost[std::size_t(b)];
-    const double at_b = cross.cost[std::size_t(a)] + own.cost[std::size_t(b)];
-    const int by_pass = at_a <= at_b ? a : b;
-    EXPECT_EQ(betterMotionByModel(own, twists, a, b), by_pass) << "pair " << a << ", " << b;
-    if (a == 2 || b == 2) EXPECT_NE(by_pass, 2) << "the box's motion explains the background worse";
-  }
 }
 
 TEST(OneMotionMerge, TheHalvesOfTheStaticWorldMergeAndTheSmallMovingBoxStaysApart) {

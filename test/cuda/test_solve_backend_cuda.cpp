@@ -139,11 +139,14 @@ void expectSameEquations(SolveBackend& cpu, SolveBackend& gpu, int level, Motion
   expectRelativelyClose(a.label_cost, b.label_cost, 1e-6, what + " label costs");
 }
 
-// A label store that forwards to a backend but for its device-only shortcuts: refitUnions runs its host loop over the
-// backend's single passes (neither refitUnionsWhereTheSumsAre nor the batched costModels forwarded).
+// A label store that forwards to a backend but for its device-only shortcuts. HostLoop: refitUnions runs its host loop
+// over the backend's single passes (neither refitUnionsWhereTheSumsAre nor the batched costModels forwarded).
+// ChoiceOnTheHost: both forwarded, but not refitPairsWhereTheSumsAre, so refitPairsFromTheBetterMotion chooses the
+// starts on the host from the backend's batched swapped pass and refits through the backend's refitUnions.
 class ForwardingStore final : public LabelStore {
  public:
-  explicit ForwardingStore(LabelStore& store) : store_(store) {}
+  enum class Mode { HostLoop, ChoiceOnTheHost };
+  ForwardingStore(LabelStore& store, Mode mode) : store_(store), batched_(mode == Mode::ChoiceOnTheHost) {}
   int labelCount() const override { return store_.labelCount(); }
   std::vector<double> supports() override { return store_.supports(); }
   void remap(const std::vector<int>& target, int new_count) override { store_.remap(target, new_count); }
@@ -156,9 +159,21 @@ class ForwardingStore final : public LabelStore {
   LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
     return store_.costModel(twists, use_occlusion, config);
   }
+  std::vector<LabelCostModel> costModels(const std::vector<std::vector<Vector6d>>& twist_sets, bool use_occlusion,
+                                         const Config& config) override {
+    return batched_ ? store_.costModels(twist_sets, use_occlusion, config)
+                    : LabelStore::costModels(twist_sets, use_occlusion, config);
+  }
+  bool refitUnionsWhereTheSumsAre(const std::vector<Vector6d>& twists, const std::vector<std::vector<int>>& groups,
+                                  const std::vector<int>& batches, const std::vector<Vector6d>& starts, int iterations,
+                                  bool use_occlusion, const Config& config, std::vector<UnionFit>& fits) override {
+    return batched_ &&
+           store_.refitUnionsWhereTheSumsAre(twists, groups, batches, starts, iterations, use_occlusion, config, fits);
+  }
 
  private:
   LabelStore& store_;
+  bool batched_;
 };
 
 // The whole sequence of stage calls a solve makes, on both backends, compared after each.
@@ -265,7 +280,7 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
     const std::vector<std::vector<int>> groups = {{0, 1}, {2}, {1, 2}};
     const std::vector<Vector6d> starts = {twists[1], twists[2] + Vector6d::Constant(0.002), twists[2]};
     const std::vector<UnionFit> host_loop = [&] {
-      ForwardingStore forward(*gpu);
+      ForwardingStore forward(*gpu, ForwardingStore::Mode::HostLoop);
       return refitUnions(forward, twists, groups, starts, 3, true, config);
     }();
     const std::vector<UnionFit> device = refitUnions(*gpu, twists, groups, starts, 3, true, config);
@@ -287,26 +302,37 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
     }
     EXPECT_GT(device[0].iterations, 0) << "the union's fit took no step: the test shows little";
 
-    // refitPairsFromTheBetterMotion: each pair's start chosen by the backend's cost models (the same choice on both
-    // backends) and refitted through refitUnions, against the CPU backend. Three pairs of three labels: three batches;
-    // label 2's twist moved so that the starts differ.
+    // refitPairsFromTheBetterMotion: the device's choice of each pair's start (no wait between the passes) against the
+    // host's choice over the same backend's passes, bit for bit, and against the CPU backend. Three pairs of three
+    // labels: three batches; label 2's twist moved so that the starts differ.
     std::vector<Vector6d> moved = twists;
     moved[2] += Vector6d::Constant(0.003);
     const std::vector<std::vector<int>> pairs = {{0, 1}, {1, 2}, {2, 0}};
-    EXPECT_EQ(unionBatches(pairs), (std::vector<int>{0, 1, 2}));
-    const LabelCostModel own_gpu = gpu->costModel(moved, true, config), own_cpu = cpu->costModel(moved, true, config);
-    const std::vector<UnionFit> on_device = refitPairsFromTheBetterMotion(*gpu, moved, pairs, own_gpu, 2, true, config);
-    const std::vector<UnionFit> on_cpu = refitPairsFromTheBetterMotion(*cpu, moved, pairs, own_cpu, 2, true, config);
+    const std::vector<int> pair_batches = unionBatches(pairs);
+    EXPECT_EQ(pair_batches, (std::vector<int>{0, 1, 2}));
+    const std::vector<double> own = gpu->costModel(moved, true, config).cost;
+    const std::vector<UnionFit> on_device =
+        refitPairsFromTheBetterMotion(*gpu, moved, pairs, pair_batches, own, 2, true, config);
+    const std::vector<UnionFit> chosen_on_host = [&] {
+      ForwardingStore forward(*gpu, ForwardingStore::Mode::ChoiceOnTheHost);
+      return refitPairsFromTheBetterMotion(forward, moved, pairs, pair_batches, own, 2, true, config);
+    }();
+    const std::vector<UnionFit> on_cpu = refitPairsFromTheBetterMotion(
+        *cpu, moved, pairs, pair_batches, cpu->costModel(moved, true, config).cost, 2, true, config);
     ASSERT_EQ(on_device.size(), pairs.size());
+    ASSERT_EQ(chosen_on_host.size(), pairs.size());
     for (std::size_t p = 0; p < pairs.size(); ++p) {
       SCOPED_TRACE("pair " + std::to_string(p));
-      EXPECT_EQ(betterMotionByModel(own_gpu, moved, pairs[p][0], pairs[p][1]),
-                betterMotionByModel(own_cpu, moved, pairs[p][0], pairs[p][1]));
+      EXPECT_EQ(on_device[p].twist, chosen_on_host[p].twist);
+      EXPECT_EQ(on_device[p].cost, chosen_on_host[p].cost);
+      EXPECT_EQ(on_device[p].iterations, chosen_on_host[p].iterations);
+      EXPECT_EQ(on_device[p].member_cost, chosen_on_host[p].member_cost);
+      EXPECT_EQ(on_device[p].curvature, chosen_on_host[p].curvature);
       EXPECT_EQ(on_device[p].iterations, on_cpu[p].iterations);
       EXPECT_LT((on_device[p].twist - on_cpu[p].twist).cwiseAbs().maxCoeff(), 1e-5) << on_cpu[p].twist.transpose();
       EXPECT_NEAR(on_device[p].cost, on_cpu[p].cost, 1e-4 * std::fabs(on_cpu[p].cost));
     }
-    EXPECT_THROW(refitPairsFromTheBetterMotion(*gpu, moved, {{1, 1}}, own_gpu, 2, true, config), InputError);
+    EXPECT_THROW(refitPairsFromTheBetterMotion(*gpu, moved, {{1, 1}}, {0}, own, 2, true, config), InputError);
   }
 
   // Remap: labels 0 and 1 merge, label 2 goes to the outlier label, the others shift down.

@@ -140,6 +140,17 @@ class LabelStore {
         (void)fits;
     return false;
   }
+  /// @brief refitPairsFromTheBetterMotion (below; its arguments checked there) where the sums are: the CUDA backend
+  /// runs the swapped pass, the choice of each pair's start and the refit's passes and steps on the device and waits
+  /// once. False (the default): the store cannot, and the host chooses between the passes.
+  virtual bool refitPairsWhereTheSumsAre(const std::vector<Vector6d>& twists,
+                                         const std::vector<std::vector<int>>& pairs, const std::vector<int>& batches,
+                                         const std::vector<double>& own_cost, int iterations, bool use_occlusion,
+                                         const Config& config, std::vector<UnionFit>& fits) {
+    (void)twists, (void)pairs, (void)batches, (void)own_cost, (void)iterations, (void)use_occlusion, (void)config,
+        (void)fits;
+    return false;
+  }
 };
 
 /// @brief Which pass each group of refitUnions shares: groups are taken in order, each into the first batch none of
@@ -211,21 +222,17 @@ std::vector<UnionFit> refitUnions(LabelStore& labels, const std::vector<Vector6d
                                   const std::vector<std::vector<int>>& groups, const std::vector<Vector6d>& starts,
                                   int iterations, bool use_occlusion, const Config& config);
 
-/// @brief Which of two motion labels' motions the union of their pixels pays less under, as their quadratic models
-/// (`own`: LabelStore::costModel at `twists`) predict it: a's where own a's cost plus b's predicted cost at a's twist
-/// (E_b + 2 g_b^T d + d^T H_b d, d = twist_a - twist_b) is at most the reverse, else b's. The merge test's start,
-/// chosen without a pass over the pixels (a pass of each side under the other's motion chose the same start on the
-/// synthetic scenes and the TUM excerpt, and one pass in four of each round: docs/decisions). Throws InputError when a
-/// or b is not a label of `own` and `twists`.
-int betterMotionByModel(const LabelCostModel& own, const std::vector<Vector6d>& twists, int a, int b);
-
 /// @brief For each pair {a, b} of motion labels, one motion refitted on the union of their pixels (refitUnions,
-/// `iterations` steps) from the better of the two motions (betterMotionByModel under `own`, the labels' cost models at
-/// `twists`). Throws InputError on mismatched sizes or a pair that is not two distinct labels.
+/// `iterations` steps) from the better of the two motions: a's where own_cost[a] plus what b's pixels pay under a's
+/// motion is at most what a's pixels pay under b's motion plus own_cost[b], else b's (each side under the other's
+/// motion: one pass per batch, the batch's pairs swapped). `batches` = unionBatches(pairs) (the pairs of a batch are
+/// disjoint); `own_cost` holds each motion label's cost under its own twist. Throws InputError on mismatched sizes or a
+/// pair that is not two distinct labels.
 std::vector<UnionFit> refitPairsFromTheBetterMotion(LabelStore& labels, const std::vector<Vector6d>& twists,
                                                     const std::vector<std::vector<int>>& pairs,
-                                                    const LabelCostModel& own, int iterations, bool use_occlusion,
-                                                    const Config& config);
+                                                    const std::vector<int>& batches,
+                                                    const std::vector<double>& own_cost, int iterations,
+                                                    bool use_occlusion, const Config& config);
 
 /// @brief mergeWhereOneMotionExplains refits a pair (and estimateStaticWorld tests a segment under the world's motion)
 /// only where the quadratic model predicts an increase below this many times what may be paid: the model is exact near
@@ -260,7 +267,7 @@ bool oneMotionExplains(const MergeEvidence& evidence, double own_tolerance, doub
 /// with merge_refit_tolerance_parts (the stream kept them apart a pair ago), and two that movedApartBefore by
 /// merge_memory_displacement are not tested in this pair (a part merges after a pair at rest, not at the turn of its
 /// motion). The merged label takes the refitted motion and mergedLineage. Costs one accumulator pass for the labels'
-/// own costs and models (none when `own_model`, the labels' LabelStore::costModel under `twists`, is given) and 1 +
+/// own costs (none when `own_model`, the labels' LabelStore::costModel under `twists`, is given) and 2 +
 /// merge_refit_iterations (batched) passes per round. Throws InputError on mismatched sizes.
 AdaptationStats mergeWhereOneMotionExplains(LabelStore& labels, std::vector<Vector6d>& twists, int valid_pixels,
                                             bool use_occlusion, const Config& config,
