@@ -967,9 +967,19 @@ __device__ bool solveSpd6(double A[36], const double b[6], double x[6]) {
   return true;
 }
 
-__global__ void unionRefitStep(const UnionRefitParams q) {
-  const int g = int(blockIdx.x * blockDim.x + threadIdx.x);
-  if (g >= q.groups) return;
+// One warp per group (kRefitWarps a block). The lanes find the group's members and sum their sums, lane k value k (in
+// ascending label order, as one thread summed them: the same doubles); lane 0 then takes the step, and lanes 0 and 1
+// compute the next linearisation point's exponential and left Jacobian side by side. (One thread per group spent most
+// of its 10-14 us waiting on one global load after another.)
+constexpr int kRefitWarps = 2;
+
+__global__ void __launch_bounds__(kRefitWarps * 32) unionRefitStep(const UnionRefitParams q) {
+  __shared__ double values[kRefitWarps][kLabelStride];
+  __shared__ double proposed[kRefitWarps][6];
+  __shared__ int take_shared[kRefitWarps];
+  const int warp = int(threadIdx.x) / 32, lane = int(threadIdx.x) & 31;
+  const int g = int(blockIdx.x) * kRefitWarps + warp;
+  if (g >= q.groups) return;  // warp-uniform
   UnionRefitState& st = q.state[g];
   // This group's batch: its sums, its labels' groups, costs and motions.
   const std::size_t batch = std::size_t(q.batch_of_group[g]);
@@ -978,70 +988,92 @@ __global__ void unionRefitStep(const UnionRefitParams q) {
   double* member_cost = q.member_cost + batch * std::size_t(q.n);
   LabelMotion* motions = q.motions + batch * std::size_t(q.n);
   // The union's model at the pass's twist: its members' sums, in ascending label order.
-  double H[kUpper], grad[6], cost = 0.0, pixels = 0.0;
-  for (int k = 0; k < kUpper; ++k) H[k] = 0.0;
-  for (int k = 0; k < 6; ++k) grad[k] = 0.0;
-  for (int i = 0; i < q.n; ++i) {
-    if (group_of_label[i] != g) continue;
-    const double* label = sums + std::size_t(i) * kLabelStride;
-    for (int k = 0; k < kUpper; ++k) H[k] += label[k];
-    for (int k = 0; k < 6; ++k) grad[k] += label[kUpper + k];
-    cost += label[kLabelCost];
-    pixels += label[kLabelPixels];
-  }
-  bool take = q.first;
-  if (!q.first) {
-    take = st.proposed_finite && cost <= st.cost;
-    st.damping =
-        take ? union_refit::dampingAfterAccept(st.damping, q.min_damping) : union_refit::dampingAfterReject(st.damping);
-    if (take) {
-      for (int k = 0; k < 6; ++k) st.twist[k] = st.proposed[k];
-      ++st.iterations;
+  double total = 0.0;
+  for (int base = 0; base < q.n; base += 32) {
+    const int i = base + lane;
+    unsigned members = __ballot_sync(0xffffffffu, i < q.n && group_of_label[i] == g);
+    for (; members != 0u; members &= members - 1u) {
+      const int label = base + __ffs(int(members)) - 1;
+      if (lane < kLabelStride) total += sums[std::size_t(label) * kLabelStride + lane];
     }
   }
-  if (take) {
-    for (int k = 0; k < kUpper; ++k) st.curvature[k] = H[k];
-    for (int k = 0; k < 6; ++k) st.gradient[k] = grad[k];
-    st.cost = cost;
-    st.pixels = pixels;
-    for (int i = 0; i < q.n; ++i)
-      if (group_of_label[i] == g) member_cost[i] = sums[std::size_t(i) * kLabelStride + kLabelCost];
-  }
-  if (!q.propose) return;
-  // The next step from the accepted model: (H + (damping + ridge) s I) d = -g, s the largest diagonal entry.
-  double A[36];
-  double scale = 1e-12;
-  {
-    int k = 0;
-    for (int r = 0; r < 6; ++r)
-      for (int c = r; c < 6; ++c, ++k) {
-        A[r * 6 + c] = st.curvature[k];
-        A[c * 6 + r] = st.curvature[k];
+  if (lane < kLabelStride) values[warp][lane] = total;
+  __syncwarp();
+  if (lane == 0) {
+    const double* H = values[warp];
+    const double* grad = H + kUpper;
+    const double cost = H[kLabelCost], pixels = H[kLabelPixels];
+    bool take = q.first;
+    if (!q.first) {
+      take = st.proposed_finite && cost <= st.cost;
+      st.damping = take ? union_refit::dampingAfterAccept(st.damping, q.min_damping)
+                        : union_refit::dampingAfterReject(st.damping);
+      if (take) {
+        for (int k = 0; k < 6; ++k) st.twist[k] = st.proposed[k];
+        ++st.iterations;
       }
-    for (int r = 0; r < 6; ++r) scale = fmax(scale, A[r * 6 + r]);
-  }
-  for (int r = 0; r < 6; ++r) A[r * 6 + r] += (st.damping + union_refit::kRidge) * scale;
-  double minus_g[6], d[6];
-  for (int k = 0; k < 6; ++k) minus_g[k] = -st.gradient[k];
-  bool finite = solveSpd6(A, minus_g, d);
-  if (finite) {
-    const double t = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    const double r = sqrt(d[3] * d[3] + d[4] * d[4] + d[5] * d[5]);
-    const double limit = fmax(1.0, fmax(t / union_refit::kMaxTranslation, r / union_refit::kMaxRotation));
-    for (int k = 0; k < 6; ++k) {
-      d[k] /= limit;
-      finite = finite && isfinite(d[k]);
+    }
+    if (take) {
+      for (int k = 0; k < kUpper; ++k) st.curvature[k] = H[k];
+      for (int k = 0; k < 6; ++k) st.gradient[k] = grad[k];
+      st.cost = cost;
+      st.pixels = pixels;
+    }
+    take_shared[warp] = take ? 1 : 0;
+    if (q.propose) {
+      // The next step from the accepted model: (H + (damping + ridge) s I) d = -g, s the largest diagonal entry.
+      double A[36];
+      double scale = 1e-12;
+      {
+        int k = 0;
+        for (int r = 0; r < 6; ++r)
+          for (int c = r; c < 6; ++c, ++k) {
+            A[r * 6 + c] = st.curvature[k];
+            A[c * 6 + r] = st.curvature[k];
+          }
+        for (int r = 0; r < 6; ++r) scale = fmax(scale, A[r * 6 + r]);
+      }
+      for (int r = 0; r < 6; ++r) A[r * 6 + r] += (st.damping + union_refit::kRidge) * scale;
+      double minus_g[6], d[6];
+      for (int k = 0; k < 6; ++k) minus_g[k] = -st.gradient[k];
+      bool finite = solveSpd6(A, minus_g, d);
+      if (finite) {
+        const double t = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        const double r = sqrt(d[3] * d[3] + d[4] * d[4] + d[5] * d[5]);
+        const double limit = fmax(1.0, fmax(t / union_refit::kMaxTranslation, r / union_refit::kMaxRotation));
+        for (int k = 0; k < 6; ++k) {
+          d[k] /= limit;
+          finite = finite && isfinite(d[k]);
+        }
+      }
+      st.proposed_finite = finite ? 1 : 0;
+      for (int k = 0; k < 6; ++k) proposed[warp][k] = st.proposed[k] = finite ? st.twist[k] + d[k] : st.twist[k];
     }
   }
-  st.proposed_finite = finite ? 1 : 0;
-  for (int k = 0; k < 6; ++k) st.proposed[k] = finite ? st.twist[k] + d[k] : st.twist[k];
-  // The members' linearisation points for the next pass.
-  LabelMotion m;
-  se3ExpDevice(st.proposed, m.transform);
-  se3LeftJacobianDevice(st.proposed, m.left_jacobian);
-  for (int k = 0; k < 6; ++k) m.twist[k] = st.proposed[k];
-  for (int i = 0; i < q.n; ++i)
-    if (group_of_label[i] == g) motions[i] = m;
+  __syncwarp();
+  // The members' costs at an accepted twist, and their linearisation points for the next pass.
+  const bool take = take_shared[warp] != 0;
+  float transform[12], left_jacobian[36];
+  if (q.propose) {
+    if (lane == 0) se3ExpDevice(proposed[warp], transform);
+    if (lane == 1) se3LeftJacobianDevice(proposed[warp], left_jacobian);
+  }
+  for (int base = 0; base < q.n; base += 32) {
+    const int i = base + lane;
+    unsigned members = __ballot_sync(0xffffffffu, i < q.n && group_of_label[i] == g);
+    for (; members != 0u; members &= members - 1u) {
+      const int label = base + __ffs(int(members)) - 1;
+      if (take && lane == 0) member_cost[label] = sums[std::size_t(label) * kLabelStride + kLabelCost];
+      if (!q.propose) continue;
+      LabelMotion& m = motions[label];
+      if (lane == 0) {
+        for (int k = 0; k < 12; ++k) m.transform[k] = transform[k];
+        for (int k = 0; k < 6; ++k) m.twist[k] = proposed[warp][k];
+      }
+      if (lane == 1)
+        for (int k = 0; k < 36; ++k) m.left_jacobian[k] = left_jacobian[k];
+    }
+  }
 }
 
 /// @brief A pair's start choice on the device (refitPairs): its labels, their costs under their own twists and the
@@ -1373,7 +1405,8 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     q.state = StagingLayout::at<UnionRefitState>(device, state_at);
     q.member_cost = StagingLayout::at<double>(device, cost_at);
     q.motions = StagingLayout::at<LabelMotion>(device, motions_at);
-    const unsigned blocks = unsigned((group_count + 63) / 64);
+    const unsigned blocks = unsigned((group_count + 63) / 64);  // chooseUnionStarts: a thread per group
+    const unsigned refit_blocks = unsigned((group_count + kRefitWarps - 1) / kRefitWarps);
     if (own_cost) {  // the swapped pass, then each pair's start: no wait
       const auto* swapped_device = StagingLayout::at<LabelMotion>(device, swapped_at);
       enqueueSums(layout, nullptr, swapped_device, false, batch_count);
@@ -1386,7 +1419,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
       enqueueSums(layout, nullptr, q.motions, false, batch_count);
       q.first = pass == 0;
       q.propose = pass < iterations;
-      unionRefitStep<<<blocks, 64, 0, s>>>(q);
+      unionRefitStep<<<refit_blocks, kRefitWarps * 32, 0, s>>>(q);
       MCFLOW_CUDA_CHECK_LAUNCH("unionRefitStep");
     }
     // Down: the states and the members' costs (adjacent), one wait.
