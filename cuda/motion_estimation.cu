@@ -912,7 +912,7 @@ __global__ void __launch_bounds__(kStepThreads) irlsStep(const StepParams q) {
 // ----------------------------------------------------------------- refitUnions on the device
 // One motion per group of labels, refitted on their union's pixels (label_adaptation.cpp's refitUnions, the host loop,
 // step for step: the same passes and the step control of union_refit_step.h; the 6x6 solves by Cholesky in double
-// here, Eigen's LDLT there). One thread per group; the state stays on the device between the passes.
+// here, Eigen's LDLT there). One warp per group; the state stays on the device between the passes.
 
 /// @brief A group's fit between the passes (read by the host once, after the last pass).
 struct UnionRefitState {
@@ -968,15 +968,17 @@ __device__ bool solveSpd6(double A[36], const double b[6], double x[6]) {
 }
 
 // One warp per group (kRefitWarps a block). The lanes find the group's members and sum their sums, lane k value k (in
-// ascending label order, as one thread summed them: the same doubles); lane 0 then takes the step, and lanes 0 and 1
-// compute the next linearisation point's exponential and left Jacobian side by side. (One thread per group spent most
-// of its 10-14 us waiting on one global load after another.)
+// ascending label order, as one thread summed them: the same doubles); lane 0 then takes the step, lanes 0 and 1
+// compute the next linearisation point's exponential and left Jacobian side by side, and the lanes write it to the
+// members. (One thread per group spent most of its 10-14 us waiting on one global load after another.)
 constexpr int kRefitWarps = 2;
 
 __global__ void __launch_bounds__(kRefitWarps * 32) unionRefitStep(const UnionRefitParams q) {
   __shared__ double values[kRefitWarps][kLabelStride];
   __shared__ double proposed[kRefitWarps][6];
   __shared__ int take_shared[kRefitWarps];
+  __shared__ float transform[kRefitWarps][12];
+  __shared__ float left_jacobian[kRefitWarps][36];
   const int warp = int(threadIdx.x) / 32, lane = int(threadIdx.x) & 31;
   const int g = int(blockIdx.x) * kRefitWarps + warp;
   if (g >= q.groups) return;  // warp-uniform
@@ -1053,11 +1055,11 @@ __global__ void __launch_bounds__(kRefitWarps * 32) unionRefitStep(const UnionRe
   __syncwarp();
   // The members' costs at an accepted twist, and their linearisation points for the next pass.
   const bool take = take_shared[warp] != 0;
-  float transform[12], left_jacobian[36];
   if (q.propose) {
-    if (lane == 0) se3ExpDevice(proposed[warp], transform);
-    if (lane == 1) se3LeftJacobianDevice(proposed[warp], left_jacobian);
+    if (lane == 0) se3ExpDevice(proposed[warp], transform[warp]);
+    if (lane == 1) se3LeftJacobianDevice(proposed[warp], left_jacobian[warp]);
   }
+  __syncwarp();
   for (int base = 0; base < q.n; base += 32) {
     const int i = base + lane;
     unsigned members = __ballot_sync(0xffffffffu, i < q.n && group_of_label[i] == g);
@@ -1066,12 +1068,9 @@ __global__ void __launch_bounds__(kRefitWarps * 32) unionRefitStep(const UnionRe
       if (take && lane == 0) member_cost[label] = sums[std::size_t(label) * kLabelStride + kLabelCost];
       if (!q.propose) continue;
       LabelMotion& m = motions[label];
-      if (lane == 0) {
-        for (int k = 0; k < 12; ++k) m.transform[k] = transform[k];
-        for (int k = 0; k < 6; ++k) m.twist[k] = proposed[warp][k];
-      }
-      if (lane == 1)
-        for (int k = 0; k < 36; ++k) m.left_jacobian[k] = left_jacobian[k];
+      if (lane < 12) m.transform[lane] = transform[warp][lane];
+      for (int k = lane; k < 36; k += 32) m.left_jacobian[k] = left_jacobian[warp][k];
+      if (lane < 6) m.twist[lane] = proposed[warp][lane];
     }
   }
 }

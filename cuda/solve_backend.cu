@@ -152,8 +152,13 @@ class CudaSolveBackend final : public SolveBackend {
     const float* in_moved_depth = nullptr;
     const int* in_dormant = nullptr;
     const int motion_labels = int(previous.segments.size());
-    if (previous.device_outputs != 0 && previous.device_outputs == outputs_serial_ && W == outputs_width_ &&
-        H == outputs_height_ && motion_labels == outputs_motion_labels_) {
+    // The same images in the same memory: a copy of the result (which a caller may have edited) has its own, and is
+    // uploaded.
+    const bool same_images = previous.labels.data.data() == outputs_labels_memory_ &&
+                             previous.optical_flow.data.data() == outputs_flow_memory_ &&
+                             previous.moved_depth.data.data() == outputs_moved_depth_memory_;
+    if (previous.device_outputs != 0 && previous.device_outputs == outputs_serial_ && same_images &&
+        W == outputs_width_ && H == outputs_height_ && motion_labels == outputs_motion_labels_) {
       // The previous result is this backend's latest: its flow and moved depth are still on the device, its ids are its
       // output labels through a table (label index + 1 -> id). Up: the table and the dormant regions (a 640x480 pair's
       // 4.8 MB staged and uploaded took about 0.7 ms, H100 machine).
@@ -539,6 +544,9 @@ class CudaSolveBackend final : public SolveBackend {
     outputs_width_ = W;
     outputs_height_ = H;
     outputs_motion_labels_ = n;
+    outputs_labels_memory_ = result.labels.data.data();
+    outputs_flow_memory_ = result.optical_flow.data.data();
+    outputs_moved_depth_memory_ = result.moved_depth.data.data();
     result.device_outputs = outputs_serial_;
   }
 
@@ -807,6 +815,10 @@ class CudaSolveBackend final : public SolveBackend {
   // Which Result::device_outputs the images above hold (0: none; serials are unique across the process's backends).
   std::uint64_t outputs_serial_ = 0;
   int outputs_width_ = 0, outputs_height_ = 0, outputs_motion_labels_ = -1;
+  // Where that result's host images live (moves keep them, copies do not).
+  const void* outputs_labels_memory_ = nullptr;
+  const void* outputs_flow_memory_ = nullptr;
+  const void* outputs_moved_depth_memory_ = nullptr;
   DeviceBuffer<std::uint8_t> occlusion_, level_occlusion_, outlier_only_;
   DeviceBuffer<float> dual_;
   DeviceBuffer<double> scalar_, partials_, motions_, cuts_;  // partials_: chunked sums' scratch

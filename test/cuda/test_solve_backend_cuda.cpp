@@ -738,9 +738,9 @@ TEST(CudaSolveBackend, CarriedSegmentsMatchTheHostBitForBit) {
 }
 
 // A stream pair's carry reads the previous result's ids, flow and moved depth where the backend left them (its latest
-// outputs, Result::device_outputs) and uploads only a table of the ids and the dormant regions; a result whose images
-// are no longer the device's (a later solve, or device_outputs cleared by the caller) is uploaded whole. Both give the
-// same result bit for bit.
+// outputs, Result::device_outputs, in the memory the solve filled) and uploads only a table of the ids and the dormant
+// regions; a copy of that result, or one whose images a later solve replaced on the device, is uploaded whole. All give
+// the same result bit for bit.
 TEST(CudaSolveBackend, AStreamPairCarriesThePreviousOutputsLeftOnTheDevice) {
   SKIP_WITHOUT_GPU();
   SyntheticSceneOptions options;
@@ -749,42 +749,53 @@ TEST(CudaSolveBackend, AStreamPairCarriesThePreviousOutputsLeftOnTheDevice) {
   Config config;
   config.backend = Backend::Cuda;
   Solver solver(config);
-  Result first = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  // The first pair, with ids that are not the label indices (as a stream's) and dormant regions (always uploaded).
+  auto firstPair = [&] {
+    Result r = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+    r.dormant_ids = {{100, 1}};
+    r.dormant_regions = r.labels;
+    for (int& id : r.dormant_regions.data)
+      if (id > 0) id += 99;
+    std::vector<int> new_id(r.segments.size() + 1, 0);
+    for (std::size_t i = 0; i < r.segments.size(); ++i) new_id[i + 1] = r.segments[i].id = int(7 + 3 * i);
+    for (int& label : r.labels.data) label = new_id[std::size_t(label)];
+    r.next_id = int(7 + 3 * r.segments.size());
+    return r;  // moved out: the images keep their memory
+  };
+  const std::size_t pixels = std::size_t(pair.frame1.width()) * std::size_t(pair.frame1.height());
+  const std::size_t whole = 5 * pixels * sizeof(float);  // ids, flow, moved depth, dormant regions
+  auto uploadedBy = [&](const Result& previous, Result& out) {
+    const std::uint64_t before = cudaCounters().carry_bytes_uploaded;
+    out = solver.solve(pair.frame2, pair.frame1, pair.intrinsics, previous);
+    return cudaCounters().carry_bytes_uploaded - before;
+  };
+
+  Result first = firstPair();
   ASSERT_NE(first.device_outputs, 0u);
   ASSERT_GE(first.segments.size(), 2u);
-  // Dormant regions (always uploaded) and ids that are not the label indices, as a stream's are.
-  first.dormant_ids = {{100, 1}};
-  first.dormant_regions = first.labels;
-  for (int& id : first.dormant_regions.data)
-    if (id > 0) id += 99;
-  std::vector<int> new_id(first.segments.size() + 1, 0);
-  for (std::size_t i = 0; i < first.segments.size(); ++i) new_id[i + 1] = first.segments[i].id = int(7 + 3 * i);
-  for (int& label : first.labels.data) label = new_id[std::size_t(label)];
-  first.next_id = int(7 + 3 * first.segments.size());
-  Result uploaded_prior = first;
-  uploaded_prior.device_outputs = 0;
-
-  const std::size_t pixels = std::size_t(pair.frame1.width()) * std::size_t(pair.frame1.height());
-  const std::uint64_t before = cudaCounters().carry_bytes_uploaded;
-  const Result on_device = solver.solve(pair.frame2, pair.frame1, pair.intrinsics, first);
-  const std::uint64_t between = cudaCounters().carry_bytes_uploaded;
-  const Result uploaded = solver.solve(pair.frame2, pair.frame1, pair.intrinsics, uploaded_prior);
-  const std::uint64_t after = cudaCounters().carry_bytes_uploaded;
-  const Result stale = solver.solve(pair.frame2, pair.frame1, pair.intrinsics, first);  // a later solve replaced them
-  const std::uint64_t last = cudaCounters().carry_bytes_uploaded;
-  // The table and the dormant regions only; then ids, flow, moved depth and dormant regions (5 values a pixel).
-  EXPECT_EQ(between - before, (first.segments.size() + 1 + pixels) * sizeof(int));
-  EXPECT_EQ(after - between, 5 * pixels * sizeof(float));
-  EXPECT_EQ(last - after, 5 * pixels * sizeof(float));
+  const Result copy = first;  // the serial, not the memory
+  Result from_copy, on_device, stale;
+  EXPECT_EQ(uploadedBy(copy, from_copy), whole);
+  first = firstPair();
+  EXPECT_EQ(uploadedBy(first, on_device), (first.segments.size() + 1 + pixels) * sizeof(int));
+  EXPECT_EQ(uploadedBy(first, stale), whole);  // on_device's solve replaced first's images on the device
   EXPECT_EQ(on_device.start, StartKind::Warm);
-  EXPECT_EQ(firstDifference(on_device, uploaded), "");
-  EXPECT_EQ(firstDifference(on_device, stale), "");
-  EXPECT_EQ(on_device.revived_ids, uploaded.revived_ids);
-  // The ids continue the renamed ones: the carry read them through the table.
+  for (const Result* other : {&from_copy, &stale}) {
+    EXPECT_EQ(firstDifference(on_device, *other), "");
+    EXPECT_EQ(on_device.dormant_regions.data, other->dormant_regions.data);
+    EXPECT_EQ(on_device.dormant_ids, other->dormant_ids);
+    EXPECT_EQ(on_device.merged_ids, other->merged_ids);
+    EXPECT_EQ(on_device.ended_ids, other->ended_ids);
+    EXPECT_EQ(on_device.revived_ids, other->revived_ids);
+    EXPECT_EQ(on_device.next_id, other->next_id);
+    EXPECT_EQ(on_device.world.ids, other->world.ids);
+  }
+  // The ids continue the renamed ones (the carry read them through the table), and the dormant id is remembered.
   int continued = 0;
   for (const Segment& s : on_device.segments)
-    continued += std::count(new_id.begin() + 1, new_id.end(), s.id) > 0 ? 1 : 0;
+    for (const Segment& p : first.segments) continued += s.id == p.id ? 1 : 0;
   EXPECT_GE(continued, 2);
+  EXPECT_FALSE(on_device.dormant_regions.data.empty());
 }
 
 // The same at an awkward size with a made-up previous result: ids <= 0, flow off the image, NaN and infinite, moved

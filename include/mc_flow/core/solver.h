@@ -84,8 +84,9 @@ struct Result {
   ImageF optical_flow;     ///< 2 channels [px]; NaN where depth is invalid
   ImageF moved_depth;      ///< [m] depth of each frame-1 point after its motion (seen from frame 2); NaN where invalid
   /// Which solve of the CUDA backend left labels, optical_flow and moved_depth on the device (a serial; 0: none, the
-  /// CPU's): the next pair's carry reads them there while they are still the backend's latest outputs, and uploads
-  /// these images otherwise. A caller that changes those images (or the segments' order) sets it to 0.
+  /// CPU's): the next pair's carry reads them there while they are still the backend's latest outputs and this result
+  /// holds them in the memory the solve filled (a moved result does, a copy does not), and uploads these images
+  /// otherwise. A caller that changes those images in place (or the segments' order) sets it to 0.
   std::uint64_t device_outputs = 0;
   StageTimings timings;
   std::vector<OuterIterationStats> iterations;
