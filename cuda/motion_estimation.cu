@@ -970,7 +970,7 @@ __device__ bool solveSpd6(double A[36], const double b[6], double x[6]) {
 // One warp per group (kRefitWarps a block). The lanes find the group's members and sum their sums, lane k value k (in
 // ascending label order, as one thread summed them: the same doubles); lane 0 then takes the step, lanes 0 and 1
 // compute the next linearisation point's exponential and left Jacobian side by side, and the lanes write it to the
-// members. (One thread per group spent most of its 10-14 us waiting on one global load after another.)
+// members. (One thread per group took 13.8 us a call on an H100, this 10.8: ncu, docs/decisions/0017.)
 constexpr int kRefitWarps = 2;
 
 __global__ void __launch_bounds__(kRefitWarps * 32) unionRefitStep(const UnionRefitParams q) {
