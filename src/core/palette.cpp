@@ -7,6 +7,10 @@
 #include <cstring>
 #include <vector>
 
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
+
 #include "mc_flow/core/error.h"
 
 namespace mc_flow {
@@ -73,6 +77,135 @@ Rgb8 displayColour(std::uint32_t id, const std::vector<int>& world_ids) {
   return colourForId(id);
 }
 
+namespace {
+
+// u if u > 0, else +0 (NaN too), as a bit mask: no branch, so the loops vectorise.
+inline double positiveWeight(float u) {
+  std::uint32_t bits;
+  std::memcpy(&bits, &u, sizeof bits);
+  bits &= 0u - std::uint32_t(u > 0.f);
+  float positive;
+  std::memcpy(&positive, &bits, sizeof positive);
+  return positive;
+}
+
+// The blend of pixel sums with the grey, rounded as lround(clamp(v, 0, 255)) without branches: in [0, 255] truncation
+// is floor and c - floor(c) is exact, so halves go up as lround sends them. NaN (only from a NaN intensity or blend)
+// gives 0, as lround's LONG_MIN cast to 8 bits did.
+inline void writePixels(const double* r, const double* g, const double* b, const float* grey_row, double blend, int n,
+                        std::uint8_t* out) {
+  for (int k = 0; k < n; ++k) {
+    const double grey = grey_row ? 255.0 * std::clamp(double(grey_row[k]), 0.0, 1.0) : 128.0;
+    const double mix[3] = {blend * r[k] + (1 - blend) * grey, blend * g[k] + (1 - blend) * grey,
+                           blend * b[k] + (1 - blend) * grey};
+    for (int c = 0; c < 3; ++c) {
+      double v = mix[c] >= 0.0 ? mix[c] : 0.0;  // NaN too
+      v = v <= 255.0 ? v : 255.0;
+      const int whole = int(v);
+      out[3 * k + c] = std::uint8_t(whole + int(v - double(whole) >= 0.5));
+    }
+  }
+}
+
+// Pixels [x0, x0 + n) of row y: each pixel's sums take their terms in plane order (planes with no positive weight add
+// +0, which leaves the non-negative sums as they are).
+void segmentationPixels(const SoftLabels& labels, const std::vector<Rgb8>& colours, const float* grey_row, double blend,
+                        int y, int x0, int n, std::uint8_t* out) {
+  constexpr int kMax = 8;
+  const std::size_t at = std::size_t(y) * std::size_t(labels.width) + std::size_t(x0);
+  for (int k0 = 0; k0 < n; k0 += kMax) {
+    const int m = std::min(kMax, n - k0);
+    double r[kMax] = {}, g[kMax] = {}, b[kMax] = {};
+    for (int i = 0; i < labels.count; ++i) {
+      const float* u = labels.plane(i) + at + std::size_t(k0);
+      const Rgb8 c = colours[std::size_t(i)];
+      for (int k = 0; k < m; ++k) {
+        const double weight = positiveWeight(u[k]);
+        r[k] += weight * double(c.r);
+        g[k] += weight * double(c.g);
+        b[k] += weight * double(c.b);
+      }
+    }
+    writePixels(r, g, b, grey_row ? grey_row + x0 + k0 : nullptr, blend, m, out + 3 * std::size_t(k0));
+  }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+// segmentationPixels for 8 pixels at a time with AVX2: the sums stay in registers over the planes. The same double
+// operations in the same order per pixel (a multiply, then an add: no FMA), so the same bits as the loop above.
+__attribute__((target("avx2"))) void segmentationRowAvx2(const SoftLabels& labels, const std::vector<Rgb8>& colours,
+                                                         const float* grey_row, double blend, int y,
+                                                         std::uint8_t* out) {
+  const int w = labels.width, chunks = w / 8;
+  const std::size_t row = std::size_t(y) * std::size_t(w);
+  for (int chunk = 0; chunk < chunks; ++chunk) {
+    const int x0 = 8 * chunk;
+    __m256d r0 = _mm256_setzero_pd(), r1 = r0, g0 = r0, g1 = r0, b0 = r0, b1 = r0;
+    for (int i = 0; i < labels.count; ++i) {
+      __m256 u = _mm256_loadu_ps(labels.plane(i) + row + std::size_t(x0));
+      u = _mm256_and_ps(u, _mm256_cmp_ps(u, _mm256_setzero_ps(), _CMP_GT_OQ));  // +0 unless u > 0
+      const __m256d lo = _mm256_cvtps_pd(_mm256_castps256_ps128(u)), hi = _mm256_cvtps_pd(_mm256_extractf128_ps(u, 1));
+      const Rgb8 c = colours[std::size_t(i)];
+      const __m256d cr = _mm256_set1_pd(c.r), cg = _mm256_set1_pd(c.g), cb = _mm256_set1_pd(c.b);
+      r0 = _mm256_add_pd(r0, _mm256_mul_pd(lo, cr));
+      r1 = _mm256_add_pd(r1, _mm256_mul_pd(hi, cr));
+      g0 = _mm256_add_pd(g0, _mm256_mul_pd(lo, cg));
+      g1 = _mm256_add_pd(g1, _mm256_mul_pd(hi, cg));
+      b0 = _mm256_add_pd(b0, _mm256_mul_pd(lo, cb));
+      b1 = _mm256_add_pd(b1, _mm256_mul_pd(hi, cb));
+    }
+    // writePixels' rule four lanes wide: the same operations (two products, then their sum), the clamps as blends
+    // that keep a NaN where std::clamp keeps it, the mask that sends NaN and negatives to +0.
+    const __m128 grey_floats = grey_row ? _mm_loadu_ps(grey_row + x0) : _mm_setzero_ps();
+    const __m128 grey_floats_hi = grey_row ? _mm_loadu_ps(grey_row + x0 + 4) : _mm_setzero_ps();
+    alignas(32) std::int32_t channel[3][8];
+    const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0), full = _mm256_set1_pd(255.0),
+                  half = _mm256_set1_pd(0.5), weight = _mm256_set1_pd(blend), rest = _mm256_set1_pd(1 - blend);
+    for (int part = 0; part < 2; ++part) {
+      __m256d grey = _mm256_set1_pd(128.0);
+      if (grey_row) {
+        __m256d v = _mm256_cvtps_pd(part == 0 ? grey_floats : grey_floats_hi);
+        v = _mm256_blendv_pd(v, zero, _mm256_cmp_pd(v, zero, _CMP_LT_OQ));
+        v = _mm256_blendv_pd(v, one, _mm256_cmp_pd(one, v, _CMP_LT_OQ));
+        grey = _mm256_mul_pd(full, v);
+      }
+      const __m256d grey_part = _mm256_mul_pd(rest, grey);
+      const __m256d sums[3] = {part == 0 ? r0 : r1, part == 0 ? g0 : g1, part == 0 ? b0 : b1};
+      for (int c = 0; c < 3; ++c) {
+        __m256d v = _mm256_add_pd(_mm256_mul_pd(weight, sums[c]), grey_part);
+        v = _mm256_and_pd(v, _mm256_cmp_pd(v, zero, _CMP_GE_OQ));
+        v = _mm256_blendv_pd(full, v, _mm256_cmp_pd(v, full, _CMP_LE_OQ));
+        const __m128i whole = _mm256_cvttpd_epi32(v);
+        const __m256d up = _mm256_cmp_pd(_mm256_sub_pd(v, _mm256_cvtepi32_pd(whole)), half, _CMP_GE_OQ);
+        // up is all ones (-1 as an integer) where the fraction is at least a half.
+        const __m128i carry = _mm256_castsi256_si128(
+            _mm256_permutevar8x32_epi32(_mm256_castpd_si256(up), _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7)));
+        _mm_store_si128(reinterpret_cast<__m128i*>(channel[c] + 4 * part), _mm_sub_epi32(whole, carry));
+      }
+    }
+    std::uint8_t* to = out + 3 * std::size_t(x0);
+    for (int k = 0; k < 8; ++k) {
+      to[3 * k] = std::uint8_t(channel[0][k]);
+      to[3 * k + 1] = std::uint8_t(channel[1][k]);
+      to[3 * k + 2] = std::uint8_t(channel[2][k]);
+    }
+  }
+  segmentationPixels(labels, colours, grey_row, blend, y, 8 * chunks, w - 8 * chunks,
+                     out + 3 * std::size_t(8 * chunks));
+}
+#endif
+
+void segmentationRow(const SoftLabels& labels, const std::vector<Rgb8>& colours, const float* grey_row, double blend,
+                     int y, std::uint8_t* out) {
+#if defined(__x86_64__) && defined(__GNUC__)
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  if (avx2) return segmentationRowAvx2(labels, colours, grey_row, blend, y, out);
+#endif
+  segmentationPixels(labels, colours, grey_row, blend, y, 0, labels.width, out);
+}
+
+}  // namespace
+
 void segmentationPictureInto(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
                              double blend, const std::vector<int>& world_ids, std::uint8_t* rgb) {
   if (labels.count < 1 || int(ids.size()) != labels.count - 1)
@@ -82,59 +215,12 @@ void segmentationPictureInto(const SoftLabels& labels, const std::vector<int>& i
   for (const int id : ids) colours.push_back(displayColour(std::uint32_t(std::max(id, 0)), world_ids));
   colours.push_back(colourForId(0));  // the outlier plane
   const bool have_image = intensity && intensity->sameSize(labels.width, labels.height);
-  // A row at a time, plane after plane: each pixel's sums take their terms in plane order, as a loop over the
-  // planes per pixel would (the same bits), but the row loop has no dependency from pixel to pixel and
-  // vectorises. Planes with no positive weight add +0, which leaves the (non-negative) sums as they are. Rows in
-  // parallel (the nodelet builds this picture for every pair).
   const int w = labels.width;
-#pragma omp parallel
-  {
-    std::vector<double> sums(4 * std::size_t(w));
-    double* const r = sums.data();
-    double* const g = r + w;
-    double* const b = g + w;
-    double* const grey = b + w;
-#pragma omp for schedule(static)
-    for (int y = 0; y < labels.height; ++y) {
-      std::fill(sums.begin(), sums.begin() + 3 * std::ptrdiff_t(w), 0.0);
-      for (int i = 0; i < labels.count; ++i) {
-        const float* u = labels.plane(i) + std::size_t(y) * std::size_t(w);
-        const double cr = colours[std::size_t(i)].r, cg = colours[std::size_t(i)].g, cb = colours[std::size_t(i)].b;
-        for (int x = 0; x < w; ++x) {
-          // u if u > 0, else +0 (NaN too), as a bit mask: no branch, so the loop vectorises.
-          std::uint32_t bits;
-          std::memcpy(&bits, &u[x], sizeof bits);
-          bits &= 0u - std::uint32_t(u[x] > 0.f);
-          float positive;
-          std::memcpy(&positive, &bits, sizeof positive);
-          const double weight = positive;
-          r[x] += weight * cr;
-          g[x] += weight * cg;
-          b[x] += weight * cb;
-        }
-      }
-      if (have_image) {
-        const float* row = &(*intensity)(0, y);
-        for (int x = 0; x < w; ++x) grey[x] = 255.0 * std::clamp(double(row[x]), 0.0, 1.0);
-      } else {
-        std::fill(grey, grey + w, 128.0);
-      }
-      // lround(clamp(v, 0, 255)) without branches, so that the loop vectorises: in [0, 255] truncation is floor and
-      // c - floor(c) is exact, so halves go up as lround sends them. NaN (only from a NaN intensity or blend) gives 0,
-      // as lround's LONG_MIN cast to 8 bits did.
-      std::uint8_t* out = rgb + std::size_t(y) * std::size_t(w) * 3;
-      for (int x = 0; x < w; ++x) {
-        const double mix[3] = {blend * r[x] + (1 - blend) * grey[x], blend * g[x] + (1 - blend) * grey[x],
-                               blend * b[x] + (1 - blend) * grey[x]};
-        for (int c = 0; c < 3; ++c) {
-          double v = mix[c] >= 0.0 ? mix[c] : 0.0;  // NaN too
-          v = v <= 255.0 ? v : 255.0;
-          const int whole = int(v);
-          out[3 * x + c] = std::uint8_t(whole + int(v - double(whole) >= 0.5));
-        }
-      }
-    }
-  }
+  // Rows in parallel (the nodelet builds this picture for every pair).
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < labels.height; ++y)
+    segmentationRow(labels, colours, have_image ? &(*intensity)(0, y) : nullptr, blend, y,
+                    rgb + std::size_t(y) * std::size_t(w) * 3);
 }
 
 ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,

@@ -53,6 +53,14 @@ cv::Mat colourToRgb8(const cv_bridge::CvImageConstPtr& image, const std::string&
 // A cv::Mat over an ImageF's pixels: OpenCV writes into the core's image, no copy after.
 cv::Mat matOver(mc_flow::ImageF& image) { return cv::Mat(image.height, image.width, CV_32F, image.ptr()); }
 
+// One row of 8-bit RGB as intensity in [0, 1]: the one grey conversion (mc_flow::greyFromRgb, in double), as the
+// synthetic frames make it. Built for AVX2 as well as the baseline (picked at load time): the same double operations
+// four lanes wide (AVX2 alone does not enable FMA contraction), so the same bits.
+__attribute__((target_clones("avx2", "default"))) void intensityRow(const std::uint8_t* rgb, int width, float* out) {
+  for (int x = 0; x < width; ++x)
+    out[x] = float(mc_flow::greyFromRgb(rgb[3 * x], rgb[3 * x + 1], rgb[3 * x + 2]) / 255.0);
+}
+
 /// Intensity in [0, 1] of the `crop` of the colour image (16-bit grey keeps its precision), written into `out`
 /// (crop-sized).
 void colourToIntensity(const cv_bridge::CvImageConstPtr& image, const std::string& encoding, const cv::Mat& rgb8,
@@ -63,20 +71,9 @@ void colourToIntensity(const cv_bridge::CvImageConstPtr& image, const std::strin
   } else if (encoding == enc::MONO8) {
     image->image(crop).convertTo(intensity, CV_32F, 1.0 / 255.0);
   } else {
-    // The one grey conversion (mc_flow::greyFromRgb), as the command-line tool reads colour files. The products
-    // come from tables (the same doubles as 0.299 * r etc.), summed in the same order.
-    double red[256], green[256], blue[256];
-    for (int v = 0; v < 256; ++v) {
-      red[v] = 0.299 * v;
-      green[v] = 0.587 * v;
-      blue[v] = 0.114 * v;
-    }
 #pragma omp parallel for schedule(static)
-    for (int y = 0; y < crop.height; ++y) {
-      const std::uint8_t* in = rgb8.ptr<std::uint8_t>(crop.y + y) + 3 * crop.x;
-      float* row = intensity.ptr<float>(y);
-      for (int x = 0; x < crop.width; ++x, in += 3) row[x] = float((red[in[0]] + green[in[1]] + blue[in[2]]) / 255.0);
-    }
+    for (int y = 0; y < crop.height; ++y)
+      intensityRow(rgb8.ptr<std::uint8_t>(crop.y + y) + 3 * crop.x, crop.width, intensity.ptr<float>(y));
   }
   if (intensity.data != reinterpret_cast<const uchar*>(out.ptr()))
     throw std::logic_error("colourToIntensity: OpenCV reallocated the intensity image");

@@ -48,10 +48,11 @@ TEST(Palette, SegmentationPictureBlendsSegmentColoursOverTheImage) {
 
 TEST(Palette, SegmentationPictureRoundsAsLroundDoes) {
   // Each channel is std::lround of the clamped blend, halves away from zero (the picture rounds without the
-  // library call): random soft labels and greys, and exact halves (blend 0.5 over grey 0 and 255).
+  // library call): random soft labels and greys, and exact halves (blend 0.5 over grey 0 and 255). 67 columns: the
+  // rows' 8-pixel blocks (AVX2 where the CPU has it) and their 3-pixel tail; some weights negative or NaN (no share).
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> unit(0.f, 1.f);
-  const int w = 64, h = 8, segments = 5;
+  const int w = 67, h = 8, segments = 5;
   SoftLabels u(w, h, segments + 1, 0.f);
   ImageF grey(w, h, 1, 0.f);
   for (int y = 0; y < h; ++y)
@@ -64,6 +65,7 @@ TEST(Palette, SegmentationPictureRoundsAsLroundDoes) {
       float sum = 0.f;
       for (int i = 0; i <= segments; ++i) sum += (u.at(i, x, y) = unit(rng));
       for (int i = 0; i <= segments; ++i) u.at(i, x, y) /= sum;
+      if ((x + y) % 7 == 0) u.at(x % segments, x, y) = (x % 2 == 0) ? std::nanf("") : -0.25f;
       grey(x, y) = unit(rng) * 1.2f - 0.1f;  // also outside [0, 1]
     }
   const std::vector<int> ids = {1, 2, 3, 4, 5};
