@@ -43,10 +43,14 @@ int nearestCentre(const Eigen::Vector3f& p, const std::vector<Eigen::Vector3f>& 
   return nearestCentreIndex(p.x(), p.y(), p.z(), centres.front().data(), int(centres.size()));
 }
 
+// Below this many points the assignment runs on one thread: a parallel region's start costs more than it saves (a warm
+// start's K-means of the pixels no carried segment covers has a few hundred to a few thousand).
+constexpr long kParallelAssignPoints = 16384;
+
 void assignAll(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& centres,
                std::vector<int>& assignment) {
   const long n = long(points.size());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n >= kParallelAssignPoints)
   for (long i = 0; i < n; ++i) assignment[std::size_t(i)] = nearestCentre(points[std::size_t(i)], centres);
 }
 
@@ -123,38 +127,45 @@ std::vector<double> kmeansSeedingDraws(unsigned seed, int k) {
   return draws;
 }
 
-KMeansResult kmeansPoints(const ImageF& points, int k, int max_iterations, double tolerance_m, unsigned seed) {
-  requirePointImage("kmeansPoints", points);
+KMeansPointsResult kmeansPointList(const std::vector<Eigen::Vector3f>& points, int k, int max_iterations,
+                                   double tolerance_m, unsigned seed) {
   if (k < 1) throw InputError("kmeansPoints: k = " + std::to_string(k) + " must be >= 1");
   if (max_iterations < 0)
     throw InputError("kmeansPoints: max_iterations = " + std::to_string(max_iterations) + " must be >= 0");
-
-  KMeansResult result;
-  result.assignment = ImageI32(points.width, points.height, 1, -1);
-  const ValidPoints valid = collectValidPoints(points);
-  if (valid.points.empty()) return result;
-
-  result.centres = seedCentres(valid.points, k, seed);
-  std::vector<int> assignment(valid.points.size(), 0);
+  KMeansPointsResult result;
+  if (points.empty()) return result;
+  result.centres = seedCentres(points, k, seed);
+  result.assignment.assign(points.size(), 0);
   for (int it = 1; it <= max_iterations; ++it) {
-    assignAll(valid.points, result.centres, assignment);
-    const double moved = updateCentres(valid.points, assignment, result.centres);
+    assignAll(points, result.centres, result.assignment);
+    const double moved = updateCentres(points, result.assignment, result.centres);
     result.iterations = it;
     if (moved <= tolerance_m) break;
   }
   // Final assignment to the returned centres; a centre that ends up without points is dropped.
   for (;;) {
-    assignAll(valid.points, result.centres, assignment);
+    assignAll(points, result.centres, result.assignment);
     std::vector<char> used(result.centres.size(), 0);
-    for (const int a : assignment) used[std::size_t(a)] = 1;
+    for (const int a : result.assignment) used[std::size_t(a)] = 1;
     std::vector<Eigen::Vector3f> kept;
     for (std::size_t c = 0; c < result.centres.size(); ++c)
       if (used[c]) kept.push_back(result.centres[c]);
     if (kept.size() == result.centres.size()) break;
     result.centres.swap(kept);
   }
+  return result;
+}
+
+KMeansResult kmeansPoints(const ImageF& points, int k, int max_iterations, double tolerance_m, unsigned seed) {
+  requirePointImage("kmeansPoints", points);
+  const ValidPoints valid = collectValidPoints(points);
+  KMeansPointsResult list = kmeansPointList(valid.points, k, max_iterations, tolerance_m, seed);
+  KMeansResult result;
+  result.assignment = ImageI32(points.width, points.height, 1, -1);
+  result.centres = std::move(list.centres);
+  result.iterations = list.iterations;
   for (std::size_t i = 0; i < valid.points.size(); ++i)
-    result.assignment.data[std::size_t(valid.pixel[i])] = assignment[i];
+    result.assignment.data[std::size_t(valid.pixel[i])] = list.assignment[i];
   return result;
 }
 

@@ -378,18 +378,24 @@ Start Solver::Impl::warmStart(const Prepared& p, const CarriedLabels& carried, c
   const double min_new = std::max(32.0, config.min_support_fraction * double(carried.valid));
   if (uncovered >= min_new) {
     const ImageF& points = backend->framePoints(p.label_level);  // on the GPU a download: only where K-means needs it
-    ImageF open_points(points.width, points.height, 3, std::numeric_limits<float>::quiet_NaN());
-    for (std::size_t k = 0; k < start.hard.data.size(); ++k)
-      if (start.hard.data[k] < 0)
-        for (int c = 0; c < 3; ++c) open_points.data[k * 3 + std::size_t(c)] = points.data[k * 3 + std::size_t(c)];
+    // The uncovered pixels' points in pixel order, as kmeansPoints takes an image's valid points (a list of the few
+    // instead of an image of the level: no pages to fill per pair).
+    std::vector<Eigen::Vector3f> open_points;
+    std::vector<std::size_t> open_pixels;
+    for (std::size_t k = 0; k < start.hard.data.size(); ++k) {
+      const float* P = points.data.data() + 3 * k;
+      if (start.hard.data[k] < 0 && std::isfinite(P[0]) && std::isfinite(P[1]) && std::isfinite(P[2])) {
+        open_points.emplace_back(P[0], P[1], P[2]);
+        open_pixels.push_back(k);
+      }
+    }
     const int clusters = std::clamp(int(std::lround(config.initial_labels * double(uncovered) / carried.valid)), 1,
                                     config.initial_labels);
-    const KMeansResult kmeans =
-        kmeansPoints(open_points, clusters, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
+    const KMeansPointsResult kmeans =
+        kmeansPointList(open_points, clusters, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
     const int base = int(carried.ids.size());
-    for (std::size_t k = 0; k < start.hard.data.size(); ++k)
-      if (start.hard.data[k] < 0 && kmeans.assignment.data[k] >= 0)
-        start.hard.data[k] = base + kmeans.assignment.data[k];
+    for (std::size_t i = 0; i < kmeans.assignment.size(); ++i)
+      start.hard.data[open_pixels[i]] = base + kmeans.assignment[i];
     for (std::size_t c = 0; c < kmeans.centres.size(); ++c) start.twists.push_back(widest);
   }
   start.motion_labels = int(start.twists.size());

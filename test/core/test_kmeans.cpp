@@ -5,6 +5,7 @@
 #include <map>
 #include <random>
 
+#include "mc_flow/core/error.h"
 #include "mc_flow/core/kmeans.h"
 #include "mc_flow/core/nearest_centre.h"
 
@@ -68,6 +69,31 @@ TEST(KMeans, SameSeedSameResult) {
   for (std::size_t c = 0; c < a.centres.size(); ++c) EXPECT_EQ(a.centres[c], b.centres[c]);
   EXPECT_EQ(a.assignment.data, b.assignment.data);
   EXPECT_EQ(a.iterations, b.iterations);
+}
+
+TEST(KMeans, APointListGivesTheClustersOfTheImageOfItsPoints) {
+  // A warm start clusters the uncovered pixels as a list (kmeansPointList): the image's valid points in pixel order
+  // must give the image's centres and assignment.
+  ImageI32 truth;
+  const ImageF points = blobImage(truth);
+  std::vector<Eigen::Vector3f> list;
+  std::vector<std::size_t> pixel;
+  for (std::size_t k = 0; k < points.pixelCount(); ++k)
+    if (truth.data[k] >= 0) {
+      list.emplace_back(points.data[3 * k], points.data[3 * k + 1], points.data[3 * k + 2]);
+      pixel.push_back(k);
+    }
+  for (const int k : {1, 3, 7}) {
+    const KMeansResult image = kmeansPoints(points, k, 10, 0.001, 5);
+    const KMeansPointsResult from_list = kmeansPointList(list, k, 10, 0.001, 5);
+    ASSERT_EQ(from_list.centres.size(), image.centres.size()) << "k " << k;
+    for (std::size_t c = 0; c < image.centres.size(); ++c) EXPECT_EQ(from_list.centres[c], image.centres[c]);
+    ASSERT_EQ(from_list.assignment.size(), list.size());
+    for (std::size_t i = 0; i < list.size(); ++i) EXPECT_EQ(from_list.assignment[i], image.assignment.data[pixel[i]]);
+    EXPECT_EQ(from_list.iterations, image.iterations);
+  }
+  EXPECT_TRUE(kmeansPointList({}, 3, 10, 0.001, 5).centres.empty());
+  EXPECT_THROW(kmeansPointList(list, 0, 10, 0.001, 5), InputError);
 }
 
 TEST(KMeans, FewerDistinctPointsThanK) {

@@ -21,6 +21,16 @@ struct KMeansResult {
 /// by `seed` (same input + seed = same output). Returns fewer centres when fewer distinct points exist.
 KMeansResult kmeansPoints(const ImageF& points, int k, int max_iterations, double tolerance_m, unsigned seed);
 
+/// @brief kmeansPoints on a list of finite points (in the order kmeansPoints would take an image's valid points): the
+/// same centres, and each point's cluster.
+struct KMeansPointsResult {
+  std::vector<Eigen::Vector3f> centres;
+  std::vector<int> assignment;  ///< cluster index per point
+  int iterations = 0;
+};
+KMeansPointsResult kmeansPointList(const std::vector<Eigen::Vector3f>& points, int k, int max_iterations,
+                                   double tolerance_m, unsigned seed);
+
 /// @brief The k uniform draws in [0, 1) of kmeansPoints' k-means++ seeding from `seed` (draw 0 picks the first centre,
 /// draw j the (j+1)-th), from a std::mt19937 and the raw-output conversion u / 2^32, which, unlike
 /// std::uniform_real_distribution, every standard library computes alike. The CUDA backend's K-means takes them as
