@@ -16,9 +16,10 @@ namespace cuda_detail {
 
 /// Kernel launches of this process (every launch site checks with MCFLOW_CUDA_CHECK_LAUNCH, which counts it;
 /// a CUB algorithm call counts as one, MCFLOW_CUDA_CHECK_CUB), and the device and page-locked allocations
-/// of the grow-only buffers, and the carries' uploads. Read by cudaCounters().
+/// of the grow-only buffers, the carries' uploads, and the CUDA graphs captured and instantiated. Read by
+/// cudaCounters().
 inline std::atomic<std::uint64_t> kernel_launches{0}, device_allocations{0}, pinned_allocations{0}, host_waits{0},
-    carry_bytes_uploaded{0};
+    carry_bytes_uploaded{0}, graph_instantiations{0};
 
 /// @brief Throws BackendError naming the call, the place and the CUDA error when `status` is not cudaSuccess.
 inline void check(cudaError_t status, const char* what, const char* file, int line) {

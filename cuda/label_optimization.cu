@@ -17,6 +17,7 @@
 #include <cub/device/device_reduce.cuh>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -382,10 +383,27 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
     MCFLOW_CUDA_CHECK_LAUNCH("primalStep");
   }
 
-  // The graph of kGraphIterations unchecked iterations for this launch configuration, captured on first use.
+  // The graph of kGraphIterations unchecked iterations for this launch configuration, captured on first use and kept
+  // among the kGraphCache most recently used: a solve's label steps change the label count and swap the label buffers,
+  // and the next pairs of a stream come back to the same configurations. (Capturing and instantiating a graph is host
+  // work, counted by cudaCounters().graph_instantiations.)
   cudaGraphExec_t graphFor(const Launch& l) {
-    if (graph_.exec && graph_launch_ == l) return graph_.exec;
-    graph_.reset();
+    ++graph_clock_;
+    for (CachedGraph& cached : graphs_)
+      if (cached.graph.exec && cached.launch == l) {
+        cached.last_used = graph_clock_;
+        return cached.graph.exec;
+      }
+    // A free slot, else the least recently used one.
+    CachedGraph* slot = &graphs_[0];
+    for (CachedGraph& cached : graphs_) {
+      if (!cached.graph.exec) {
+        slot = &cached;
+        break;
+      }
+      if (cached.last_used < slot->last_used) slot = &cached;
+    }
+    slot->graph.reset();
     cudaStream_t s = stream_;
     MCFLOW_CUDA_CHECK(cudaStreamBeginCapture(s, cudaStreamCaptureModeThreadLocal));
     cudaGraph_t graph = nullptr;
@@ -397,11 +415,13 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
       throw;
     }
     MCFLOW_CUDA_CHECK(cudaStreamEndCapture(s, &graph));
-    const cudaError_t status = cudaGraphInstantiate(&graph_.exec, graph, 0);
+    const cudaError_t status = cudaGraphInstantiate(&slot->graph.exec, graph, 0);
     cudaGraphDestroy(graph);
     MCFLOW_CUDA_CHECK(status);
-    graph_launch_ = l;
-    return graph_.exec;
+    cuda_detail::graph_instantiations.fetch_add(1, std::memory_order_relaxed);
+    slot->launch = l;
+    slot->last_used = graph_clock_;
+    return slot->graph.exec;
   }
 
   template <typename T>
@@ -452,8 +472,15 @@ class PrimalDualEngine final : public cuda_detail::DevicePrimalDual {
   std::size_t temp_bytes_ = 0, reduced_items_ = 0;
   std::size_t primal_shared_limit_ = 48 * 1024;  // available without opting in
   std::uint64_t buffer_generation_ = 0;
-  GraphHolder graph_;  // declared last: destroyed before the buffers it refers to
-  Launch graph_launch_;
+  // Declared last: destroyed before the buffers they refer to.
+  struct CachedGraph {
+    GraphHolder graph;
+    Launch launch;
+    std::uint64_t last_used = 0;
+  };
+  static constexpr int kGraphCache = 16;
+  std::array<CachedGraph, kGraphCache> graphs_;
+  std::uint64_t graph_clock_ = 0;
 };
 
 // The host-memory interface: uploads the problem and the warm start, runs the engine, downloads u and p.

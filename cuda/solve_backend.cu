@@ -859,6 +859,7 @@ CudaCounters cudaCounters() {
   c.pinned_allocations = cuda_detail::pinned_allocations.load();
   c.host_waits = cuda_detail::host_waits.load();
   c.carry_bytes_uploaded = cuda_detail::carry_bytes_uploaded.load();
+  c.graph_instantiations = cuda_detail::graph_instantiations.load();
   return c;
 }
 

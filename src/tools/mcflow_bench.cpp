@@ -520,10 +520,11 @@ int main(int argc, char** argv) {
     if (cudaDeviceMemory(&used, &device_total))
       std::printf(
           "# device memory in use (all processes): %.1f MiB of %.1f MiB; allocations so far: %llu device, %llu "
-          "page-locked\n",
+          "page-locked; label-step graphs instantiated: %llu\n",
           double(used) / (1024.0 * 1024.0), double(device_total) / (1024.0 * 1024.0),
           static_cast<unsigned long long>(cudaCounters().device_allocations),
-          static_cast<unsigned long long>(cudaCounters().pinned_allocations));
+          static_cast<unsigned long long>(cudaCounters().pinned_allocations),
+          static_cast<unsigned long long>(cudaCounters().graph_instantiations));
     return 0;
   } catch (const CommandLineError& e) {
     std::fprintf(stderr, "mcflow_bench: %s\n", e.what());

@@ -690,6 +690,31 @@ TEST(CudaSolveBackend, NoAllocationAfterTheFirstPairsOfASize) {
   std::printf("kernel launches per solve: %.0f\n", double(after.kernel_launches - before.kernel_launches) / 3.0);
 }
 
+// The label step's graphs (its unchecked iterations) are kept per launch configuration: a pair solved again, cold and
+// warm, captures none, and gives the same result bit for bit.
+TEST(CudaSolveBackend, LabelStepGraphsAreReusedWhenTheConfigurationsComeBack) {
+  SKIP_WITHOUT_GPU();
+  Config config;
+  config.backend = Backend::Cuda;
+  SyntheticSceneOptions options;
+  options.variant = 2;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Solver solver(config);
+  const CudaCounters start = cudaCounters();
+  const Result cold = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  const Result warm = solver.solve(pair.frame1, pair.frame2, pair.intrinsics, cold);
+  const CudaCounters first = cudaCounters();
+  EXPECT_GT(first.graph_instantiations, start.graph_instantiations);
+  const Result cold_again = solver.solve(pair.frame1, pair.frame2, pair.intrinsics);
+  const Result warm_again = solver.solve(pair.frame1, pair.frame2, pair.intrinsics, cold_again);
+  EXPECT_EQ(cudaCounters().graph_instantiations, first.graph_instantiations);
+  std::printf("label-step graphs instantiated by a cold and a warm solve: %llu\n",
+              static_cast<unsigned long long>(first.graph_instantiations - start.graph_instantiations));
+  EXPECT_EQ(cold_again.soft_labels.data, cold.soft_labels.data);
+  EXPECT_EQ(warm_again.soft_labels.data, warm.soft_labels.data);
+  EXPECT_EQ(warm_again.labels.data, warm.labels.data);
+}
+
 // Stream mode's carry on the device (cuda/warm_start.cu) against the host's (warm_start.cpp): the same carried ids and
 // dormant regions and the same hard labels at every label level, bit for bit (the device's majority up to 8 x 8 input
 // pixels per level pixel, the host's beyond).

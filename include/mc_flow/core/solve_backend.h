@@ -135,6 +135,9 @@ struct CudaCounters {
   /// Bytes the carries of stream pairs uploaded: the previous result's ids, flow and moved depth where they were no
   /// longer on the device (Result::device_outputs), else a table of its ids; its dormant regions when it has any.
   std::uint64_t carry_bytes_uploaded = 0;
+  /// CUDA graphs captured and instantiated (the label step's unchecked iterations, one per launch configuration not
+  /// in the engine's cache of recent ones).
+  std::uint64_t graph_instantiations = 0;
 };
 CudaCounters cudaCounters();
 
