@@ -107,7 +107,7 @@ struct KernelParams {
   int width = 0, height = 0, motion_labels = 0;
   int sum_regions = kWarps;  // shared-memory regions of the per-label sums (a divisor of kWarps)
   float fx = 0, fy = 0, cx = 0, cy = 0;
-  float c_intensity = 0, c_depth = 0, alpha = 0, min_weight = 0;
+  float c_intensity = 0, c_depth = 0, depth_noise_reference = 0, alpha = 0, min_weight = 0;
   double out_of_view_cost = 0;
   double* block_partials = nullptr;  // per block: motion_labels * kLabelStride label sums, then cost, pixels
   std::uint8_t* blended = nullptr;   // per pixel: 1 when in view with several active labels
@@ -297,7 +297,8 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
           float JZ[6];
           motion_pixel::depthRow(proj, gZx, gZy, row);
           motion_pixel::residualJacobian(P2, row, left_jacobian, JZ);
-          const float wZ = motion_pixel::cauchyWeight(p.alpha, p.c_depth, rZ);
+          const float c_depth = motion_pixel::depthCauchyScale(p.c_depth, p.depth_noise_reference, Z2);
+          const float wZ = motion_pixel::cauchyWeight(p.alpha, c_depth, rZ);
           const float wrZ = wZ * rZ;
           float wJZ[6];
 #pragma unroll
@@ -310,7 +311,7 @@ __global__ void __launch_bounds__(kThreads, 3) accumulateNormalEquations(const K
           for (int r = 0; r < 6; ++r)
 #pragma unroll
             for (int c = r; c < 6; ++c) Hm[k++] += wJZ[r] * JZ[c];
-          cost += mulRn(p.alpha, motion_pixel::cauchyCost(p.c_depth, rZ));
+          cost += mulRn(p.alpha, motion_pixel::cauchyCost(c_depth, rZ));
         } else {
           cost += motion_pixel::missingDepthCost(p.alpha);
         }
@@ -1619,6 +1620,7 @@ class CudaMotionAccumulator final : public cuda_detail::DeviceMotionAccumulator 
     p.cy = float(level_.intrinsics.cy);
     p.c_intensity = float(config_.cauchy_c_intensity);
     p.c_depth = float(config_.cauchy_c_depth);
+    p.depth_noise_reference = float(config_.depth_noise_reference);
     p.alpha = float(config_.alpha);
     p.min_weight = float(config_.min_label_weight);
     p.out_of_view_cost = motionOutOfViewCost(config_);

@@ -60,6 +60,7 @@ class CpuMotionAccumulator final : public MotionAccumulator {
     const Intrinsics& K = frame2.intrinsics;
     const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
     const float cI = float(config_.cauchy_c_intensity), cZ = float(config_.cauchy_c_depth);
+    const float depth_noise_reference = float(config_.depth_noise_reference);
     const float alpha = float(config_.alpha), min_weight = float(config_.min_label_weight);
     const double out_of_view_cost = motionOutOfViewCost(config_);
     int threads = 1;
@@ -159,10 +160,11 @@ class CpuMotionAccumulator final : public MotionAccumulator {
             Vector6f JZ;
             motion_pixel::depthRow(proj, gZx, gZy, row);
             motion_pixel::residualJacobian(P2, row, left_jacobian->data(), JZ.data());
-            const float wZ = motion_pixel::cauchyWeight(alpha, cZ, rZ);
+            const float cZ_here = motion_pixel::depthCauchyScale(cZ, depth_noise_reference, Z2);
+            const float wZ = motion_pixel::cauchyWeight(alpha, cZ_here, rZ);
             Hp += wZ * JZ * JZ.transpose();
             gp += wZ * rZ * JZ;
-            cost += mulRn(alpha, motion_pixel::cauchyCost(cZ, rZ));
+            cost += mulRn(alpha, motion_pixel::cauchyCost(cZ_here, rZ));
           } else {
             cost += motion_pixel::missingDepthCost(alpha);
           }

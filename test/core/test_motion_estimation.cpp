@@ -9,6 +9,7 @@
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/motion_estimation.h"
+#include "mc_flow/core/motion_estimation_pixel.h"
 #include "mc_flow/core/motion_step_control.h"
 #include "mc_flow/core/pyramid.h"
 #include "coupled_labels.h"
@@ -39,6 +40,14 @@ std::vector<Vector6d> estimateSingle(const test::TwoPlaneScene& s, const Config&
 }
 
 }  // namespace
+
+TEST(MotionEstimation, DepthCauchyScaleGrowsWithTheSquareOfDepthBeyondTheReference) {
+  EXPECT_EQ(motion_pixel::depthCauchyScale(0.03f, 0.f, 4.f), 0.03f);   // the model off
+  EXPECT_EQ(motion_pixel::depthCauchyScale(0.03f, 1.5f, 1.f), 0.03f);  // nearer than the reference
+  EXPECT_EQ(motion_pixel::depthCauchyScale(0.03f, 1.5f, 1.5f), 0.03f);
+  EXPECT_FLOAT_EQ(motion_pixel::depthCauchyScale(0.03f, 1.5f, 3.f), 0.12f);  // twice as far: four times the scale
+  EXPECT_FLOAT_EQ(motion_pixel::depthCauchyScale(0.02f, 2.f, 5.f), 0.125f);
+}
 
 TEST(MotionEstimation, RecoversSingleRigidMotionToMillimetreAndTwentiethOfDegree) {
   Vector6d truth;

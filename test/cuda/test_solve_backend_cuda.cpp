@@ -927,6 +927,33 @@ TEST(CudaSolveBackend, SolverMatchesCpuOnSyntheticScenes) {
   }
 }
 
+// The depth noise model (Config::depth_noise_reference, motion_pixel::depthCauchyScale in both accumulators and both
+// data costs): on a pair with Kinect-like noise the GPU gives the CPU's segments and, within the parity tolerance, its
+// flow, and the model changes the result on both.
+TEST(CudaSolveBackend, SolverMatchesCpuWithTheDepthNoiseModel) {
+  SKIP_WITHOUT_GPU();
+  SyntheticSceneOptions options;
+  options.variant = 0;
+  options.addSensorNoise();
+  const SyntheticPair pair = renderSyntheticPair(options);
+  Config cpu_config, gpu_config;
+  cpu_config.backend = Backend::Cpu;
+  gpu_config.backend = Backend::Cuda;
+  cpu_config.depth_noise_reference = gpu_config.depth_noise_reference = 1.5;
+  const Result a = Solver(cpu_config).solve(pair.frame1, pair.frame2, pair.intrinsics);
+  const Result b = Solver(gpu_config).solve(pair.frame1, pair.frame2, pair.intrinsics);
+  gpu_config.depth_noise_reference = 0.0;
+  const Result off = Solver(gpu_config).solve(pair.frame1, pair.frame2, pair.intrinsics);
+  const FlowErrors ea = opticalFlowErrors(a.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion);
+  const FlowErrors eb = opticalFlowErrors(b.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion);
+  const FlowErrors eo = opticalFlowErrors(off.optical_flow, pair.gt_optical_flow, &pair.gt_occlusion);
+  std::printf("depth noise model 1.5 m: segments cpu %zu gpu %zu, EPE cpu %.4f px gpu %.4f px (model off: %.4f px)\n",
+              a.segments.size(), b.segments.size(), ea.epe, eb.epe, eo.epe);
+  EXPECT_EQ(a.segments.size(), b.segments.size());
+  EXPECT_LT(std::abs(ea.epe - eb.epe), 0.01);
+  EXPECT_LT(eb.epe, eo.epe);
+}
+
 }  // namespace
 }  // namespace mc_flow
 

@@ -45,11 +45,12 @@ inline float geometricWeightFocal(const Intrinsics& K) { return float(0.5 * (K.f
 
 /// @brief The constants of a motion label's data cost at one level.
 struct DataCostTerms {
-  float fx, fy, cx, cy;        ///< frame 2's intrinsics [px]
-  float c_intensity, c_depth;  ///< Cauchy scales
-  float alpha;                 ///< weight of the depth term
-  float out_of_view;           ///< cost of a warp behind the camera or out of view
-  float missing_depth;         ///< cost of the depth term without a depth sample: as if |r_Z| = c_Z
+  float fx, fy, cx, cy;         ///< frame 2's intrinsics [px]
+  float c_intensity, c_depth;   ///< Cauchy scales
+  float depth_noise_reference;  ///< [m] where the depth scale starts to grow (motion_pixel::depthCauchyScale)
+  float alpha;                  ///< weight of the depth term
+  float out_of_view;            ///< cost of a warp behind the camera or out of view
+  float missing_depth;          ///< cost of the depth term without a depth sample: as if |r_Z| = c_Z
 };
 
 /// @brief The data cost's constants from frame 2's intrinsics K at the level and the Config (on the host, for both
@@ -62,6 +63,7 @@ inline DataCostTerms dataCostTerms(const Intrinsics& K, const Config& config) {
   t.cy = float(K.cy);
   t.c_intensity = float(config.cauchy_c_intensity);
   t.c_depth = float(config.cauchy_c_depth);
+  t.depth_noise_reference = float(config.depth_noise_reference);
   t.alpha = float(config.alpha);
   t.out_of_view = float(config.out_of_view_cost);
   t.missing_depth = t.alpha * std::log(2.f);
@@ -82,7 +84,7 @@ MCFLOW_HOST_DEVICE float motionLabelCost(const float P2[3], float I1, const Inte
   const float rI = divRn(subRn(I1, I2), t.c_intensity);
   const float cost = log1pF(mulRn(rI, rI));
   if (!sampleDepthBilinearAt(depth2, width, height, u, v, Z2)) return addRn(cost, t.missing_depth);
-  const float rZ = divRn(subRn(P2[2], Z2), t.c_depth);
+  const float rZ = divRn(subRn(P2[2], Z2), motion_pixel::depthCauchyScale(t.c_depth, t.depth_noise_reference, Z2));
   return addRn(cost, mulRn(t.alpha, log1pF(mulRn(rZ, rZ))));
 }
 

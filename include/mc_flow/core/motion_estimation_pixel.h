@@ -95,6 +95,15 @@ MCFLOW_HOST_DEVICE inline float cauchyWeight(float factor, float c, float r) {
   return divRn(factor, addRn(mulRn(c, c), mulRn(r, r)));
 }
 
+/// @brief The Cauchy scale of a depth residual where frame 2's depth is Z2 (Config::depth_noise_reference): c_depth up
+/// to `reference`, c_depth (Z2 / reference)^2 beyond it; c_depth everywhere when `reference` is 0.
+MCFLOW_HOST_DEVICE inline float depthCauchyScale(float c_depth, float reference, float Z2) {
+  if (!(reference > 0.f)) return c_depth;
+  const float ratio = divRn(Z2, reference);
+  const float growth = mulRn(ratio, ratio);
+  return growth > 1.f ? mulRn(c_depth, growth) : c_depth;
+}
+
 /// @brief The normalised Cauchy cost ln(1 + (r/c)^2) of a residual, in float.
 MCFLOW_HOST_DEVICE inline float cauchyCost(float c, float r) { return log1pF(divRn(mulRn(r, r), mulRn(c, c))); }
 
