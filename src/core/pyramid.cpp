@@ -7,6 +7,9 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/pyramid_pixel.h"
@@ -123,6 +126,80 @@ inline void interiorDownsampledDepth4(const float* const rows[4], int x0, float 
 }
 #endif
 
+#if defined(__x86_64__) && defined(__GNUC__)
+// interiorDownsampledDepth4 eight lanes wide, for CPUs with AVX2 (chosen at run time): each lane does the scalar
+// function's float operations in its order, so the same bits. Lane p reads window columns x0 + 2p .. x0 + 2p + 3; the
+// caller keeps the last lane's window (and the 16 floats each load reads) inside the row.
+__attribute__((target("avx2"))) inline __m256 depthSamples8(const float* row, int x0, int s) {
+  const float* from = row + x0 + (s & 2);
+  const __m256 a = _mm256_loadu_ps(from), b = _mm256_loadu_ps(from + 8);
+  // Within each 128-bit half the even (odd) columns of a and b, then the halves in column order.
+  const __m256 picked =
+      (s & 1) ? _mm256_shuffle_ps(a, b, _MM_SHUFFLE(3, 1, 3, 1)) : _mm256_shuffle_ps(a, b, _MM_SHUFFLE(2, 0, 2, 0));
+  return _mm256_castpd_ps(_mm256_permute4x64_pd(_mm256_castps_pd(picked), _MM_SHUFFLE(3, 1, 2, 0)));
+}
+
+__attribute__((target("avx2"))) inline __m256 validDepth8(__m256 z) {
+  return _mm256_and_ps(_mm256_cmp_ps(z, _mm256_setzero_ps(), _CMP_GT_OQ),
+                       _mm256_cmp_ps(z, _mm256_set1_ps(std::numeric_limits<float>::max()), _CMP_LE_OQ));
+}
+
+__attribute__((target("avx2"))) inline void order8(__m256& a, __m256& b) {
+  const __m256 lo = _mm256_min_ps(a, b), hi = _mm256_max_ps(a, b);
+  a = lo;
+  b = hi;
+}
+
+__attribute__((target("avx2"))) void interiorDownsampledDepth8(const float* const rows[4], int x0, float max_diff,
+                                                               float* out) {
+  const __m256 inf = _mm256_set1_ps(std::numeric_limits<float>::infinity());
+  const __m256 magnitude = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+  const __m256 limit = _mm256_set1_ps(max_diff);
+  __m256 c[4] = {depthSamples8(rows[1], x0, 1), depthSamples8(rows[1], x0, 2), depthSamples8(rows[2], x0, 1),
+                 depthSamples8(rows[2], x0, 2)};
+  __m256i n = _mm256_setzero_si256();
+  for (__m256& v : c) {
+    const __m256 ok = validDepth8(v);
+    n = _mm256_sub_epi32(n, _mm256_castps_si256(ok));  // + 1 in each lane where v is valid
+    v = _mm256_blendv_ps(inf, v, ok);
+  }
+  // sortFour's network.
+  order8(c[0], c[1]);
+  order8(c[2], c[3]);
+  order8(c[0], c[2]);
+  order8(c[1], c[3]);
+  order8(c[1], c[2]);
+  // The lower median c[(n - 1) / 2]: c[1] for n = 3, 4, else c[0].
+  const __m256 upper = _mm256_castsi256_ps(_mm256_cmpgt_epi32(n, _mm256_set1_epi32(2)));
+  const __m256 reference = _mm256_blendv_ps(c[0], c[1], upper);
+  const float k[4] = {1.f, 3.f, 3.f, 1.f};
+  __m256 sum_w = _mm256_setzero_ps(), sum_z = _mm256_setzero_ps();
+  for (int t = 0; t < 4; ++t)
+    for (int s = 0; s < 4; ++s) {
+      const __m256 z = depthSamples8(rows[t], x0, s);
+      const __m256 difference = _mm256_and_ps(_mm256_sub_ps(z, reference), magnitude);
+      const __m256 ok = _mm256_and_ps(validDepth8(z), _mm256_cmp_ps(difference, limit, _CMP_NGT_UQ));
+      const __m256 weight = _mm256_and_ps(ok, _mm256_set1_ps(k[t] * k[s]));
+      sum_w = _mm256_add_ps(sum_w, weight);
+      sum_z = _mm256_add_ps(sum_z, _mm256_mul_ps(weight, _mm256_and_ps(ok, z)));
+    }
+  const __m256 none = _mm256_castsi256_ps(_mm256_cmpeq_epi32(n, _mm256_setzero_si256()));
+  _mm256_storeu_ps(out, _mm256_andnot_ps(none, _mm256_div_ps(sum_z, sum_w)));
+}
+
+// The row's interior output pixels from x on, eight at a time; returns the first pixel not done.
+__attribute__((target("avx2"))) int interiorDepthRowAvx2(const float* const rows[4], int x, int ow, int w,
+                                                         float max_diff, float* o) {
+  for (; x + 7 < ow && 2 * (x + 7) + 2 < w; x += 8) interiorDownsampledDepth8(rows, 2 * x - 1, max_diff, o + x);
+  return x;
+}
+
+bool haveAvx2() {
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  return avx2;
+}
+#endif
+
 }  // namespace
 
 int PyramidLevel::validCount() const {
@@ -221,6 +298,9 @@ ImageF downsampleDepth(const ImageF& depth, double range) {
       x = 1;
 #if defined(__SSE2__)
       const float* const rows[4] = {r0, r1, r2, r3};
+#if defined(__x86_64__) && defined(__GNUC__)
+      if (haveAvx2()) x = interiorDepthRowAvx2(rows, x, ow, w, max_diff, o);
+#endif
       for (; x + 3 < ow && 2 * (x + 3) + 2 < w; x += 4) interiorDownsampledDepth4(rows, 2 * x - 1, max_diff, o + x);
 #endif
       for (; 2 * x + 2 < w && x < ow; ++x) o[x] = interiorDownsampledDepth(r0, r1, r2, r3, 2 * x - 1, max_diff);
