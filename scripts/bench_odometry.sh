@@ -2,7 +2,9 @@
 # The odometry benchmark on real frames with moving objects composited in (issue 28): the TUM fr1/rpy excerpt as it
 # is (static office) and with textured boxes moving in the world composited in (mcflow_bench_odometry composite),
 # each run through mc_flow (default, and one rigid motion: dense robust VO) and OpenCV's rgbd odometry (rgbd, icp,
-# rgbdicp), scored by `mcflow eval-traj` (ground truth at the colour stamp - 15 ms). Prints one markdown table.
+# rgbdicp), scored by `mcflow eval-traj` (ground truth at the colour stamp - 15 ms), and mc_flow's moving masks
+# against the boxes' pixels (`mcflow_bench_odometry moving-iou`; on the static frames the boxes' pixels of the
+# composited copy: what is flagged there is the room called moving). Prints two markdown tables.
 # Builds nothing: build the targets mcflow and mcflow_bench_odometry first (the latter needs OpenCV's contrib rgbd).
 #   bash scripts/bench_odometry.sh [TUM_DIR ($MCFLOW_SHARED_DATA/tum_fr1_rpy_0_60)]
 #   env: MCFLOW_BUILD_DIR (build), BOXES (2), SEED (1)
@@ -33,6 +35,7 @@ echo "compositing ${BOXES:-2} moving box(es) into $DATA" >&2
   --seed "${SEED:-1}" 2>/dev/null >&2
 
 rows=""
+masks=""
 notes=""
 # score SEQUENCE METHOD TRAJECTORY [ODOMETRY_CSV]: one table row from mcflow eval-traj (with run-seq's odometry.csv:
 # the NEES of each pair's camera motion, median / mean / share inside chi2_6's 95 % interval; 5.35 / 6 / 0.95 when the
@@ -59,6 +62,10 @@ for sequence in static composited; do
     summary=$("$MCFLOW" run-seq --tum "$dir" --intrinsics "$INTRINSICS" --out "$work/run" "${settings[@]}" 2>/dev/null)
     notes+="$sequence, mc_flow $variant: ${summary%; wrote *}"$'\n'
     score "$sequence" "mc_flow $variant" "$work/run/trajectory.txt" "$work/run/odometry.csv"
+    # The moving mask against the composited boxes (on the static frames: the room flagged as moving).
+    masks+="| $sequence | mc_flow $variant | "$("$BENCH" moving-iou --composited "$work/composited" --run "$work/run" |
+      awk '$1 == "moving_iou" { i = $2 } $1 == "moving_iou_median" { m = $2 } $1 == "box_recall" { r = $2 }
+           $1 == "static_flagged" { s = $2 } END { printf "%.3f | %.3f | %.3f | %.3f |", i, m, r, s }')$'\n'
     rm -rf "$work/run"
   done
   for method in rgbd icp rgbdicp; do
@@ -72,6 +79,10 @@ done
 echo "| sequence | method | ATE m | RPE trans m/frame | RPE rot deg/frame | NEES median / mean / inside95 |"
 echo "|---|---|---|---|---|---|"
 printf "%s" "$rows"
+echo
+echo "| sequence | method | moving-mask IoU (all pairs) | per pair median | box pixels flagged | other pixels flagged |"
+echo "|---|---|---|---|---|---|"
+printf "%s" "$masks"
 echo
 grep "box pixels" "$work/composited/composite.txt" | sed 's/^/composited: /'
 printf "%s" "$notes"

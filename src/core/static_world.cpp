@@ -128,13 +128,14 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
   const double noise = own.cost[std::size_t(widest)] / std::max(1.0, own.pixels[std::size_t(widest)]);
   // Whether one motion (the pass `under` of every segment at it) explains segment i's pixels as well as its own motion
   // does: the merge test's rule, against the widest segment's noise level.
-  auto explainedBy = [&](const LabelCostModel& under, int i) {
+  auto explainedBy = [&](const LabelCostModel& under, int i, double tolerance_factor) {
     MergeEvidence e;
     e.own_a = e.own_b = own.cost[std::size_t(i)];
     e.increase_a = e.increase_b = under.cost[std::size_t(i)] - own.cost[std::size_t(i)];
     e.pixels_a = e.pixels_b = own.pixels[std::size_t(i)];
     e.noise_per_pixel = noise;
-    return oneMotionExplains(e, config.merge_refit_tolerance, config.merge_refit_noise_tolerance);
+    return oneMotionExplains(e, tolerance_factor * config.merge_refit_tolerance,
+                             tolerance_factor * config.merge_refit_noise_tolerance);
   };
   // Whether group a is in front of group b where they meet (a moving thing in front of the room it moves in).
   auto inFront = [&](const std::vector<int>& a, const std::vector<int>& b) {
@@ -151,7 +152,7 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
         labels.costModel(std::vector<Vector6d>(std::size_t(n), prior_twist), use_occlusion, config);
     for (int i = 0; i < n; ++i) {
       if (own.pixels[std::size_t(i)] < 6.0) continue;  // no evidence either way
-      if (explainedBy(under_prior, i)) world.labels.push_back(i);
+      if (explainedBy(under_prior, i, 1.0)) world.labels.push_back(i);
     }
     if (!world.labels.empty()) world.chosen_by = "prior";
   }
@@ -202,13 +203,29 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
   // 4. Pieces of the room: the segments that the world's motion explains as well as their own motions do (the merge
   // test's rule) and that are not in front of it. Without the depth order a slowly moving thing would join the world
   // and stay there (docs/decisions/0011); things that move are in front of the room.
-  if (config.world_joins_pieces && depth_order && depth_order->segments == n && config.world_front_share > 0 &&
-      world.chosen_by != "prior" && int(world.labels.size()) < n) {
+  const bool joins_pieces = config.world_joins_pieces && depth_order && depth_order->segments == n &&
+                            config.world_front_share > 0 && world.chosen_by != "prior";
+  // A remembered piece is tested again: a box that the world's motion explained while it rested, or a piece whose
+  // label has come to hold a moving thing, leaves the world when the test no longer holds (by its id it would
+  // otherwise stay for the rest of the stream and drag the world's fit). It stays up to world_piece_keep_ratio times
+  // the join's allowance, so that a room piece near the limit (blur) does not flicker in and out of the world.
+  std::vector<int> remembered_pieces;
+  if (joins_pieces && world.chosen_by == "previous") {
+    for (const int i : world.labels)
+      if (i != start) remembered_pieces.push_back(i);
+    world.labels.assign(1, start);
+  }
+  if (joins_pieces && int(world.labels.size()) < n) {
     const std::vector<int> chosen = world.labels;
     // Candidates: not in front of the world, and not priced by their own quadratic model far beyond what the test
     // allows (a distinct motion), so that a pair of a room and people pays no pass.
     const Vector6d& world_twist = twists[std::size_t(start)];
     std::vector<int> candidates;
+    auto toleranceFactor = [&](int i) {
+      return std::find(remembered_pieces.begin(), remembered_pieces.end(), i) != remembered_pieces.end()
+                 ? config.world_piece_keep_ratio
+                 : 1.0;
+    };
     for (int i = 0; i < n; ++i) {
       if (std::find(chosen.begin(), chosen.end(), i) != chosen.end() || own.pixels[std::size_t(i)] < 6.0 ||
           inFront({i}, chosen))
@@ -217,14 +234,14 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
       const double predicted = d.dot(own.curvature[std::size_t(i)] * d);
       const double allowed = std::min(config.merge_refit_tolerance * std::max(0.0, own.cost[std::size_t(i)]),
                                       config.merge_refit_noise_tolerance * noise * own.pixels[std::size_t(i)]);
-      if (predicted < kRefitCandidateRatio * std::max(allowed, 1e-9)) candidates.push_back(i);
+      if (predicted < kRefitCandidateRatio * toleranceFactor(i) * std::max(allowed, 1e-9)) candidates.push_back(i);
     }
     const LabelCostModel under_world =
         candidates.empty()
             ? LabelCostModel()
             : labels.costModel(std::vector<Vector6d>(std::size_t(n), world_twist), use_occlusion, config);
     for (const int i : candidates) {
-      if (explainedBy(under_world, i)) world.labels.push_back(i);
+      if (explainedBy(under_world, i, toleranceFactor(i))) world.labels.push_back(i);
     }
   }
 

@@ -9,7 +9,12 @@
 //     real depth. Box i is placed in front of the camera at frame (i + 1/2) N / boxes, not all at the first frame:
 //     fr1/rpy pans ~100 deg in 1.3 s, and boxes placed at frame 0 had left the view by frame 20. The real images
 //     are motion-blurred in the fast turns; the boxes are not. OUT/box_N.txt hold the boxes' world-from-box poses per
-//     frame (TUM format); OUT/composite.txt says how they were made.
+//     frame (TUM format); OUT/mask/ the box pixels of each frame (PNG, 255 = a box, named as its colour image);
+//     OUT/composite.txt says how they were made.
+//   mcflow_bench_odometry moving-iou --composited DIR --run RUN
+//     Scores run-seq's moving.png of each pair (RUN/pair_NNNN, frame 1 of the pair) against DIR/mask at the same
+//     frame, sampled at the moving mask's resolution: the IoU of all pairs' pixels together, its median per pair, the
+//     share of the box pixels flagged (recall) and of the other pixels flagged (the static scene called moving).
 //   mcflow_bench_odometry opencv --tum DIR --intrinsics FX,FY,CX,CY --out TRAJ [--method rgbd|icp|rgbdicp]
 //     Frame-to-frame cv::rgbd::RgbdOdometry / ICPOdometry / RgbdICPOdometry with OpenCV's defaults, chained into a
 //     TUM trajectory (colour stamps; the camera's optical frame in the first frame's). A pair that fails holds
@@ -206,6 +211,7 @@ int cmdComposite(const CommandLine& line) {
   io::createOutputDirectory(out);
   fs::create_directories(fs::path(out) / "rgb");
   fs::create_directories(fs::path(out) / "depth");
+  fs::create_directories(fs::path(out) / "mask");
   fs::copy_file(gt_path, fs::path(out) / "groundtruth.txt", fs::copy_options::overwrite_existing);
 
   const double t0 = frames.front().stamp;
@@ -247,8 +253,10 @@ int cmdComposite(const CommandLine& line) {
       box_poses[b] += io::tumTrajectoryLine(frame.stamp, world_from_box);
     }
     long replaced = 0, in_view = 0;
+    cv::Mat box_mask(colour.size(), CV_8UC1, cv::Scalar(0));
     for (int v = 0; v < colour.rows; ++v) {
       auto* bgr = colour.ptr<cv::Vec3b>(v);
+      auto* on_box = box_mask.ptr<std::uint8_t>(v);
       auto* z_real = depth.ptr<std::uint16_t>(v);
       for (int u = 0; u < colour.cols; ++u) {
         // The ray's parameter is the camera's z, as the direction has z = 1 in the camera frame.
@@ -274,6 +282,7 @@ int cmdComposite(const CommandLine& line) {
         const double level = boxTexture(boxes[box_best], face_best, hit_best[(axis + 1) % 3], hit_best[(axis + 2) % 3]);
         for (int c = 0; c < 3; ++c) bgr[u][c] = cv::saturate_cast<std::uint8_t>(level * boxes[box_best].tint[c]);
         z_real[u] = std::uint16_t(std::min(65535.0, std::round(z_best * kTumDepthScale)));
+        on_box[u] = 255;
         ++replaced;
       }
     }
@@ -284,6 +293,7 @@ int cmdComposite(const CommandLine& line) {
     const std::string depth_name = "depth/" + fs::path(frame.depth).filename().string();
     io::writeImage((fs::path(out) / rgb_name).string(), colour);
     io::writeImage((fs::path(out) / depth_name).string(), depth);
+    io::writeImage((fs::path(out) / "mask" / fs::path(frame.rgb).filename()).string(), box_mask);
     char stamps[64];
     std::snprintf(stamps, sizeof(stamps), "%.6f", frame.stamp);
     const std::string rgb_stamp = stamps;
@@ -306,7 +316,7 @@ int cmdComposite(const CommandLine& line) {
         << std::abs(offset) << " s (interpolated); intrinsics " << K.fx << "," << K.fy << "," << K.cx << "," << K.cy
         << ".\nBoxes move in the world frame (groundtruth.txt's), t = colour stamp - " << std::fixed << t0
         << std::defaultfloat << " s; a box pixel replaces colour and depth where it is nearer than the real depth "
-        << "or the real depth is missing. Poses per frame: box_N.txt.\n";
+        << "or the real depth is missing. Poses per frame: box_N.txt; the box pixels of each frame: mask/.\n";
   for (std::size_t b = 0; b < boxes.size(); ++b) {
     const Box& box = boxes[b];
     about << "box " << b << ": anchored at t=" << anchors[b].t << " s (scene depth " << anchors[b].scene_depth
@@ -328,6 +338,58 @@ int cmdComposite(const CommandLine& line) {
   about << summary;
   io::writeTextFile((fs::path(out) / "composite.txt").string(), about.str());
   std::printf("wrote %s: %zu frames, %zu box(es); %s", out.c_str(), frames.size(), boxes.size(), summary);
+  return 0;
+}
+
+// ---------------------------------------------------------------- moving mask against the boxes
+
+int cmdMovingIou(const CommandLine& line) {
+  const std::string dir = line.text("composited", ""), run = line.text("run", "");
+  if (dir.empty() || run.empty()) throw CommandLineError("moving-iou needs --composited DIR and --run RUN");
+  const std::vector<io::SequenceFrameFiles> frames = io::listTumSequence(dir);
+  long both = 0, either = 0, truth = 0, flagged_static = 0, static_pixels = 0;
+  std::vector<double> per_pair;
+  std::size_t pairs = 0;
+  for (std::size_t f = 0; f + 1 < frames.size(); ++f) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "pair_%04zu", f);
+    const fs::path moving_path = fs::path(run) / name / "moving.png";
+    if (!fs::exists(moving_path)) continue;  // a pair that failed or was skipped
+    const fs::path truth_path = fs::path(dir) / "mask" / fs::path(frames[f].rgb).filename();
+    const cv::Mat moving = cv::imread(moving_path.string(), cv::IMREAD_GRAYSCALE);
+    const cv::Mat boxes = cv::imread(truth_path.string(), cv::IMREAD_GRAYSCALE);
+    if (moving.empty()) throw InputError("'" + moving_path.string() + "': cannot read the moving mask");
+    if (boxes.empty())
+      throw InputError("'" + truth_path.string() + "': cannot read the box mask (made by a composite before masks?)");
+    if (boxes.cols % moving.cols != 0 || boxes.rows % moving.rows != 0 ||
+        boxes.cols / moving.cols != boxes.rows / moving.rows)
+      throw InputError("'" + moving_path.string() + "' (" + std::to_string(moving.cols) + "x" +
+                       std::to_string(moving.rows) + ") is not the box mask's size (" + std::to_string(boxes.cols) +
+                       "x" + std::to_string(boxes.rows) + ") divided by a whole number");
+    const int step = boxes.cols / moving.cols;
+    long pair_both = 0, pair_either = 0;
+    for (int y = 0; y < moving.rows; ++y)
+      for (int x = 0; x < moving.cols; ++x) {
+        // The box mask at the centre of the block the moving mask's pixel stands for.
+        const bool box = boxes.at<std::uint8_t>(y * step + step / 2, x * step + step / 2) != 0;
+        const bool flagged = moving.at<std::uint8_t>(y, x) != 0;
+        pair_both += box && flagged;
+        pair_either += box || flagged;
+        truth += box;
+        static_pixels += !box;
+        flagged_static += flagged && !box;
+      }
+    both += pair_both;
+    either += pair_either;
+    if (pair_either > 0) per_pair.push_back(double(pair_both) / double(pair_either));
+    ++pairs;
+  }
+  if (pairs == 0) throw InputError("'" + run + "' holds no pair_NNNN/moving.png of " + dir + "'s frames");
+  std::sort(per_pair.begin(), per_pair.end());
+  const double median = per_pair.empty() ? 1.0 : per_pair[per_pair.size() / 2];
+  std::printf("pairs %zu\nmoving_iou %.4f\nmoving_iou_median %.4f\nbox_recall %.4f\nstatic_flagged %.4f\n", pairs,
+              either > 0 ? double(both) / double(either) : 1.0, median, truth > 0 ? double(both) / double(truth) : 1.0,
+              static_pixels > 0 ? double(flagged_static) / double(static_pixels) : 0.0);
   return 0;
 }
 
@@ -412,16 +474,21 @@ int main(int argc, char** argv) {
   const std::string usage =
       "usage: mcflow_bench_odometry composite --tum DIR --intrinsics FX,FY,CX,CY --out OUT [--boxes 2] [--seed 1] "
       "[--offset -0.015]\n"
-      "       mcflow_bench_odometry opencv --tum DIR --intrinsics FX,FY,CX,CY --out TRAJ [--method rgbd|icp|rgbdicp]\n";
+      "       mcflow_bench_odometry opencv --tum DIR --intrinsics FX,FY,CX,CY --out TRAJ [--method rgbd|icp|rgbdicp]\n"
+      "       mcflow_bench_odometry moving-iou --composited DIR --run RUN\n";
   const std::string command = argc > 1 ? argv[1] : "";
-  if (command != "composite" && command != "opencv") {
+  if (command != "composite" && command != "opencv" && command != "moving-iou") {
     std::fprintf(stderr, "%s", usage.c_str());
     return command == "--help" || command == "-h" ? 0 : 2;
   }
-  std::vector<CommandLineOption> options{
-      {"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000 units/m)"},
-      {"intrinsics", true, "FX,FY,CX,CY in pixels (TUM fr1: 517.3,516.5,318.6,255.3)"}};
-  if (command == "composite") {
+  std::vector<CommandLineOption> options;
+  if (command != "moving-iou")
+    options = {{"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000 units/m)"},
+               {"intrinsics", true, "FX,FY,CX,CY in pixels (TUM fr1: 517.3,516.5,318.6,255.3)"}};
+  if (command == "moving-iou") {
+    options.push_back({"composited", true, "a sequence made by composite (its mask/ holds the box pixels)"});
+    options.push_back({"run", true, "mcflow run-seq's output directory on that sequence"});
+  } else if (command == "composite") {
     options.push_back({"out", true, "output directory (created): the sequence with the boxes, in the TUM layout"});
     options.push_back({"boxes", true, "number of moving boxes (default 2)"});
     options.push_back({"seed", true, "seed of the boxes' sizes, poses, velocities and textures (default 1)"});
@@ -437,6 +504,7 @@ int main(int argc, char** argv) {
       std::printf("%s", line.usage().c_str());
       return 0;
     }
+    if (command == "moving-iou") return cmdMovingIou(line);
     return command == "composite" ? cmdComposite(line) : cmdOpenCv(line);
   } catch (const CommandLineError& e) {
     std::fprintf(stderr, "mcflow_bench_odometry: %s\n%s", e.what(), line.usage().c_str());

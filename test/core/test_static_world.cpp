@@ -371,6 +371,43 @@ TEST(StaticWorld, PiecesOfTheRoomJoinTheWorldUnlessInFrontOfIt) {
   EXPECT_EQ(scene.choose(u, segments, {}, &level_ground, no_join).ids, std::vector<int>{20});
 }
 
+TEST(StaticWorld, ARememberedPieceStaysOnlyWhileTheWorldsMotionExplainsIt) {
+  // The stream remembers two segments as its world. Remembered room pieces stay; a remembered segment that moves
+  // (a box that joined the world while it rested, or a label that has come to hold a moving part) leaves it, and the
+  // world's motion is then the room's alone.
+  const RoomScene scene;
+  const int width = scene.pyr1[RoomScene::kLevel].points.width;
+  const Config config = cpuConfig();
+  DepthOrder level_ground;  // no depth edges between the segments: only the motion decides
+  level_ground.segments = 2;
+  level_ground.front = {0, 0, 0, 0};
+
+  SoftLabels pieces = scene.labels([&](int x, int, bool on_room) { return !on_room ? 2 : x < width * 3 / 5 ? 0 : 1; });
+  const StaticWorld room = scene.choose(pieces, scene.roomSegments(20, 21), {20, 21}, &level_ground, config);
+  EXPECT_EQ(room.chosen_by, "previous");
+  EXPECT_EQ(room.ids, (std::vector<int>{20, 21}));
+
+  // Label 1: the fastest part alone, with its own motion; the other parts go to the outlier label.
+  const SyntheticPart* mover = nullptr;
+  for (const SyntheticPart& part : scene.pair.parts)
+    if (part.id != scene.pair.parts.front().id && (!mover || part.twist.norm() > mover->twist.norm())) mover = &part;
+  ASSERT_NE(mover, nullptr);
+  ASSERT_GT((mover->twist - scene.pair.parts.front().twist).norm(), 0.01);
+  SoftLabels with_part = scene.labels([&](int x, int y, bool on_room) {
+    return on_room ? 0 : scene.pair.gt_parts(2 * x, 2 * y) == mover->id ? 1 : 2;
+  });
+  ASSERT_GT(with_part.support(1), 50.0);
+  std::vector<Segment> segments = scene.roomSegments(30, 31);
+  segments[1].twist = mover->twist;
+  segments[1].transform = se3Exp(mover->twist);
+  const StaticWorld left = scene.choose(with_part, segments, {30, 31}, &level_ground, config);
+  EXPECT_EQ(left.chosen_by, "previous");
+  EXPECT_EQ(left.ids, std::vector<int>{30});
+  EXPECT_LT((left.twist - scene.pair.parts.front().twist).norm(), 1e-3);
+  // Without the depth order no piece is tested, so none joins and none leaves: the memory is kept as it is.
+  EXPECT_EQ(scene.choose(with_part, segments, {30, 31}, nullptr, config).ids, (std::vector<int>{30, 31}));
+}
+
 TEST(DepthOrder, CountsTheEdgesWhereOneSegmentIsInFrontOfAnother) {
   // A 4x4 square of segment 7 at 1 m in front of segment 3 at 2 m, in an 8x8 image; one row of segment 3 without
   // depth; ids read at step 1.

@@ -75,7 +75,9 @@ Matrix6d twistCovariance(const Matrix6d& curvature, double cost, double pixels, 
 /// Config::world_outgrown_ratio times their pixels and is not in front of them ("outgrown"); else the widest segment,
 /// or the second widest when the widest is in front of it ("behind"). `depth_order` null: depth order decides nothing.
 /// Then, unless a prior chose (Config::world_joins_pieces), every other segment that the chosen world's motion (its
-/// widest segment's) explains and that is not in front of the world joins it. The world's motion is fitted on the
+/// widest segment's) explains and that is not in front of the world joins it; a remembered world is its widest
+/// segment and its other segments are tested again in the same way, each allowed Config::world_piece_keep_ratio times
+/// a join's cost increase (without the depth order the memory is kept as it is). The world's motion is fitted on the
 /// union from its widest chosen segment's twist; its covariance is twistCovariance's plus the floor
 /// Config::world_covariance_floor_translation² and world_covariance_floor_rotation² on the diagonal (what real sensors
 /// leave that the fit cannot see). Also fills each segment's twist covariance (`segment_covariances`, in `segments`
