@@ -247,8 +247,12 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
 
   // One robust rigid fit on the union, from the motion of its widest chosen member: a world split into segments gives
   // one motion, not the widest piece's.
+  // With its own depth noise model (world_depth_noise_reference): the far room's depth noise is what biases a real
+  // camera's odometry, while the segmentation keeps the solver's model (docs/decisions/0021).
+  Config fit_config = config;
+  fit_config.depth_noise_reference = config.world_depth_noise_reference;
   const std::vector<UnionFit> fit = refitUnions(labels, twists, {world.labels}, {twists[std::size_t(start)]},
-                                                config.world_fit_iterations, use_occlusion, config);
+                                                config.world_fit_iterations, use_occlusion, fit_config);
   world.twist = fit[0].twist;
   world.pixels = fit[0].pixels;
   world.covariance = twistCovariance(fit[0].curvature, fit[0].cost, fit[0].pixels, config);
