@@ -75,11 +75,14 @@ class SyntheticSequence : public ::testing::Test {
             << "no ~segments for pair " << t;
       }
     }
-    // The other outputs of the last pair may still be on their way.
+    // The other outputs of the last pair may still be on their way (each topic is its own connection: the segments can
+    // arrive before the images of the same pair).
     waitFor(
         [] {
-          return cloud_->count() >= kFrames - 1 && occlusion_->count() >= kFrames - 1 &&
-                 odom_->count() >= kFrames - 1 && moving_mask_->count() >= kFrames - 1;
+          const std::size_t pairs = kFrames - 1;
+          return cloud_->count() >= pairs && occlusion_->count() >= pairs && odom_->count() >= pairs &&
+                 moving_mask_->count() >= pairs && soft_labels_->count() >= pairs && labels_->count() >= pairs &&
+                 segmentation_->count() >= pairs && markers_->count() >= pairs;
         },
         10.0);
   }
