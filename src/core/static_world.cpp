@@ -221,15 +221,17 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
     // allows (a distinct motion), so that a pair of a room and people pays no pass.
     const Vector6d& world_twist = twists[std::size_t(start)];
     std::vector<int> candidates;
-    auto toleranceFactor = [&](int i) {
-      return std::find(remembered_pieces.begin(), remembered_pieces.end(), i) != remembered_pieces.end()
-                 ? config.world_piece_keep_ratio
-                 : 1.0;
+    auto remembered = [&](int i) {
+      return std::find(remembered_pieces.begin(), remembered_pieces.end(), i) != remembered_pieces.end();
     };
+    auto toleranceFactor = [&](int i) { return remembered(i) ? config.world_piece_keep_ratio : 1.0; };
     for (int i = 0; i < n; ++i) {
-      if (std::find(chosen.begin(), chosen.end(), i) != chosen.end() || own.pixels[std::size_t(i)] < 6.0 ||
-          inFront({i}, chosen))
+      if (std::find(chosen.begin(), chosen.end(), i) != chosen.end()) continue;
+      if (own.pixels[std::size_t(i)] < 6.0) {  // no evidence either way: a remembered piece stays
+        if (remembered(i)) world.labels.push_back(i);
         continue;
+      }
+      if (inFront({i}, chosen)) continue;
       const Vector6d d = world_twist - twists[std::size_t(i)];
       const double predicted = d.dot(own.curvature[std::size_t(i)] * d);
       const double allowed = std::min(config.merge_refit_tolerance * std::max(0.0, own.cost[std::size_t(i)]),

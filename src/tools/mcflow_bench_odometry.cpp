@@ -12,9 +12,10 @@
 //     frame (TUM format); OUT/mask/ the box pixels of each frame (PNG, 255 = a box, named as its colour image);
 //     OUT/composite.txt says how they were made.
 //   mcflow_bench_odometry moving-iou --composited DIR --run RUN
-//     Scores run-seq's moving.png of each pair (RUN/pair_NNNN, frame 1 of the pair) against DIR/mask at the same
-//     frame, sampled at the moving mask's resolution: the IoU of all pairs' pixels together, its median per pair, the
-//     share of the box pixels flagged (recall) and of the other pixels flagged (the static scene called moving).
+//     Scores run-seq's moving.png of each pair (RUN/pair_NNNN) against DIR/mask at the pair's first frame (its
+//     report.json's inputs.rgb1), sampled at the moving mask's resolution: the IoU of all pairs' pixels together, its
+//     median per pair, the share of the box pixels flagged (recall) and of the other pixels flagged (the static scene
+//     called moving).
 //   mcflow_bench_odometry opencv --tum DIR --intrinsics FX,FY,CX,CY --out TRAJ [--method rgbd|icp|rgbdicp]
 //     Frame-to-frame cv::rgbd::RgbdOdometry / ICPOdometry / RgbdICPOdometry with OpenCV's defaults, chained into a
 //     TUM trajectory (colour stamps; the camera's optical frame in the first frame's). A pair that fails holds
@@ -35,6 +36,7 @@
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -346,21 +348,33 @@ int cmdComposite(const CommandLine& line) {
 int cmdMovingIou(const CommandLine& line) {
   const std::string dir = line.text("composited", ""), run = line.text("run", "");
   if (dir.empty() || run.empty()) throw CommandLineError("moving-iou needs --composited DIR and --run RUN");
-  const std::vector<io::SequenceFrameFiles> frames = io::listTumSequence(dir);
+  if (!fs::is_directory(run)) throw InputError("--run: '" + run + "' is not a directory (mcflow run-seq's --out)");
+  if (!fs::is_directory(fs::path(dir) / "mask"))
+    throw InputError("'" + dir + "' has no mask/ (made by a composite before masks, or not a composited sequence)");
+  // run-seq numbers its pairs as it solves them (a skipped frame or a reset shifts the numbers): each pair's frame 1
+  // is the rgb1 of its report.json, and its box mask is mask/ under that file's name.
+  std::vector<fs::path> pair_dirs;
+  for (const fs::directory_entry& entry : fs::directory_iterator(run))
+    if (entry.is_directory() && entry.path().filename().string().rfind("pair_", 0) == 0) pair_dirs.push_back(entry);
+  std::sort(pair_dirs.begin(), pair_dirs.end());
   long both = 0, either = 0, truth = 0, flagged_static = 0, static_pixels = 0;
   std::vector<double> per_pair;
   std::size_t pairs = 0;
-  for (std::size_t f = 0; f + 1 < frames.size(); ++f) {
-    char name[32];
-    std::snprintf(name, sizeof(name), "pair_%04zu", f);
-    const fs::path moving_path = fs::path(run) / name / "moving.png";
-    if (!fs::exists(moving_path)) continue;  // a pair that failed or was skipped
-    const fs::path truth_path = fs::path(dir) / "mask" / fs::path(frames[f].rgb).filename();
+  for (const fs::path& pair_dir : pair_dirs) {
+    const fs::path moving_path = pair_dir / "moving.png", report_path = pair_dir / "report.json";
+    if (!fs::exists(moving_path))  // run-seq writes one for every solved pair
+      throw InputError("'" + pair_dir.string() + "' has no moving.png (not written by mcflow run-seq?)");
+    const nlohmann::json report = io::readJsonFile(report_path.string());
+    if (!report.contains("inputs") || !report["inputs"].contains("rgb1") || !report["inputs"]["rgb1"].is_string())
+      throw InputError("'" + report_path.string() + "' names no inputs.rgb1 (not written by mcflow run-seq?)");
+    const fs::path truth_path =
+        fs::path(dir) / "mask" / fs::path(report["inputs"]["rgb1"].get<std::string>()).filename();
     const cv::Mat moving = cv::imread(moving_path.string(), cv::IMREAD_GRAYSCALE);
     const cv::Mat boxes = cv::imread(truth_path.string(), cv::IMREAD_GRAYSCALE);
     if (moving.empty()) throw InputError("'" + moving_path.string() + "': cannot read the moving mask");
     if (boxes.empty())
-      throw InputError("'" + truth_path.string() + "': cannot read the box mask (made by a composite before masks?)");
+      throw InputError("'" + truth_path.string() + "': cannot read the box mask of " + pair_dir.string() +
+                       "'s first frame (was the run made on this composited sequence?)");
     if (boxes.cols % moving.cols != 0 || boxes.rows % moving.rows != 0 ||
         boxes.cols / moving.cols != boxes.rows / moving.rows)
       throw InputError("'" + moving_path.string() + "' (" + std::to_string(moving.cols) + "x" +
@@ -384,9 +398,12 @@ int cmdMovingIou(const CommandLine& line) {
     if (pair_either > 0) per_pair.push_back(double(pair_both) / double(pair_either));
     ++pairs;
   }
-  if (pairs == 0) throw InputError("'" + run + "' holds no pair_NNNN/moving.png of " + dir + "'s frames");
+  if (pairs == 0) throw InputError("'" + run + "' holds no pair_NNNN/moving.png");
   std::sort(per_pair.begin(), per_pair.end());
-  const double median = per_pair.empty() ? 1.0 : per_pair[per_pair.size() / 2];
+  const std::size_t half = per_pair.size() / 2;
+  const double median = per_pair.empty()           ? 1.0
+                        : per_pair.size() % 2 == 1 ? per_pair[half]
+                                                   : 0.5 * (per_pair[half - 1] + per_pair[half]);
   std::printf("pairs %zu\nmoving_iou %.4f\nmoving_iou_median %.4f\nbox_recall %.4f\nstatic_flagged %.4f\n", pairs,
               either > 0 ? double(both) / double(either) : 1.0, median, truth > 0 ? double(both) / double(truth) : 1.0,
               static_pixels > 0 ? double(flagged_static) / double(static_pixels) : 0.0);

@@ -455,6 +455,40 @@ TEST(StaticWorld, ARememberedPieceStaysOnlyWhileTheWorldsMotionExplainsIt) {
   EXPECT_EQ(scene.choose(with_part, segments, {30, 31}, nullptr, config).ids, (std::vector<int>{30, 31}));
 }
 
+TEST(StaticWorld, ARememberedPieceIsAllowedWorldPieceKeepRatioTimesTheJoinsIncrease) {
+  // The room in two pieces; the wider one's twist (the world's motion) 2 cm off the truth, the other's true. That
+  // piece would not join a fresh world, but remembered it stays up to world_piece_keep_ratio times the join's
+  // allowance: it leaves with the ratio at 1 (the join's own test) and stays at the default 3; 4 cm off, it leaves.
+  const RoomScene scene;
+  const int width = scene.pyr1[RoomScene::kLevel].points.width;
+  SoftLabels u = scene.labels([&](int x, int, bool on_room) { return !on_room ? 2 : x < width * 3 / 5 ? 0 : 1; });
+  DepthOrder level_ground;
+  level_ground.segments = 2;
+  level_ground.front = {0, 0, 0, 0};
+  auto worldIds = [&](double offset, const std::vector<int>& memory, double keep_ratio) {
+    std::vector<Segment> segments = scene.roomSegments(20, 21);
+    segments[0].twist[0] += offset;
+    segments[0].transform = se3Exp(segments[0].twist);
+    Config config = cpuConfig();
+    config.world_piece_keep_ratio = keep_ratio;
+    return scene.choose(u, segments, memory, &level_ground, config).ids;
+  };
+  EXPECT_EQ(worldIds(0.02, {}, 3.0), std::vector<int>{20});
+  EXPECT_EQ(worldIds(0.02, {20, 21}, 1.0), std::vector<int>{20});
+  EXPECT_EQ(worldIds(0.02, {20, 21}, 3.0), (std::vector<int>{20, 21}));
+  EXPECT_EQ(worldIds(0.04, {20, 21}, 3.0), std::vector<int>{20});
+  // A remembered piece of a few pixels says nothing either way: it stays.
+  SoftLabels speck = scene.labels([&](int x, int y, bool on_room) { return !on_room ? 2 : x + y < 2 ? 1 : 0; });
+  ASSERT_LT(speck.support(1), 6.0);
+  std::vector<Segment> segments = scene.roomSegments(20, 21);
+  segments[1].twist[0] += 0.1;
+  segments[1].transform = se3Exp(segments[1].twist);
+  EXPECT_EQ(scene.choose(speck, segments, {20, 21}, &level_ground, cpuConfig()).ids, (std::vector<int>{20, 21}));
+  Config invalid;
+  invalid.world_piece_keep_ratio = 0.5;
+  EXPECT_THROW(invalid.validate(), ConfigError);
+}
+
 TEST(DepthOrder, CountsTheEdgesWhereOneSegmentIsInFrontOfAnother) {
   // A 4x4 square of segment 7 at 1 m in front of segment 3 at 2 m, in an 8x8 image; one row of segment 3 without
   // depth; ids read at step 1.

@@ -77,14 +77,22 @@ class SyntheticSequence : public ::testing::Test {
     }
     // The other outputs of the last pair may still be on their way (each topic is its own connection: the segments can
     // arrive before the images of the same pair).
-    waitFor(
-        [] {
+    auto lastPairOnTf = [] {
+      const ros::Time last = segments_->messages().back()->header.stamp;
+      for (const auto& tf : tf_->messages())
+        for (const auto& t : tf->transforms)
+          if (t.header.stamp == last) return true;
+      return false;
+    };
+    ASSERT_TRUE(waitFor(
+        [&] {
           const std::size_t pairs = kFrames - 1;
           return cloud_->count() >= pairs && occlusion_->count() >= pairs && odom_->count() >= pairs &&
                  moving_mask_->count() >= pairs && soft_labels_->count() >= pairs && labels_->count() >= pairs &&
-                 segmentation_->count() >= pairs && markers_->count() >= pairs;
+                 segmentation_->count() >= pairs && markers_->count() >= pairs && lastPairOnTf();
         },
-        10.0);
+        30.0))
+        << "some output of the last pair never arrived";
   }
 
   static SyntheticCamera* camera_;
