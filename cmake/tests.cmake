@@ -43,8 +43,9 @@ if(MCFLOW_WITH_OPENCV)
   set(MCFLOW_TEST_LIBS mc_flow_io)
   mcflow_add_gtest(test_io ${CMAKE_CURRENT_SOURCE_DIR}/test/io/*.cpp)
   target_compile_definitions(test_io PRIVATE MCFLOW_CLI_PATH="$<TARGET_FILE:mcflow>"
-                                            MCFLOW_BENCH_PATH="$<TARGET_FILE:mcflow_bench>")
-  add_dependencies(test_io mcflow mcflow_bench)
+                                            MCFLOW_BENCH_PATH="$<TARGET_FILE:mcflow_bench>"
+                                            MCFLOW_BENCH_STREAM_PATH="$<TARGET_FILE:mcflow_bench_stream>")
+  add_dependencies(test_io mcflow mcflow_bench mcflow_bench_stream)
   if(TARGET mc_flow_bag)  # the tool reads rosbags (ros_nodelet.cmake)
     target_compile_definitions(test_io PRIVATE MCFLOW_CLI_HAS_BAG=1)
   endif()

@@ -1,6 +1,8 @@
 #include "mc_flow/io/flow_io.h"
 
+#include <Eigen/Geometry>
 #include <cmath>
+#include <cstdio>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -292,6 +294,14 @@ SoftLabels readSoftLabelsNpy(const std::string& path) {
   for (std::size_t i = 0; i < n; ++i)
     for (std::size_t p = 0; p < pixels; ++p) labels.plane(int(i))[p] = array.data[p * n + i];
   return labels;
+}
+
+std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose) {
+  const Eigen::Quaterniond q(Eigen::Matrix3d(pose.topLeftCorner<3, 3>()));
+  char line[256];
+  std::snprintf(line, sizeof(line), "%.6f %.6f %.6f %.6f %.6f %.6f %.6f %.6f\n", stamp, pose(0, 3), pose(1, 3),
+                pose(2, 3), q.x(), q.y(), q.z(), q.w());
+  return line;
 }
 
 }  // namespace io

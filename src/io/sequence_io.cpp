@@ -217,14 +217,6 @@ std::vector<OdometryStep> readOdometryCsv(const std::string& path) {
   return steps;
 }
 
-std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose) {
-  const Eigen::Quaterniond q(Eigen::Matrix3d(pose.topLeftCorner<3, 3>()));
-  char line[256];
-  std::snprintf(line, sizeof(line), "%.6f %.6f %.6f %.6f %.6f %.6f %.6f %.6f\n", stamp, pose(0, 3), pose(1, 3),
-                pose(2, 3), q.x(), q.y(), q.z(), q.w());
-  return line;
-}
-
 std::vector<std::pair<double, Eigen::Matrix4d>> readTumTrajectory(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw InputError("trajectory '" + path + "': cannot be opened");

@@ -30,6 +30,7 @@
 #include "mc_flow/core/solver.h"
 #include "mc_flow/eval/metrics.h"
 #include "mc_flow/eval/real_pairs.h"
+#include "mc_flow/eval/sequence_folder.h"
 #include "mc_flow/eval/synthetic_scene.h"
 #include "mc_flow/io/benchmark.h"
 #include "mc_flow/io/camera_info.h"
@@ -230,6 +231,23 @@ std::vector<Command> commands() {
                    {"out", true, "output directory (created)"},
                    {"pairs", true, "comma-separated folder names (default: the four pairs of the shared set)"},
                    {"help", false, "this help"}}});
+
+  list.push_back(
+      {"export-seq",
+       "mcflow export-seq (--tum DIR | --frames DIR) [--intrinsics FX,FY,CX,CY | --camera-info F] --out DIR",
+       "Writes an RGB-D sequence's frames as run-seq decodes them (grey intensity in [0, 1], depth in metres, at the "
+       "input resolution) as PFM files with their stamps and intrinsics, for `mcflow_bench_stream --sequence DIR` on "
+       "a machine without OpenCV (the GPU machine): OUT/intensity_NNNNN.pfm, OUT/depth_NNNNN.pfm, OUT/stamps.txt and "
+       "OUT/intrinsics.txt (mc_flow/eval/sequence_folder.h).",
+       {{"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000/m)"},
+        {"frames", true, "directory with rgb/ and depth/ images paired in name order (depth 1000/m)"},
+        {"fps", true, "frame rate of --frames [Hz] (default 30)"},
+        {"intrinsics", true, "FX,FY,CX,CY in pixels (default: DIR/camera_info.yaml when present)"},
+        {"camera-info", true, "ROS camera_info YAML file instead of --intrinsics"},
+        {"depth-scale", true, "16-bit depth units per metre (default 5000 with --tum, 1000 with --frames)"},
+        {"max-frames", true, "stop after this many frames"},
+        {"out", true, "output directory (created)"},
+        {"help", false, "this help"}}});
   return list;
 }
 
@@ -788,6 +806,24 @@ int cmdExportReal(const CommandLine& args) {
   return 0;
 }
 
+int cmdExportSeq(const CommandLine& args) {
+  const std::string out = args.required("out");
+  if (int(args.has("tum")) + int(args.has("frames")) != 1)
+    throw CommandLineError("give one of --tum DIR or --frames DIR");
+  const SequenceSource source = fileSequence(args, 1);  // the input resolution: the bench's pipeline downsamples
+  std::vector<double> stamps;
+  Intrinsics K;
+  for (std::size_t i = 0; i < source.count; ++i) {
+    const SequenceInput in = source.load(i);
+    if (i == 0) K = in.stream.K;
+    writeSequenceFrame(out, i, in.stream.frame);
+    stamps.push_back(in.stream.stamp);
+  }
+  writeSequenceIndex(out, K, stamps);
+  std::printf("%s: %zu frames\n", out.c_str(), stamps.size());
+  return 0;
+}
+
 int cmdBenchReal(const CommandLine& args) {
   const std::string data = args.required("data");
   const Config config = buildConfig(args);
@@ -875,6 +911,7 @@ int main(int argc, char** argv) {
     if (name == "eval") return cmdEval(args);
     if (name == "bench-real") return cmdBenchReal(args);
     if (name == "export-real") return cmdExportReal(args);
+    if (name == "export-seq") return cmdExportSeq(args);
     if (name == "eval-traj") return cmdEvalTraj(args);
     return cmdDemo(args);
   } catch (const CommandLineError& e) {

@@ -24,11 +24,18 @@
 //              pose_nees: the mean over frames of the odometry pose's NEES (its accumulated covariance)
 // The first table's columns keep their meaning under --world; only their timings include the pipeline's own work.
 //
+// --sequence DIR solves a real sequence exported by `mcflow export-seq` (PFM, no OpenCV: the GPU machine) as
+// `mcflow run-seq` solves it (SequencePipeline, --downsample as run-seq's) instead of the synthetic ones, and prints
+// per mode the time per pair (push: the pipeline's call, its downsampling included; solve: Result::timings.total), the
+// segments per pair and the stage means; --trajectory FILE writes the camera's path as run-seq's trajectory.txt.
+//
 //   mcflow_bench_stream [--frames 30] [--variants 0,1,2] [--width 320] [--height 240] [--backend auto|cpu|cuda]
 //                       [--modes cold,warm] [--noise] [--ids] [--world] [--set name=value ...]
+//   mcflow_bench_stream --sequence DIR [--downsample 0] [--modes cold,warm] [--trajectory FILE] [--backend ...]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -40,8 +47,10 @@
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/core/static_world.h"
+#include "mc_flow/io/flow_io.h"
 #include "mc_flow/testing/bench.h"
 #include "mc_flow/eval/metrics.h"
+#include "mc_flow/eval/sequence_folder.h"
 #include "mc_flow/eval/synthetic_scene.h"
 
 using namespace mc_flow;
@@ -57,6 +66,9 @@ struct Options {
   bool world = false;       // the static world's metrics (issue 28)
   OutputSelection outputs;  // --outputs required: no soft labels, no scene flow
   Config config;
+  std::string sequence;    // --sequence DIR: a real sequence (mcflow export-seq) instead of the synthetic ones
+  int downsample = 0;      // --downsample, as run-seq's
+  std::string trajectory;  // --trajectory FILE: the camera's path (one mode only)
 };
 
 constexpr int kLatePart = 10;           // synthetic_scene.h: the box that starts moving at frame 10
@@ -85,6 +97,18 @@ struct WorldStats {
   // the estimate is unbiased and the covariance right.
   std::vector<double> nees_pair, nees_pose;
 };
+
+// The stage columns' sums: `s` added to `sum`.
+void addStages(StageTimings& sum, const StageTimings& s) {
+  sum.preprocessing += s.preprocessing;
+  sum.initialisation += s.initialisation;
+  sum.motion += s.motion;
+  sum.labels += s.labels;
+  sum.adaptation += s.adaptation;
+  sum.merge_test += s.merge_test;
+  sum.occlusion += s.occlusion;
+  sum.outputs += s.outputs;
+}
 
 // Majority predicted id of each true part (parts with enough pixels).
 std::map<int, int> majorityIds(const ImageI32& labels, const ImageI32& parts) {
@@ -239,15 +263,7 @@ ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& con
     const Result& r = pipeline ? *step.result : solved;
     if (t > 0) {  // the first pair is cold in both modes
       st.ms.push_back(ms);
-      const StageTimings& s = r.timings;
-      st.stages.preprocessing += s.preprocessing;
-      st.stages.initialisation += s.initialisation;
-      st.stages.motion += s.motion;
-      st.stages.labels += s.labels;
-      st.stages.adaptation += s.adaptation;
-      st.stages.merge_test += s.merge_test;
-      st.stages.occlusion += s.occlusion;
-      st.stages.outputs += s.outputs;
+      addStages(st.stages, r.timings);
       st.warm += r.start == StartKind::Warm;
       st.fallbacks += r.start == StartKind::ColdFallback;
     }
@@ -292,6 +308,59 @@ std::vector<SyntheticPair> renderSequence(const Options& opt, int variant, bool 
   return pairs;
 }
 
+double maxOf(const std::vector<double>& v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); }
+
+// A real sequence (--sequence): every frame through SequencePipeline as run-seq pushes it, in one mode.
+int runRealSequence(const Options& opt, const SequenceFolder& folder, bool warm) {
+  Config config = opt.config;
+  config.warm_start = warm;
+  SequencePipeline pipeline(config, opt.downsample, 1.0);  // run-seq's default --max-pair-interval
+  pipeline.setOutputs(opt.outputs);
+  std::vector<double> push_ms, solve_ms, segments;
+  StageTimings stages;
+  int warm_starts = 0, fallbacks = 0, failed = 0, processing_width = 0, processing_height = 0;
+  std::string trajectory;
+  for (std::size_t i = 0; i < folder.stamps.size(); ++i) {
+    StreamFrame frame{folder.frame(i), folder.K, folder.stamps[i], folder.dir, {}};  // read before the clock starts
+    const auto start = std::chrono::steady_clock::now();
+    const SequenceStep step = pipeline.push(std::move(frame));
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    if (step.outcome == SequenceStep::Outcome::PairFailed) ++failed;
+    if (step.outcome != SequenceStep::Outcome::Solved) continue;
+    const Result& r = *step.result;
+    if (trajectory.empty()) trajectory = io::tumTrajectoryLine(step.first->stamp, Eigen::Matrix4d::Identity());
+    trajectory += io::tumTrajectoryLine(step.second->stamp, pipeline.odometry().pose);
+    processing_width = r.processing_width;
+    processing_height = r.processing_height;
+    segments.push_back(double(r.segments.size()));
+    if (step.pair_index == 0) continue;  // the first pair is cold in both modes: not timed
+    push_ms.push_back(ms);
+    solve_ms.push_back(r.timings.total);
+    addStages(stages, r.timings);
+    warm_starts += r.start == StartKind::Warm;
+    fallbacks += r.start == StartKind::ColdFallback;
+  }
+  if (!opt.trajectory.empty()) {
+    std::ofstream file(opt.trajectory);
+    file << trajectory;
+    if (!file) throw io::FileError("cannot write " + opt.trajectory);
+  }
+  std::vector<double> sorted = push_ms;
+  std::sort(sorted.begin(), sorted.end());
+  const double p90 =
+      sorted.empty() ? 0.0 : sorted[std::min(sorted.size() - 1, std::size_t(0.9 * double(sorted.size())))];
+  const double n = std::max<double>(1.0, double(push_ms.size()));
+  std::printf(
+      "%-5s %9s %6zu %8.1f %9.1f %7.1f %7.1f %9.1f %8.1f %8.0f %6d %9d %6d   %.1f %.1f %.1f %.1f %.1f %.1f %.1f %.2f\n",
+      warm ? "warm" : "cold", (std::to_string(processing_width) + "x" + std::to_string(processing_height)).c_str(),
+      push_ms.size(), mean(push_ms), median(push_ms), p90, maxOf(push_ms), median(solve_ms), median(segments),
+      maxOf(segments), warm_starts, fallbacks, failed, stages.preprocessing / n, stages.initialisation / n,
+      stages.motion / n, stages.labels / n, stages.adaptation / n, stages.occlusion / n, stages.outputs / n,
+      stages.merge_test / n);
+  std::fflush(stdout);
+  return failed == 0 ? 0 : 1;
+}
+
 struct WorldRow {
   int variant = 0;
   bool warm = false;
@@ -299,8 +368,6 @@ struct WorldRow {
   WorldStats stats;
   double ate_ratio = -1;  // parts / static; < 0: not printed
 };
-
-double maxOf(const std::vector<double>& v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); }
 
 void printWorldTable(const std::vector<WorldRow>& rows, const Config& config) {
   std::printf(
@@ -352,7 +419,16 @@ int main(int argc, char** argv) {
                                            {"outputs", true,
                                             "all | required (default all): with required the solves leave out the "
                                             "soft labels and the scene flow (OutputSelection), as the nodelet does "
-                                            "when nobody subscribes to them"}});
+                                            "when nobody subscribes to them"},
+                                           {"sequence", true,
+                                            "DIR: a real sequence written by `mcflow export-seq` (PFM), solved as "
+                                            "`mcflow run-seq` solves it, instead of the synthetic sequences"},
+                                           {"downsample", true,
+                                            "with --sequence: input pixels per processing pixel, as run-seq's (0 = "
+                                            "towards 320 px wide, default)"},
+                                           {"trajectory", true,
+                                            "with --sequence and one mode: write the camera's path to FILE (TUM "
+                                            "RGB-D format, as run-seq's trajectory.txt)"}});
   try {
     line.parse(argc, argv);
     if (line.helpRequested()) {
@@ -379,9 +455,36 @@ int main(int argc, char** argv) {
     opt.outputs.soft_labels = opt.outputs.scene_flow = outputs == "all";
     line.applySettings(opt.config);
     opt.config.validate();
+    opt.sequence = line.text("sequence", "");
+    opt.downsample = line.integer("downsample", 0, 0, 64);
+    opt.trajectory = line.text("trajectory", "");
+    if (opt.sequence.empty() && (line.has("downsample") || line.has("trajectory")))
+      throw ConfigError("--downsample and --trajectory are for --sequence");
+    if (!opt.trajectory.empty() && opt.warm_modes.size() != 1)
+      throw ConfigError("--trajectory needs one mode (--modes warm or --modes cold)");
+    if (!opt.sequence.empty() && (opt.world || opt.print_ids || opt.noise))
+      throw ConfigError("--world, --ids and --noise are for the synthetic sequences, not --sequence");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mcflow_bench_stream: %s\n%s", e.what(), line.usage().c_str());
     return 2;
+  }
+  if (!opt.sequence.empty()) {
+    int code = 0;
+    try {
+      const SequenceFolder folder = readSequenceFolder(opt.sequence);
+      const RgbdFrame first = folder.frame(0);
+      std::printf("# mcflow_bench_stream --sequence %s: %zu frames of %dx%d, downsample %d, backend %s\n",
+                  opt.sequence.c_str(), folder.stamps.size(), first.width(), first.height(), opt.downsample,
+                  toString(opt.config.backend).c_str());
+      std::printf("%-5s %9s %6s %8s %9s %7s %7s %9s %8s %8s %6s %9s %6s   %s\n", "mode", "process", "pairs", "mean_ms",
+                  "median_ms", "p90_ms", "max_ms", "solve_med", "segs_med", "segs_max", "warm", "fallbacks", "failed",
+                  "mean stage ms: pyramid init motion labels count occl outputs merge");
+      for (const bool warm : opt.warm_modes) code = std::max(code, runRealSequence(opt, folder, warm));
+    } catch (const std::exception& e) {  // a missing or malformed file, a pair the solver refused
+      std::fprintf(stderr, "mcflow_bench_stream: %s\n", e.what());
+      return 1;
+    }
+    return code;
   }
   std::printf("%-8s %-5s %6s %9s %9s %9s %8s %9s %9s %6s   %s\n", "variant", "mode", "pairs", "mean_ms", "median_ms",
               "mean_epe", "id_keep", "late_pairs", "fallbacks", "warm",

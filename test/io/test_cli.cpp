@@ -424,6 +424,7 @@ TEST(CliErrors, EverySubcommandNamesTheOptionAndValueAndExits2) {
       {"bench-real --data d --repeat 0", {"--repeat", "'0'"}},
       {"bench-real --data d --mask none", {"--mask", "'none'"}},
       {"export-real --data d --out o --pairs ,", {"--pairs", "names no pair"}},
+      {"export-seq --out o", {"--tum", "--frames"}},
       {"eval stray", {"unexpected argument", "stray"}},
   };
   for (const Case& c : cases) {
@@ -432,7 +433,8 @@ TEST(CliErrors, EverySubcommandNamesTheOptionAndValueAndExits2) {
     for (const std::string& needle : c.needles) EXPECT_NE(run.err.find(needle), std::string::npos) << run.err;
     EXPECT_NE(run.err.find("usage: mcflow"), std::string::npos) << run.err;
   }
-  for (const char* command : {"run", "run-seq", "synth", "eval", "demo", "bench-real", "eval-traj", "export-real"})
+  for (const char* command :
+       {"run", "run-seq", "synth", "eval", "demo", "bench-real", "eval-traj", "export-real", "export-seq"})
     for (const char* help : {"--help", "-h"}) {
       const CliRun run = runCli(std::string(command) + " " + help);
       EXPECT_EQ(run.code, 0) << command << " " << help << ": " << run.err;

@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <sstream>
@@ -31,7 +32,10 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/static_world.h"
+#include "mc_flow/eval/sequence_folder.h"
 #include "mc_flow/io/benchmark.h"
+#include "mc_flow/io/image_io.h"
+#include "mc_flow/io/sequence_io.h"
 #include "mc_flow/io/report_io.h"
 #include <nlohmann/json.hpp>
 
@@ -285,6 +289,64 @@ TEST(BenchRealCli, McflowBenchOnTheExportedPairPrintsTheSameTable) {
   EXPECT_EQ(runTool(MCFLOW_BENCH_PATH, "--real '" + exported + "' --table" + settings).code, 1)
       << "a pair at two sizes must be refused";
   EXPECT_EQ(runTool(MCFLOW_BENCH_PATH, "--table" + settings).code, 2);
+}
+
+// One code path for real sequences: `mcflow export-seq` writes the frames run-seq decodes, bit for bit, and
+// `mcflow_bench_stream --sequence` (the GPU machine's way, no OpenCV) solves them as `mcflow run-seq` does: the same
+// camera path to the last digit.
+TEST(BenchSequenceCli, TheExportedTumFramesSolveAsRunSeqSolvesThem) {
+  const fs::path tum = sharedDataDir() / "tum_fr1_rpy_0_60";
+  ASSERT_TRUE(fs::is_directory(tum)) << "TUM excerpt missing: " << tum << " (set MCFLOW_SHARED_DATA)";
+  const fs::path exported = benchWorkDir() / "tum_sequence", run = benchWorkDir() / "tum_run_seq";
+  const std::string source = "--tum '" + tum.string() + "' --intrinsics 517.3,516.5,318.6,255.3 --max-frames 4";
+  ASSERT_EQ(runTool(MCFLOW_CLI_PATH, "export-seq " + source + " --out '" + exported.string() + "'").code, 0);
+
+  const SequenceFolder folder = readSequenceFolder(exported.string());
+  const std::vector<io::SequenceFrameFiles> files = io::listTumSequence(tum.string());
+  ASSERT_EQ(folder.stamps.size(), 4u);
+  EXPECT_EQ(folder.K.fx, 517.3);
+  EXPECT_EQ(folder.K.cy, 255.3);
+  for (std::size_t i = 0; i < folder.stamps.size(); ++i) {
+    EXPECT_EQ(folder.stamps[i], files[i].stamp) << "frame " << i;
+    const RgbdFrame decoded = io::loadRgbdFrame(files[i].rgb, files[i].depth, 5000.0);
+    const RgbdFrame read = folder.frame(i);
+    ASSERT_TRUE(read.intensity.sameSize(decoded.intensity) && read.depth.sameSize(decoded.depth)) << "frame " << i;
+    EXPECT_EQ(std::memcmp(read.intensity.data.data(), decoded.intensity.data.data(),
+                          decoded.intensity.data.size() * sizeof(float)),
+              0)
+        << "frame " << i << ": intensity";
+    EXPECT_EQ(std::memcmp(read.depth.data.data(), decoded.depth.data.data(), decoded.depth.data.size() * sizeof(float)),
+              0)
+        << "frame " << i << ": depth";
+  }
+
+  const std::string settings = " --backend cpu --set threads=2";
+  ASSERT_EQ(std::system(("'" + std::string(MCFLOW_CLI_PATH) + "' run-seq " + source + settings + " --out '" +
+                         run.string() + "' >/dev/null 2>&1")
+                            .c_str()),
+            0);
+  const fs::path trajectory = benchWorkDir() / "tum_bench_trajectory.txt";
+  const CliOutput bench =
+      runTool(MCFLOW_BENCH_STREAM_PATH, "--sequence '" + exported.string() + "' --modes warm" + settings +
+                                            " --trajectory '" + trajectory.string() + "'");
+  ASSERT_EQ(bench.code, 0) << bench.out << bench.err;
+  EXPECT_NE(bench.out.find("warm    320x240      2"), std::string::npos) << bench.out;  // pairs after the first
+  auto poses = [](const fs::path& file) {  // the lines that are not comments
+    std::istringstream in(io::readTextFile(file.string()));
+    std::string line, kept;
+    while (std::getline(in, line))
+      if (!line.empty() && line[0] != '#') kept += line + "\n";
+    return kept;
+  };
+  const std::string expected = poses(run / "trajectory.txt");
+  EXPECT_EQ(std::count(expected.begin(), expected.end(), '\n'), 4);
+  EXPECT_EQ(poses(trajectory), expected);
+
+  // A folder that is not one is named.
+  const CliOutput missing =
+      runTool(MCFLOW_BENCH_STREAM_PATH, "--sequence '" + (benchWorkDir() / "nothing").string() + "'");
+  EXPECT_EQ(missing.code, 1);
+  EXPECT_NE(missing.err.find("intrinsics.txt"), std::string::npos) << missing.err;
 }
 
 TEST(BenchRealCli, MissingDataDirectoryIsAnInputErrorNamingIt) {

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 
 #include <Eigen/Geometry>
 
@@ -12,6 +13,7 @@
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/sequence.h"
 #include "mc_flow/core/solver.h"
+#include "mc_flow/eval/sequence_folder.h"
 #include "mc_flow/io/sequence_io.h"
 #include "mc_flow/io/trajectory_eval.h"
 
@@ -205,4 +207,46 @@ TEST(SequenceIo, OdometryCsvRoundTripsAndNamesABadLine) {
     EXPECT_NE(std::string(e.what()).find("line 3"), std::string::npos) << e.what();
   }
   EXPECT_THROW(io::readOdometryCsv((dir.path() / "missing.csv").string()), InputError);
+}
+
+// A sequence folder (mcflow export-seq) reads back what was written, and a malformed one is named.
+TEST(SequenceFolder, FramesStampsAndIntrinsicsReadBackAndBadFilesAreNamed) {
+  const test::TempDir dir("mcflow_sequence_folder_");
+  const std::string folder = (dir.path() / "seq").string();
+  RgbdFrame frame;
+  frame.intensity = ImageF(5, 4, 1, 0.25f);
+  frame.depth = ImageF(5, 4, 1, 1.5f);
+  frame.depth.data[3] = NAN;
+  writeSequenceFrame(folder, 0, frame);
+  frame.intensity.data[7] = 0.75f;
+  writeSequenceFrame(folder, 1, frame);
+  const Intrinsics K{300.25, 301.5, 2.0, 1.5};
+  writeSequenceIndex(folder, K, {10.0, 10.0333333333333333});
+  const SequenceFolder read = readSequenceFolder(folder);
+  EXPECT_EQ(read.K.fx, K.fx);
+  EXPECT_EQ(read.K.cy, K.cy);
+  ASSERT_EQ(read.stamps.size(), 2u);
+  EXPECT_EQ(read.stamps[1], 10.0333333333333333);
+  const RgbdFrame second = read.frame(1);
+  EXPECT_EQ(second.intensity.data, frame.intensity.data);
+  EXPECT_TRUE(std::isnan(second.depth.data[3]));
+  EXPECT_EQ(second.depth.data[4], 1.5f);
+
+  auto throwsNaming = [](const std::function<void()>& call, const std::string& part) {
+    try {
+      call();
+      ADD_FAILURE() << "no error, expected one naming " << part;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(part), std::string::npos) << e.what();
+    }
+  };
+  throwsNaming([&] { read.frame(2); }, "frame 2 of 2");
+  fs::remove(fs::path(folder) / "depth_00001.pfm");
+  throwsNaming([&] { read.frame(1); }, "depth_00001.pfm");
+  write(fs::path(folder) / "stamps.txt", "10.0\nten\n");
+  throwsNaming([&] { readSequenceFolder(folder); }, "stamps.txt:2");
+  write(fs::path(folder) / "stamps.txt", "10.0\n");
+  throwsNaming([&] { readSequenceFolder(folder); }, "1 frame(s)");
+  fs::remove(fs::path(folder) / "intrinsics.txt");
+  throwsNaming([&] { readSequenceFolder(folder); }, "intrinsics.txt");
 }

@@ -1,6 +1,7 @@
 /**
  * @file flow_io.h
- * @brief Dense float files: Middlebury .flo, PFM and NumPy .npy (writers and readers).
+ * @brief File formats that need no OpenCV: dense float files (Middlebury .flo, PFM and NumPy .npy, writers and
+ * readers) and the TUM RGB-D trajectory line (for the core-only benchmarks too).
  *
  * .flo: "PIEH", width, height (int32), then (u, v) float32 per pixel, row-major, little endian.
  * .pfm: "PF" (3 channels) or "Pf" (1 channel), width height, scale (negative = little endian), rows stored
@@ -12,6 +13,8 @@
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "mc_flow/core/image.h"
 #include "mc_flow/core/soft_labels.h"
@@ -33,6 +36,10 @@ ImageF readFlo(const std::string& path);
 void writePfm(const std::string& path, const ImageF& image);
 /// @brief Reads a PFM file of either endianness into a top-row-first image.
 ImageF readPfm(const std::string& path);
+
+/// @brief One line of a TUM RGB-D trajectory file: "stamp tx ty tz qx qy qz qw" (the pose's translation [m] and
+/// rotation as a unit quaternion).
+std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose);
 
 /// @brief A float32 array read from a .npy file.
 struct NpyArray {

@@ -13,6 +13,7 @@
 
 #include "mc_flow/core/solver.h"
 #include "mc_flow/eval/metrics.h"
+#include "mc_flow/io/flow_io.h"
 
 namespace mc_flow {
 namespace io {
@@ -56,9 +57,7 @@ std::string odometryCsvRow(long pair, const OdometryStep& step);
 /// malformed line.
 std::vector<OdometryStep> readOdometryCsv(const std::string& path);
 
-/// @brief One line of a TUM RGB-D trajectory file: "stamp tx ty tz qx qy qz qw" (the pose's translation [m] and
-/// rotation as a unit quaternion).
-std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose);
+/// tumTrajectoryLine (one line of a TUM RGB-D trajectory file): mc_flow/io/flow_io.h.
 
 /// @brief A trajectory in the TUM RGB-D format: stamp -> pose. Lines starting with '#' and empty lines are skipped.
 /// Throws InputError naming the file and line of a malformed line or a quaternion far from unit length.
