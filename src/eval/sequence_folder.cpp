@@ -1,4 +1,5 @@
-// A real sequence in PFM files (sequence_folder.h): mcflow export-seq writes it, mcflow_bench_stream --sequence reads it.
+// A real sequence in PFM files (sequence_folder.h): mcflow export-seq writes it, mcflow_bench_stream --sequence reads
+// it.
 #include "mc_flow/eval/sequence_folder.h"
 
 #include <cmath>

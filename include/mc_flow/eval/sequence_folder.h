@@ -1,7 +1,8 @@
 /**
  * @file sequence_folder.h
  * @brief A real RGB-D sequence in files that need no OpenCV, for the GPU machine: `mcflow export-seq` writes the frames
- * as run-seq decodes them, `mcflow_bench_stream --sequence` reads them back bit for bit and solves them as run-seq does.
+ * as run-seq decodes them, `mcflow_bench_stream --sequence` reads them back bit for bit and solves them as run-seq
+ * does.
  *
  * The folder: intrinsics.txt ("fx fy cx cy", 17 digits), stamps.txt (one stamp [s] per frame, 17 digits) and per frame
  * i intensity_NNNNN.pfm and depth_NNNNN.pfm (i with five digits; intensity in [0, 1], depth [m], 0 or NaN invalid).
