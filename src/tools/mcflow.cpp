@@ -69,6 +69,15 @@ const std::vector<CommandLineOption> kInputOptions = {
     {"depth-scale", true, "16-bit depth units per metre (default 1000 = mm as ROS 16UC1; TUM data: 5000)"},
 };
 
+// The options of a sequence of image files (--tum, --frames), run-seq's and export-seq's.
+const std::vector<CommandLineOption> kFileSequenceOptions = {
+    {"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000/m)"},
+    {"frames", true, "directory with rgb/ and depth/ images paired in name order (depth 1000/m)"},
+    {"fps", true, "frame rate of --frames [Hz] (default 30)"},
+    {"camera-info", true, "ROS camera_info YAML file instead of --intrinsics"},
+    {"max-frames", true, "stop after this many frames"},
+};
+
 std::vector<Command> commands() {
   std::vector<Command> list;
   Command run{
@@ -108,27 +117,23 @@ std::vector<Command> commands() {
       "DIR/sequence.json (per pair: start kind, timings, ids, merges, resets). A rosbag (--bag, ROS build "
       "only) is read as the nodelet reads its topics: colour and depth paired by the nearest header stamp, "
       "intrinsics from the first camera_info, frames with no valid depth skipped.",
-      {{"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000/m)"},
-       {"frames", true, "directory with rgb/ and depth/ images paired in name order (depth 1000/m)"},
-       {"bag", true, "rosbag with sensor_msgs/Image colour and depth (16UC1 mm or 32FC1 m) and CameraInfo"},
+      {{"bag", true, "rosbag with sensor_msgs/Image colour and depth (16UC1 mm or 32FC1 m) and CameraInfo"},
        {"rgb-topic", true, "colour topic of --bag (default /camera/rgb/image_rect_color)"},
        {"depth-topic", true, "registered depth topic of --bag (default /camera/depth_registered/image_rect)"},
        {"info-topic", true, "camera_info topic of --bag (default /camera/rgb/camera_info)"},
        {"max-stamp-difference", true,
         "[s] --bag: colour and depth stamps further apart are not paired "
         "(default 0.02)"},
-       {"fps", true, "frame rate of --frames [Hz] (default 30)"},
        {"intrinsics", true,
         "FX,FY,CX,CY in pixels (default: DIR/camera_info.yaml when present; --bag: "
         "its first camera_info)"},
-       {"camera-info", true, "ROS camera_info YAML file instead of --intrinsics"},
        {"depth-scale", true,
         "16-bit depth units per metre (default 5000 with --tum, 1000 with --frames; "
         "not with --bag: 16UC1 is mm)"},
        {"downsample", true, "input pixels per processing pixel: 0 = towards 320 px wide (default), or 1, 2, 4..."},
        {"max-pair-interval", true, "[s] a longer gap between frames starts a new sequence (default 1)"},
-       {"cold", false, "solve every pair from scratch (ids are still matched by overlap)"},
-       {"max-frames", true, "stop after this many frames"}}};
+       {"cold", false, "solve every pair from scratch (ids are still matched by overlap)"}}};
+  run_seq.options.insert(run_seq.options.begin(), kFileSequenceOptions.begin(), kFileSequenceOptions.end());
   // The solver options of `run` (not its pair inputs).
   for (const CommandLineOption& o : run.options) {
     bool input = false;
@@ -239,15 +244,11 @@ std::vector<Command> commands() {
        "input resolution) as PFM files with their stamps and intrinsics, for `mcflow_bench_stream --sequence DIR` on "
        "a machine without OpenCV (the GPU machine): OUT/intensity_NNNNN.pfm, OUT/depth_NNNNN.pfm, OUT/stamps.txt and "
        "OUT/intrinsics.txt (mc_flow/eval/sequence_folder.h).",
-       {{"tum", true, "TUM RGB-D directory (rgb.txt, depth.txt, optional associations.txt; depth 5000/m)"},
-        {"frames", true, "directory with rgb/ and depth/ images paired in name order (depth 1000/m)"},
-        {"fps", true, "frame rate of --frames [Hz] (default 30)"},
-        {"intrinsics", true, "FX,FY,CX,CY in pixels (default: DIR/camera_info.yaml when present)"},
-        {"camera-info", true, "ROS camera_info YAML file instead of --intrinsics"},
+       {{"intrinsics", true, "FX,FY,CX,CY in pixels (default: DIR/camera_info.yaml when present)"},
         {"depth-scale", true, "16-bit depth units per metre (default 5000 with --tum, 1000 with --frames)"},
-        {"max-frames", true, "stop after this many frames"},
         {"out", true, "output directory (created)"},
         {"help", false, "this help"}}});
+  list.back().options.insert(list.back().options.begin(), kFileSequenceOptions.begin(), kFileSequenceOptions.end());
   return list;
 }
 
