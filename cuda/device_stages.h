@@ -301,15 +301,20 @@ struct KMeansRun {
   int k = 0;  ///< 1..KMeansCentres::kMax
   int max_iterations = 0;
   double tolerance_m = 0;
+  /// Null: every valid point of the level. Else a warm start's hard labels at the level (device memory): only the
+  /// valid points where they are -1 take part, and each such pixel's label becomes first_new + its cluster.
+  int* uncovered_hard = nullptr;
+  int first_new = 0;
 };
 /// @brief K-means' answer: the centres (count 0 when no point is valid) and the Lloyd iterations run.
 struct KMeansOutcome {
   KMeansCentres centres;
   int iterations = 0;
 };
-/// @brief kmeansPoints on the valid points of `points` in one block on the device: `scratch_points` (3 floats per
-/// pixel), `scratch_distances` (a double per pixel) and `scratch_assignment` (an int per pixel) hold the level's
-/// points, the seeding's distances and the clusters; the answer goes to `outcome` (device memory).
+/// @brief kmeansPoints on the valid points of `points` in one block on the device (kmeansPointList on the uncovered
+/// ones with run.uncovered_hard, whose labels it then writes): `scratch_points` (3 floats per pixel),
+/// `scratch_distances` (a double per pixel) and `scratch_assignment` (an int per pixel) hold the level's points, the
+/// seeding's distances and the clusters; the answer goes to `outcome` (device memory).
 void launchKMeans(const DeviceImage& points, const KMeansRun& run, float* scratch_points, double* scratch_distances,
                   int* scratch_assignment, KMeansOutcome* outcome, cudaStream_t stream);
 

@@ -40,6 +40,11 @@ __device__ __forceinline__ bool validPoint(const float* p) {
   return isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2]);
 }
 
+// Whether pixel i's point takes part: valid, and uncovered where a warm start's hard labels are given.
+__device__ __forceinline__ bool clusteredPoint(const DeviceImage& image, const int* uncovered_hard, int i) {
+  return (uncovered_hard == nullptr || uncovered_hard[i] < 0) && validPoint(image.data + 3 * i);
+}
+
 struct MinInt {
   __device__ __forceinline__ int operator()(int a, int b) const { return b < a ? b : a; }
 };
@@ -105,16 +110,18 @@ __global__ void __launch_bounds__(kKMeansThreads)
   __shared__ KMeansShared s;
   const int t = threadIdx.x;
 
-  // The valid points in pixel order (collectValidPoints): thread t compacts a contiguous run of pixels.
+  // The valid points in pixel order (collectValidPoints; the uncovered ones: kmeansPointList's list): thread t
+  // compacts a contiguous run of pixels.
   const int plane = image.width * image.height;
   const int pixel_run = (plane + kKMeansThreads - 1) / kKMeansThreads;
   const int pixel_begin = min(plane, t * pixel_run), pixel_end = min(plane, pixel_begin + pixel_run);
   int valid = 0;
-  for (int i = pixel_begin; i < pixel_end; ++i) valid += validPoint(image.data + 3 * i) ? 1 : 0;
-  int offset = 0, n = 0;
-  IntScan(temp.int_scan).ExclusiveSum(valid, offset, n);
+  for (int i = pixel_begin; i < pixel_end; ++i) valid += clusteredPoint(image, run.uncovered_hard, i) ? 1 : 0;
+  int run_offset = 0, n = 0;
+  IntScan(temp.int_scan).ExclusiveSum(valid, run_offset, n);
+  int offset = run_offset;
   for (int i = pixel_begin; i < pixel_end; ++i)
-    if (validPoint(image.data + 3 * i)) {
+    if (clusteredPoint(image, run.uncovered_hard, i)) {
       for (int k = 0; k < 3; ++k) points[3 * offset + k] = image.data[3 * i + k];
       ++offset;
     }
@@ -216,6 +223,12 @@ __global__ void __launch_bounds__(kKMeansThreads)
     }
     __syncthreads();
     if (s.stop) break;
+  }
+  // A warm start's uncovered pixels take their clusters (the final assignment's, to the centres returned).
+  if (run.uncovered_hard != nullptr) {
+    offset = run_offset;
+    for (int i = pixel_begin; i < pixel_end; ++i)
+      if (clusteredPoint(image, run.uncovered_hard, i)) run.uncovered_hard[i] = run.first_new + assignment[offset++];
   }
   for (int k = t; k < 3 * kMaxCentres; k += kKMeansThreads)  // the whole answer comes down: no byte left unwritten
     outcome->centres.xyz[k] = k < 3 * s.count ? s.centres[k] : 0.f;

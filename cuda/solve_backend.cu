@@ -290,6 +290,43 @@ class CudaSolveBackend final : public SolveBackend {
     labelsFromHardLabels(level, int(centres.size()));
   }
 
+  int initialiseLabelsWithUncoveredClusters(int level, ImageI32 hard, int first_new, int clusters,
+                                            const Config& config) override {
+    // Outside what the kernel argument holds (Config caps initial_labels at its size), or refused: the host's.
+    if (clusters < 1 || clusters > cuda_detail::KMeansCentres::kMax || config.kmeans_max_iterations < 0 ||
+        first_new < 0)
+      return SolveBackend::initialiseLabelsWithUncoveredClusters(level, std::move(hard), first_new, clusters, config);
+    const DeviceLevel& L = levelAt(level);
+    validateHardLabels(hard, std::max(1, first_new), L.width, L.height);
+    const std::size_t p = std::size_t(L.width) * L.height;
+    int* staged = staged_ints_.reserve(p);
+    std::copy_n(hard.data.data(), p, staged);
+    hard_labels_.reserve(p);
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(hard_labels_.get(), staged, p * sizeof(int), cudaMemcpyHostToDevice, stream_.stream));
+    cuda_detail::KMeansRun run;
+    const std::vector<double> draws = kmeansSeedingDraws(config.seed, clusters);
+    std::copy(draws.begin(), draws.end(), run.draws);
+    run.k = clusters;
+    run.max_iterations = config.kmeans_max_iterations;
+    run.tolerance_m = config.kmeans_tolerance;
+    run.uncovered_hard = hard_labels_.get();
+    run.first_new = first_new;
+    kmeans_points_.reserve(3 * p);
+    kmeans_distances_.reserve(p);
+    kmeans_assignment_.reserve(p);
+    kmeans_outcome_.reserve(1);
+    cuda_detail::launchKMeans(L.points1, run, kmeans_points_.get(), kmeans_distances_.get(), kmeans_assignment_.get(),
+                              kmeans_outcome_.get(), stream_.stream);
+    cuda_detail::KMeansOutcome outcome;
+    download(&outcome, kmeans_outcome_.get(), 1, staged_kmeans_);  // waits: the staged upload is done too
+    const int kept = outcome.centres.count;
+    if (first_new + kept < 1)
+      throw InputError("initial labels with uncovered clusters: no carried label and no cluster (motion labels 0)");
+    labelsFromHardLabels(level, first_new + kept);
+    return kept;
+  }
+
   void holdCarriedLabels(int carried_labels) override {
     carried_held_ = false;
     carried_slot_ = 0;  // buffer 0 at the label level, buffer 1 at the level moved to: no regrowth from pair to pair

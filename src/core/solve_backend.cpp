@@ -48,6 +48,32 @@ void SolveBackend::initialiseLabelsFromCentres(int level, const std::vector<Eige
   initialiseLabels(level, assignToNearestCentre(framePoints(level), centres), int(centres.size()));
 }
 
+int SolveBackend::initialiseLabelsWithUncoveredClusters(int level, ImageI32 hard, int first_new, int clusters,
+                                                        const Config& config) {
+  const ImageF& points = framePoints(level);
+  if (!hard.sameSize(points))
+    throw InputError("initial labels with uncovered clusters: hard labels " + imageSizeText(hard.width, hard.height) +
+                     " for a level of " + imageSizeText(points.width, points.height));
+  // The uncovered pixels' points in pixel order, as kmeansPoints takes an image's valid points (a list of the few
+  // instead of an image of the level: no pages to fill per pair).
+  std::vector<Eigen::Vector3f> open_points;
+  std::vector<std::size_t> open_pixels;
+  for (std::size_t k = 0; k < hard.data.size(); ++k) {
+    const float* P = points.data.data() + 3 * k;
+    if (hard.data[k] < 0 && std::isfinite(P[0]) && std::isfinite(P[1]) && std::isfinite(P[2])) {
+      open_points.emplace_back(P[0], P[1], P[2]);
+      open_pixels.push_back(k);
+    }
+  }
+  const KMeansPointsResult kmeans =
+      kmeansPointList(open_points, clusters, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
+  for (std::size_t i = 0; i < kmeans.assignment.size(); ++i)
+    hard.data[open_pixels[i]] = first_new + kmeans.assignment[i];
+  const int kept = int(kmeans.centres.size());
+  initialiseLabels(level, hard, first_new + kept);
+  return kept;
+}
+
 namespace {
 
 // Nearest-pixel resampling of a mask (or of carried labels) to another pyramid level (pixel-centre aligned). Levels

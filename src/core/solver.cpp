@@ -376,30 +376,17 @@ Start Solver::Impl::warmStart(const Prepared& p, const CarriedLabels& carried, c
   // the label step hands to their neighbours.
   const int uncovered = carried.valid - carried.covered;
   const double min_new = std::max(32.0, config.min_support_fraction * double(carried.valid));
-  if (uncovered >= min_new) {
-    const ImageF& points = backend->framePoints(p.label_level);  // on the GPU a download: only where K-means needs it
-    // The uncovered pixels' points in pixel order, as kmeansPoints takes an image's valid points (a list of the few
-    // instead of an image of the level: no pages to fill per pair).
-    std::vector<Eigen::Vector3f> open_points;
-    std::vector<std::size_t> open_pixels;
-    for (std::size_t k = 0; k < start.hard.data.size(); ++k) {
-      const float* P = points.data.data() + 3 * k;
-      if (start.hard.data[k] < 0 && std::isfinite(P[0]) && std::isfinite(P[1]) && std::isfinite(P[2])) {
-        open_points.emplace_back(P[0], P[1], P[2]);
-        open_pixels.push_back(k);
-      }
-    }
+  if (uncovered >= min_new) {  // the K-means where frame 1's points are (on the GPU: on the device)
     const int clusters = std::clamp(int(std::lround(config.initial_labels * double(uncovered) / carried.valid)), 1,
                                     config.initial_labels);
-    const KMeansPointsResult kmeans =
-        kmeansPointList(open_points, clusters, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed);
-    const int base = int(carried.ids.size());
-    for (std::size_t i = 0; i < kmeans.assignment.size(); ++i)
-      start.hard.data[open_pixels[i]] = base + kmeans.assignment[i];
-    for (std::size_t c = 0; c < kmeans.centres.size(); ++c) start.twists.push_back(widest);
+    const int kept = backend->initialiseLabelsWithUncoveredClusters(p.label_level, start.hard, int(start.twists.size()),
+                                                                    clusters, config);
+    for (int c = 0; c < kept; ++c) start.twists.push_back(widest);
+    start.motion_labels = int(start.twists.size());
+  } else {
+    start.motion_labels = int(start.twists.size());
+    backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
   }
-  start.motion_labels = int(start.twists.size());
-  backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
   backend->holdCarriedLabels(int(start.carried_lineage.size()));
   start.outer_iterations = config.warm_outer_iterations;
   start.label_iterations = config.warm_label_iterations;

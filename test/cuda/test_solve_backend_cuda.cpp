@@ -594,6 +594,46 @@ TEST(CudaSolveBackend, KMeansCentresMatchTheHost) {
   std::printf("K-means: %d of %d centres bit-identical to the host's\n", identical, compared);
 }
 
+// A warm start's K-means of the pixels no carried segment covers (initialiseLabelsWithUncoveredClusters) on the device
+// against the host's default: the same clusters kept and the same initial labels, with carried labels on part of the
+// level (two carried labels, first_new 2) and with none (first_new 0), at two sizes and several cluster counts.
+TEST(CudaSolveBackend, UncoveredClustersMatchTheHost) {
+  SKIP_WITHOUT_GPU();
+  Config config;
+  auto cpu = makeCpuSolveBackend();
+  auto gpu = makeCudaSolveBackend();
+  for (const auto& [width, height, variant] : {std::tuple{320, 240, 2}, std::tuple{317, 239, 1}}) {
+    SyntheticSceneOptions options;
+    options.width = width;
+    options.height = height;
+    options.variant = variant;
+    const SyntheticPair pair = renderSyntheticPair(options);
+    const int levels = pyramidLevelCount(width, height, config.coarsest_min_width);
+    for (SolveBackend* b : {cpu.get(), gpu.get()})
+      b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
+    const int level = 1;
+    const ImageF& points = cpu->framePoints(level);
+    for (const bool carried : {true, false}) {
+      // Carried: label 0 on the left third, 1 on the middle third, the right third uncovered.
+      ImageI32 hard(points.width, points.height, 1, -1);
+      if (carried)
+        for (int y = 0; y < hard.height; ++y)
+          for (int x = 0; x < 2 * hard.width / 3; ++x) hard(x, y) = x < hard.width / 3 ? 0 : 1;
+      const int first_new = carried ? 2 : 0;
+      for (const int clusters : {1, 3, 8}) {
+        const std::string what = std::to_string(width) + "x" + std::to_string(height) + (carried ? " carried" : "") +
+                                 ", " + std::to_string(clusters) + " clusters";
+        const int a = cpu->initialiseLabelsWithUncoveredClusters(level, hard, first_new, clusters, config);
+        const int b = gpu->initialiseLabelsWithUncoveredClusters(level, hard, first_new, clusters, config);
+        EXPECT_EQ(a, b) << what;
+        EXPECT_GE(a, 1) << what;
+        EXPECT_EQ(cpu->labelCount(), first_new + a + 1) << what;
+        EXPECT_EQ(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 0.0) << what;
+      }
+    }
+  }
+}
+
 // Small inputs (the sanitizers' case): a 64x48 scene at every level, three valid pixels for 20 centres (three centres),
 // and none valid (no centre).
 TEST(CudaSolveBackend, KMeansCentresOfFewOrNoValidPoints) {

@@ -83,6 +83,14 @@ class SolveBackend : public LabelStore {
   /// assignToNearestCentre(framePoints(level), centres); the CUDA backend assigns on the device, without
   /// downloading the level's points.
   virtual void initialiseLabelsFromCentres(int level, const std::vector<Eigen::Vector3f>& centres);
+  /// @brief A warm start's hard initial labels at `level`: `hard` (the carried labels, -1 where no carried segment
+  /// covers a pixel) with the uncovered valid pixels clustered by kmeansPointList (their points in pixel order,
+  /// `clusters` clusters, Config's kmeans_max_iterations, kmeans_tolerance and seed) and numbered from `first_new`,
+  /// then initialiseLabels(level, those labels, first_new + the clusters kept). Returns the clusters kept. This default
+  /// runs the K-means on framePoints(level); the CUDA backend runs it on the device (the same rules as kmeansCentres'
+  /// there) and downloads only the centres.
+  virtual int initialiseLabelsWithUncoveredClusters(int level, ImageI32 hard, int first_new, int clusters,
+                                                    const Config& config);
   /// @brief Stream mode (a warm start), right after initialiseLabels: the initial labels below `carried_labels` are the
   /// previous pair's segments. From then on each label step adds Config::warm_switch_cost to every other label's data
   /// cost at the pixels that started in one of them (addSwitchingCost). The carried labels follow remap (merged into
