@@ -1,11 +1,12 @@
 // K-means on the device (src/core/kmeans.cpp: kmeansPoints, and assignToNearestCentre at the label level).
 //
-// kmeansPoints runs at a coarse level (40x30 to 160x90 points for 320x240 to 1280x720 inputs): one block does all of
-// it, so the level's points never come down and only the centres do. The per-point rules are nearest_centre.h's and
-// the seeding's draws are the host's (kmeansSeedingDraws), so the centres are the host's except where a sum over
-// points, which runs here in another order (a tree of per-thread partials instead of one serial chain), changes
-// a double in its last bits: a mean can then differ from the host's by an ulp of a float, and a seeding draw that
-// falls within that rounding of a running sum's step picks the neighbouring point.
+// kmeansPoints runs at a coarse level (40x30 to 160x90 points for 320x240 to 1280x720 inputs), and a warm start's
+// kmeansPointList over the label level's pixels no carried segment covers (a few hundred to some thousands): one block
+// does all of it, so the level's points never come down and only the centres do. The per-point rules are
+// nearest_centre.h's and the seeding's draws are the host's (kmeansSeedingDraws), so the centres are the host's except
+// where a sum over points, which runs here in another order (a tree of per-thread partials instead of one serial
+// chain), changes a double in its last bits: a mean can then differ from the host's by an ulp of a float, and a seeding
+// draw that falls within that rounding of a running sum's step picks the neighbouring point.
 //
 // The assignment at the label level: the centres go in as a kernel argument, one thread per pixel.
 #include <cuda_runtime.h>

@@ -236,12 +236,7 @@ class CudaSolveBackend final : public SolveBackend {
   void initialiseLabels(int level, const ImageI32& hard, int motion_labels) override {
     const DeviceLevel& L = levelAt(level);
     validateHardLabels(hard, motion_labels, L.width, L.height);
-    const std::size_t p = std::size_t(L.width) * L.height;
-    int* staged = staged_ints_.reserve(p);
-    std::copy_n(hard.data.data(), p, staged);
-    hard_labels_.reserve(p);
-    MCFLOW_CUDA_CHECK(
-        cudaMemcpyAsync(hard_labels_.get(), staged, p * sizeof(int), cudaMemcpyHostToDevice, stream_.stream));
+    uploadHardLabels(hard);
     labelsFromHardLabels(level, motion_labels);
     // The staging buffer is reused by the next small transfer: wait for this one.
     MCFLOW_CUDA_WAIT(stream_.stream);
@@ -252,22 +247,8 @@ class CudaSolveBackend final : public SolveBackend {
     // Outside what the kernel argument holds (Config caps initial_labels at its size), or refused: the host's.
     if (k < 1 || k > cuda_detail::KMeansCentres::kMax || max_iterations < 0)
       return SolveBackend::kmeansCentres(level, k, max_iterations, tolerance_m, seed);
-    const DeviceLevel& L = levelAt(level);
-    const std::size_t p = std::size_t(L.width) * L.height;
-    cuda_detail::KMeansRun run;
-    const std::vector<double> draws = kmeansSeedingDraws(seed, k);
-    std::copy(draws.begin(), draws.end(), run.draws);
-    run.k = k;
-    run.max_iterations = max_iterations;
-    run.tolerance_m = tolerance_m;
-    kmeans_points_.reserve(3 * p);
-    kmeans_distances_.reserve(p);
-    kmeans_assignment_.reserve(p);
-    kmeans_outcome_.reserve(1);
-    cuda_detail::launchKMeans(L.points1, run, kmeans_points_.get(), kmeans_distances_.get(), kmeans_assignment_.get(),
-                              kmeans_outcome_.get(), stream_.stream);
-    cuda_detail::KMeansOutcome outcome;
-    download(&outcome, kmeans_outcome_.get(), 1, staged_kmeans_);
+    const cuda_detail::KMeansOutcome outcome =
+        runKMeans(levelAt(level), k, max_iterations, tolerance_m, seed, nullptr, 0);
     std::vector<Eigen::Vector3f> centres(std::size_t(outcome.centres.count));
     for (std::size_t c = 0; c < centres.size(); ++c)
       centres[c] =
@@ -293,36 +274,16 @@ class CudaSolveBackend final : public SolveBackend {
   int initialiseLabelsWithUncoveredClusters(int level, ImageI32 hard, int first_new, int clusters,
                                             const Config& config) override {
     // Outside what the kernel argument holds (Config caps initial_labels at its size), or refused: the host's.
-    if (clusters < 1 || clusters > cuda_detail::KMeansCentres::kMax || config.kmeans_max_iterations < 0 ||
-        first_new < 0)
+    if (clusters < 1 || clusters > cuda_detail::KMeansCentres::kMax || config.kmeans_max_iterations < 0)
       return SolveBackend::initialiseLabelsWithUncoveredClusters(level, std::move(hard), first_new, clusters, config);
     const DeviceLevel& L = levelAt(level);
-    validateHardLabels(hard, std::max(1, first_new), L.width, L.height);
-    const std::size_t p = std::size_t(L.width) * L.height;
-    int* staged = staged_ints_.reserve(p);
-    std::copy_n(hard.data.data(), p, staged);
-    hard_labels_.reserve(p);
-    MCFLOW_CUDA_CHECK(
-        cudaMemcpyAsync(hard_labels_.get(), staged, p * sizeof(int), cudaMemcpyHostToDevice, stream_.stream));
-    cuda_detail::KMeansRun run;
-    const std::vector<double> draws = kmeansSeedingDraws(config.seed, clusters);
-    std::copy(draws.begin(), draws.end(), run.draws);
-    run.k = clusters;
-    run.max_iterations = config.kmeans_max_iterations;
-    run.tolerance_m = config.kmeans_tolerance;
-    run.uncovered_hard = hard_labels_.get();
-    run.first_new = first_new;
-    kmeans_points_.reserve(3 * p);
-    kmeans_distances_.reserve(p);
-    kmeans_assignment_.reserve(p);
-    kmeans_outcome_.reserve(1);
-    cuda_detail::launchKMeans(L.points1, run, kmeans_points_.get(), kmeans_distances_.get(), kmeans_assignment_.get(),
-                              kmeans_outcome_.get(), stream_.stream);
-    cuda_detail::KMeansOutcome outcome;
-    download(&outcome, kmeans_outcome_.get(), 1, staged_kmeans_);  // waits: the staged upload is done too
-    const int kept = outcome.centres.count;
-    if (first_new + kept < 1)
-      throw InputError("initial labels with uncovered clusters: no carried label and no cluster (motion labels 0)");
+    validateCarriedHardLabels(hard, first_new, L.width, L.height);
+    uploadHardLabels(hard);
+    // The K-means writes the uncovered pixels' labels into the uploaded ones; its wait covers the upload too.
+    const int kept = runKMeans(L, clusters, config.kmeans_max_iterations, config.kmeans_tolerance, config.seed,
+                               hard_labels_.get(), first_new)
+                         .centres.count;
+    requireMotionLabels(first_new + kept);  // as the host's initialiseLabels
     labelsFromHardLabels(level, first_new + kept);
     return kept;
   }
@@ -802,6 +763,40 @@ class CudaSolveBackend final : public SolveBackend {
     buffer.reserve(std::max<std::size_t>(count, 1));
     MCFLOW_CUDA_CHECK(
         cudaMemcpyAsync(buffer.get(), host.data(), count * sizeof(T), cudaMemcpyHostToDevice, stream_.stream));
+  }
+
+  // Up into hard_labels_ through the page-locked staging buffer (reused by the next small transfer: the caller waits).
+  void uploadHardLabels(const ImageI32& hard) {
+    const std::size_t p = hard.data.size();
+    int* staged = staged_ints_.reserve(p);
+    std::copy_n(hard.data.data(), p, staged);
+    hard_labels_.reserve(p);
+    MCFLOW_CUDA_CHECK(
+        cudaMemcpyAsync(hard_labels_.get(), staged, p * sizeof(int), cudaMemcpyHostToDevice, stream_.stream));
+  }
+
+  // kmeans.cu's one-block K-means on level L's valid points (only where `uncovered_hard` is -1, whose labels it then
+  // writes, when given), waited for: its answer.
+  cuda_detail::KMeansOutcome runKMeans(const DeviceLevel& L, int k, int max_iterations, double tolerance_m,
+                                       unsigned seed, int* uncovered_hard, int first_new) {
+    const std::size_t p = std::size_t(L.width) * L.height;
+    cuda_detail::KMeansRun run;
+    const std::vector<double> draws = kmeansSeedingDraws(seed, k);
+    std::copy(draws.begin(), draws.end(), run.draws);
+    run.k = k;
+    run.max_iterations = max_iterations;
+    run.tolerance_m = tolerance_m;
+    run.uncovered_hard = uncovered_hard;
+    run.first_new = first_new;
+    kmeans_points_.reserve(3 * p);
+    kmeans_distances_.reserve(p);
+    kmeans_assignment_.reserve(p);
+    kmeans_outcome_.reserve(1);
+    cuda_detail::launchKMeans(L.points1, run, kmeans_points_.get(), kmeans_distances_.get(), kmeans_assignment_.get(),
+                              kmeans_outcome_.get(), stream_.stream);
+    cuda_detail::KMeansOutcome outcome;
+    download(&outcome, kmeans_outcome_.get(), 1, staged_kmeans_);
+    return outcome;
   }
 
   // One-hot labels at `level` from hard_labels_ (motion_labels + 1 planes); clears the occlusion and the dual.

@@ -18,17 +18,35 @@
 
 namespace mc_flow {
 
-void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int height) {
-  if (motion_labels < 1)
-    throw InputError("initial labels: " + std::to_string(motion_labels) + " motion labels, need at least 1");
+namespace {
+
+// The size and the value range of hard labels: [-1, labels).
+void validateHardLabelValues(const ImageI32& hard, int labels, int width, int height) {
   if (hard.width != width || hard.height != height || hard.channels != 1)
     throw InputError("initial labels: a " + std::to_string(hard.width) + "x" + std::to_string(hard.height) + "x" +
                      std::to_string(hard.channels) + " image for a " + std::to_string(width) + "x" +
                      std::to_string(height) + " level");
   for (std::size_t k = 0; k < hard.data.size(); ++k)
-    if (hard.data[k] < -1 || hard.data[k] >= motion_labels)
+    if (hard.data[k] < -1 || hard.data[k] >= labels)
       throw InputError("initial labels: pixel " + std::to_string(k) + " has label " + std::to_string(hard.data[k]) +
-                       ", outside [-1, " + std::to_string(motion_labels) + ")");
+                       ", outside [-1, " + std::to_string(labels) + ")");
+}
+
+}  // namespace
+
+void requireMotionLabels(int motion_labels) {
+  if (motion_labels < 1)
+    throw InputError("initial labels: " + std::to_string(motion_labels) + " motion labels, need at least 1");
+}
+
+void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int height) {
+  requireMotionLabels(motion_labels);
+  validateHardLabelValues(hard, motion_labels, width, height);
+}
+
+void validateCarriedHardLabels(const ImageI32& hard, int first_new, int width, int height) {
+  if (first_new < 0) throw InputError("initial labels: the new clusters numbered from " + std::to_string(first_new));
+  validateHardLabelValues(hard, first_new, width, height);
 }
 
 std::vector<Eigen::Vector3f> SolveBackend::kmeansCentres(int level, int k, int max_iterations, double tolerance_m,
@@ -51,9 +69,7 @@ void SolveBackend::initialiseLabelsFromCentres(int level, const std::vector<Eige
 int SolveBackend::initialiseLabelsWithUncoveredClusters(int level, ImageI32 hard, int first_new, int clusters,
                                                         const Config& config) {
   const ImageF& points = framePoints(level);
-  if (!hard.sameSize(points))
-    throw InputError("initial labels with uncovered clusters: hard labels " + imageSizeText(hard.width, hard.height) +
-                     " for a level of " + imageSizeText(points.width, points.height));
+  validateCarriedHardLabels(hard, first_new, points.width, points.height);
   // The uncovered pixels' points in pixel order, as kmeansPoints takes an image's valid points (a list of the few
   // instead of an image of the level: no pages to fill per pair).
   std::vector<Eigen::Vector3f> open_points;

@@ -382,11 +382,10 @@ Start Solver::Impl::warmStart(const Prepared& p, const CarriedLabels& carried, c
     const int kept = backend->initialiseLabelsWithUncoveredClusters(p.label_level, start.hard, int(start.twists.size()),
                                                                     clusters, config);
     for (int c = 0; c < kept; ++c) start.twists.push_back(widest);
-    start.motion_labels = int(start.twists.size());
   } else {
-    start.motion_labels = int(start.twists.size());
-    backend->initialiseLabels(p.label_level, start.hard, start.motion_labels);
+    backend->initialiseLabels(p.label_level, start.hard, int(start.twists.size()));
   }
+  start.motion_labels = int(start.twists.size());
   backend->holdCarriedLabels(int(start.carried_lineage.size()));
   start.outer_iterations = config.warm_outer_iterations;
   start.label_iterations = config.warm_label_iterations;

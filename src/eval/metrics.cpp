@@ -68,6 +68,14 @@ double median(std::vector<double> values) {
   return *middle;
 }
 
+double percentile(std::vector<double> values, double q) {
+  if (values.empty()) return 0.0;
+  const std::size_t rank = std::size_t(std::ceil(q * double(values.size())));
+  const auto at = values.begin() + std::ptrdiff_t(std::clamp<std::size_t>(rank, 1, values.size()) - 1);
+  std::nth_element(values.begin(), at, values.end());
+  return *at;
+}
+
 FlowErrors opticalFlowErrors(const ImageF& estimate, const ImageF& truth, const ImageU8* excluded) {
   requireChannels("opticalFlowErrors", "estimate", estimate, 2);
   requireChannels("opticalFlowErrors", "truth", truth, 2);

@@ -34,23 +34,26 @@ void writeSequenceIndex(const std::string& dir, const Intrinsics& K, const std::
   std::ofstream intrinsics(folder / "intrinsics.txt");
   intrinsics.precision(17);
   intrinsics << K.fx << " " << K.fy << " " << K.cx << " " << K.cy << "\n";
+  intrinsics.flush();
   if (!intrinsics) throw io::FileError("cannot write " + (folder / "intrinsics.txt").string());
   std::ofstream list(folder / "stamps.txt");
   list.precision(17);
   for (const double stamp : stamps) list << stamp << "\n";
+  list.flush();
   if (!list) throw io::FileError("cannot write " + (folder / "stamps.txt").string());
 }
 
 RgbdFrame SequenceFolder::frame(std::size_t index) const {
   if (index >= stamps.size())
-    throw InputError("sequence folder " + dir + ": frame " + std::to_string(index) + " of " +
-                     std::to_string(stamps.size()));
+    throw InputError("sequence folder " + dir + ": frame index " + std::to_string(index) + " is past the last frame (" +
+                     std::to_string(stamps.size()) + " frames in stamps.txt)");
   RgbdFrame f;
   f.intensity = io::readPfm(framePath(dir, "intensity", index));
   f.depth = io::readPfm(framePath(dir, "depth", index));
   if (f.intensity.channels != 1 || f.depth.channels != 1 || !f.intensity.sameSize(f.depth.width, f.depth.height))
-    throw InputError("sequence folder " + dir + ": frame " + std::to_string(index) +
-                     ": intensity and depth must be one-channel images of one size");
+    throw InputError("sequence folder " + dir + ": frame " + std::to_string(index) + ": intensity " +
+                     imageSizeText(f.intensity) + " and depth " + imageSizeText(f.depth) +
+                     ": expected one-channel images of one size");
   return f;
 }
 
@@ -58,20 +61,28 @@ SequenceFolder readSequenceFolder(const std::string& dir) {
   const std::filesystem::path folder(dir);
   SequenceFolder out;
   out.dir = dir;
-  std::ifstream intrinsics(folder / "intrinsics.txt");
+  const std::string intrinsics_path = (folder / "intrinsics.txt").string();
+  std::ifstream intrinsics(intrinsics_path);
+  if (!intrinsics) throw InputError(intrinsics_path + ": cannot be opened (write the folder with mcflow export-seq)");
   if (!(intrinsics >> out.K.fx >> out.K.fy >> out.K.cx >> out.K.cy))
-    throw InputError((folder / "intrinsics.txt").string() + ": expected four numbers fx fy cx cy");
-  std::ifstream list(folder / "stamps.txt");
-  if (!list) throw InputError((folder / "stamps.txt").string() + ": cannot be opened");
+    throw InputError(intrinsics_path + ": expected four numbers fx fy cx cy");
+  try {
+    out.K.validate();
+  } catch (const InputError& e) {
+    throw InputError(intrinsics_path + ": " + e.what());
+  }
+  const std::string stamps_path = (folder / "stamps.txt").string();
+  std::ifstream list(stamps_path);
+  if (!list) throw InputError(stamps_path + ": cannot be opened");
   std::string line;
   int number = 0;
   while (std::getline(list, line)) {
     ++number;
     std::istringstream in(line);
     double stamp = NAN;
-    if (!(in >> stamp) || !std::isfinite(stamp))
-      throw InputError((folder / "stamps.txt").string() + ":" + std::to_string(number) + ": expected a stamp, got '" +
-                       line + "'");
+    std::string rest;
+    if (!(in >> stamp) || !std::isfinite(stamp) || (in >> rest))
+      throw InputError(stamps_path + ":" + std::to_string(number) + ": expected one stamp [s], got '" + line + "'");
     out.stamps.push_back(stamp);
   }
   if (out.stamps.size() < 2)

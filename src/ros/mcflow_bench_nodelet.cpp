@@ -145,18 +145,11 @@ class StepTimes {
   std::map<std::string, std::vector<double>> times_, faults_;
 };
 
-double percentile90(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const std::size_t k = std::size_t(std::ceil(0.9 * double(v.size()))) - 1;
-  return v[std::min(k, v.size() - 1)];
-}
-
 void printRow(const std::string& step, const std::vector<double>& ms, const std::vector<double>& faults,
               std::size_t bytes) {
   char line[160];
-  std::snprintf(line, sizeof(line), "  %-44s %9.3f %9.3f %7.0f", step.c_str(), mc_flow::median(ms), percentile90(ms),
-                mc_flow::median(faults));
+  std::snprintf(line, sizeof(line), "  %-44s %9.3f %9.3f %7.0f", step.c_str(), mc_flow::median(ms),
+                mc_flow::percentile(ms, 0.9), mc_flow::median(faults));
   std::cout << line;
   if (bytes > 0) std::cout << "  " << bytes << " B";
   std::cout << "\n";

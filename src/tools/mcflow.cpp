@@ -812,6 +812,8 @@ int cmdExportSeq(const CommandLine& args) {
   if (int(args.has("tum")) + int(args.has("frames")) != 1)
     throw CommandLineError("give one of --tum DIR or --frames DIR");
   const SequenceSource source = fileSequence(args, 1);  // the input resolution: the bench's pipeline downsamples
+  // An earlier export's index goes first: an export that fails half way leaves no folder that reads as complete.
+  std::filesystem::remove(std::filesystem::path(out) / "stamps.txt");
   std::vector<double> stamps;
   Intrinsics K;
   for (std::size_t i = 0; i < source.count; ++i) {

@@ -1,4 +1,5 @@
-// Stream-mode benchmark on synthetic sequences (core only: runs on the GPU machine too). Each sequence is
+// Stream-mode benchmark on synthetic sequences, or on a real one exported by `mcflow export-seq` (core only: runs on
+// the GPU machine too). Each sequence is
 // solved twice with persistent ids: cold (every pair from K-means, ids matched by overlap) and warm (each
 // pair from the previous pair's segments and motions). Prints per mode: time per pair, optical-flow EPE,
 // id consistency (the fraction of consecutive pairs in which each true part keeps the id most of its
@@ -315,6 +316,8 @@ int runRealSequence(const Options& opt, const SequenceFolder& folder, bool warm)
   Config config = opt.config;
   config.warm_start = warm;
   SequencePipeline pipeline(config, opt.downsample, 1.0);  // run-seq's default --max-pair-interval
+  if (!pipeline.backendUnavailable().empty())  // the CPU's timings must not pass for the requested backend's
+    throw BackendError("backend '" + toString(config.backend) + "' cannot be used: " + pipeline.backendUnavailable());
   pipeline.setOutputs(opt.outputs);
   std::vector<double> push_ms, solve_ms, segments;
   StageTimings stages;
@@ -343,12 +346,10 @@ int runRealSequence(const Options& opt, const SequenceFolder& folder, bool warm)
   if (!opt.trajectory.empty()) {
     std::ofstream file(opt.trajectory);
     file << trajectory;
-    if (!file) throw io::FileError("cannot write " + opt.trajectory);
+    file.flush();
+    if (!file) throw io::FileError("cannot write " + opt.trajectory + " (disk full or not writable?)");
   }
-  std::vector<double> sorted = push_ms;
-  std::sort(sorted.begin(), sorted.end());
-  const double p90 =
-      sorted.empty() ? 0.0 : sorted[std::min(sorted.size() - 1, std::size_t(0.9 * double(sorted.size())))];
+  const double p90 = percentile(push_ms, 0.9);
   const double n = std::max<double>(1.0, double(push_ms.size()));
   std::printf(
       "%-5s %9s %6zu %8.1f %9.1f %7.1f %7.1f %9.1f %8.1f %8.0f %6d %9d %6d   %.1f %.1f %.1f %.1f %.1f %.1f %.1f %.2f\n",
@@ -456,14 +457,17 @@ int main(int argc, char** argv) {
     line.applySettings(opt.config);
     opt.config.validate();
     opt.sequence = line.text("sequence", "");
-    opt.downsample = line.integer("downsample", 0, 0, 64);
+    opt.downsample = line.integer("downsample", 0, 0, 1 << 20);
+    chooseDownsample(opt.downsample, 320);  // 0 or a power of two, as SequencePipeline takes it
     opt.trajectory = line.text("trajectory", "");
     if (opt.sequence.empty() && (line.has("downsample") || line.has("trajectory")))
       throw ConfigError("--downsample and --trajectory are for --sequence");
     if (!opt.trajectory.empty() && opt.warm_modes.size() != 1)
       throw ConfigError("--trajectory needs one mode (--modes warm or --modes cold)");
-    if (!opt.sequence.empty() && (opt.world || opt.print_ids || opt.noise))
-      throw ConfigError("--world, --ids and --noise are for the synthetic sequences, not --sequence");
+    if (!opt.sequence.empty())
+      for (const char* synthetic : {"frames", "variants", "width", "height", "noise", "ids", "world"})
+        if (line.has(synthetic))
+          throw ConfigError(std::string("--") + synthetic + " is for the synthetic sequences, not --sequence");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mcflow_bench_stream: %s\n%s", e.what(), line.usage().c_str());
     return 2;

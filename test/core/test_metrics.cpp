@@ -241,3 +241,16 @@ TEST(Metrics, OdometryConsistencyIsTheNeesOfEachStepAgainstTheTruth) {
 
 }  // namespace
 }  // namespace mc_flow
+
+// The nearest-rank percentile the benchmarks print (p90): rank ceil(q n) of the sorted values.
+TEST(Metrics, PercentileIsTheNearestRank) {
+  const std::vector<double> ten = {10, 9, 8, 7, 6, 5, 4, 3, 2, 1};
+  EXPECT_EQ(mc_flow::percentile(ten, 0.9), 9.0);
+  EXPECT_EQ(mc_flow::percentile(ten, 0.91), 10.0);
+  EXPECT_EQ(mc_flow::percentile(ten, 1.0), 10.0);
+  EXPECT_EQ(mc_flow::percentile(ten, 0.5), 5.0);
+  EXPECT_EQ(mc_flow::percentile(ten, 0.01), 1.0);
+  EXPECT_EQ(mc_flow::percentile({4.0, 1.0, 3.0}, 0.9), 4.0);
+  EXPECT_EQ(mc_flow::percentile({7.5}, 0.9), 7.5);
+  EXPECT_EQ(mc_flow::percentile({}, 0.9), 0.0);
+}

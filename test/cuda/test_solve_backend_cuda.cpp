@@ -48,6 +48,19 @@ double maxAbsDifference(const SoftLabels& a, const SoftLabels& b) {
   return d;
 }
 
+// A rendered synthetic pair (`variant`, width x height) with its whole pyramid built on both backends; returns the
+// level count.
+int buildBothPyramids(SolveBackend& cpu, SolveBackend& gpu, int width, int height, int variant, const Config& config) {
+  SyntheticSceneOptions options;
+  options.width = width;
+  options.height = height;
+  options.variant = variant;
+  const SyntheticPair pair = renderSyntheticPair(options);
+  const int levels = pyramidLevelCount(width, height, config.coarsest_min_width);
+  for (SolveBackend* b : {&cpu, &gpu}) b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
+  return levels;
+}
+
 // The same values bit for bit (NaN matches NaN of the same bits).
 bool sameBits(const ImageF& a, const ImageF& b) {
   return a.width == b.width && a.height == b.height && a.channels == b.channels &&
@@ -575,14 +588,7 @@ TEST(CudaSolveBackend, KMeansCentresMatchTheHost) {
   };
   for (const auto& [width, height, variant] :
        {std::tuple{320, 240, 0}, std::tuple{320, 240, 1}, std::tuple{317, 239, 2}, std::tuple{640, 480, 0}}) {
-    SyntheticSceneOptions options;
-    options.width = width;
-    options.height = height;
-    options.variant = variant;
-    const SyntheticPair pair = renderSyntheticPair(options);
-    const int levels = pyramidLevelCount(width, height, config.coarsest_min_width);
-    for (SolveBackend* b : {cpu.get(), gpu.get()})
-      b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
+    const int levels = buildBothPyramids(*cpu, *gpu, width, height, variant, config);
     for (int level = 0; level < levels; ++level) {
       const std::string what = std::to_string(width) + "x" + std::to_string(height) + " variant " +
                                std::to_string(variant) + " level " + std::to_string(level);
@@ -596,21 +602,17 @@ TEST(CudaSolveBackend, KMeansCentresMatchTheHost) {
 
 // A warm start's K-means of the pixels no carried segment covers (initialiseLabelsWithUncoveredClusters) on the device
 // against the host's default: the same clusters kept and the same initial labels, with carried labels on part of the
-// level (two carried labels, first_new 2) and with none (first_new 0), at two sizes and several cluster counts.
+// level (two carried labels, first_new 2), with none (first_new 0) and covering every pixel (no cluster), at two sizes
+// and several cluster counts; hard labels outside [-1, first_new) refused by both. The labels are compared exactly:
+// a centre an ulp off the host's (cuda/kmeans.cu says when) would move a pixel only on a tie, and
+// KMeansCentresMatchTheHost finds every centre bit-identical on these scenes.
 TEST(CudaSolveBackend, UncoveredClustersMatchTheHost) {
   SKIP_WITHOUT_GPU();
   Config config;
   auto cpu = makeCpuSolveBackend();
   auto gpu = makeCudaSolveBackend();
   for (const auto& [width, height, variant] : {std::tuple{320, 240, 2}, std::tuple{317, 239, 1}}) {
-    SyntheticSceneOptions options;
-    options.width = width;
-    options.height = height;
-    options.variant = variant;
-    const SyntheticPair pair = renderSyntheticPair(options);
-    const int levels = pyramidLevelCount(width, height, config.coarsest_min_width);
-    for (SolveBackend* b : {cpu.get(), gpu.get()})
-      b->buildPyramids(pair.frame1, pair.frame2, pair.intrinsics, levels, config);
+    buildBothPyramids(*cpu, *gpu, width, height, variant, config);
     const int level = 1;
     const ImageF& points = cpu->framePoints(level);
     for (const bool carried : {true, false}) {
@@ -628,9 +630,20 @@ TEST(CudaSolveBackend, UncoveredClustersMatchTheHost) {
         EXPECT_EQ(a, b) << what;
         EXPECT_GE(a, 1) << what;
         EXPECT_EQ(cpu->labelCount(), first_new + a + 1) << what;
+        EXPECT_EQ(gpu->labelCount(), first_new + b + 1) << what;
         EXPECT_EQ(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 0.0) << what;
       }
     }
+    ImageI32 covered(points.width, points.height, 1, 0);  // every pixel carried: nothing to cluster
+    for (int y = 0; y < covered.height; ++y)
+      for (int x = covered.width / 2; x < covered.width; ++x) covered(x, y) = 1;
+    EXPECT_EQ(cpu->initialiseLabelsWithUncoveredClusters(level, covered, 2, 3, config), 0);
+    EXPECT_EQ(gpu->initialiseLabelsWithUncoveredClusters(level, covered, 2, 3, config), 0);
+    EXPECT_EQ(gpu->labelCount(), 3);
+    EXPECT_EQ(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 0.0) << "every pixel carried";
+    covered(0, 0) = 2;  // not a carried label when the new ones start at 2
+    EXPECT_THROW(cpu->initialiseLabelsWithUncoveredClusters(level, covered, 2, 3, config), InputError);
+    EXPECT_THROW(gpu->initialiseLabelsWithUncoveredClusters(level, covered, 2, 3, config), InputError);
   }
 }
 

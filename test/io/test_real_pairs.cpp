@@ -321,10 +321,8 @@ TEST(BenchSequenceCli, TheExportedTumFramesSolveAsRunSeqSolvesThem) {
   }
 
   const std::string settings = " --backend cpu --set threads=2";
-  ASSERT_EQ(std::system(("'" + std::string(MCFLOW_CLI_PATH) + "' run-seq " + source + settings + " --out '" +
-                         run.string() + "' >/dev/null 2>&1")
-                            .c_str()),
-            0);
+  const CliOutput run_seq = runTool(MCFLOW_CLI_PATH, "run-seq " + source + settings + " --out '" + run.string() + "'");
+  ASSERT_EQ(run_seq.code, 0) << run_seq.err;
   const fs::path trajectory = benchWorkDir() / "tum_bench_trajectory.txt";
   const CliOutput bench =
       runTool(MCFLOW_BENCH_STREAM_PATH, "--sequence '" + exported.string() + "' --modes warm" + settings +

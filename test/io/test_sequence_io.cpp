@@ -240,13 +240,17 @@ TEST(SequenceFolder, FramesStampsAndIntrinsicsReadBackAndBadFilesAreNamed) {
       EXPECT_NE(std::string(e.what()).find(part), std::string::npos) << e.what();
     }
   };
-  throwsNaming([&] { read.frame(2); }, "frame 2 of 2");
+  throwsNaming([&] { read.frame(2); }, "frame index 2 is past the last frame (2 frames");
   fs::remove(fs::path(folder) / "depth_00001.pfm");
   throwsNaming([&] { read.frame(1); }, "depth_00001.pfm");
   write(fs::path(folder) / "stamps.txt", "10.0\nten\n");
   throwsNaming([&] { readSequenceFolder(folder); }, "stamps.txt:2");
+  write(fs::path(folder) / "stamps.txt", "10.0\n10.1 x\n");
+  throwsNaming([&] { readSequenceFolder(folder); }, "stamps.txt:2");
   write(fs::path(folder) / "stamps.txt", "10.0\n");
   throwsNaming([&] { readSequenceFolder(folder); }, "1 frame(s)");
-  fs::remove(fs::path(folder) / "intrinsics.txt");
+  write(fs::path(folder) / "intrinsics.txt", "0 300 2 1.5\n");
   throwsNaming([&] { readSequenceFolder(folder); }, "intrinsics.txt");
+  fs::remove(fs::path(folder) / "intrinsics.txt");
+  throwsNaming([&] { readSequenceFolder(folder); }, "intrinsics.txt: cannot be opened");
 }

@@ -15,6 +15,13 @@ failures=0
 tools=$(awk '/^```/{inblock=!inblock; next} inblock{print; next} {while (match($0, /`[^`]*`/)) {print substr($0, RSTART+1, RLENGTH-2); $0=substr($0, RSTART+RLENGTH)}}' "$readme" |
         grep -oE '(^|[[:space:];(|&])(ros[a-z_]+|rviz|dynparam)\b' | tr -d ' \t;(|&' | sort -u)
 [ -n "$tools" ] || { echo "FAIL: no ROS tools found in $readme"; exit 1; }
+# (grep reads a here-string, not a pipe: under pipefail `echo | grep -q` could fail with SIGPIPE on a long output.)
+starts() {
+  out=$("${cmd[@]}" 2>&1)
+  rc=$?
+  [ "$rc" != 127 ] && grep -qiE "usage|commands:|--fixed-frame" <<<"$out" &&
+    ! grep -qE "Traceback|No module named|command not found" <<<"$out"
+}
 for tool in $tools; do
   case "$tool" in
     rviz)
@@ -29,12 +36,6 @@ for tool in $tools; do
   # tool (exit 127) or Python module (a traceback, as dynparam without rosservice) fails. A tool that fails is
   # started once more, visibly (one full ctest run here saw this check fail once, with its output lost, while
   # rerunning it under load never failed again): a missing tool or module fails both times.
-  starts() {
-    out=$("${cmd[@]}" 2>&1)
-    rc=$?
-    [ "$rc" != 127 ] && echo "$out" | grep -qiE "usage|commands:|--fixed-frame" &&
-      ! echo "$out" | grep -qE "Traceback|No module named|command not found"
-  }
   if starts; then
     echo "ok   $tool"
   else

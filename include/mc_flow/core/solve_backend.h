@@ -88,7 +88,7 @@ class SolveBackend : public LabelStore {
   /// `clusters` clusters, Config's kmeans_max_iterations, kmeans_tolerance and seed) and numbered from `first_new`,
   /// then initialiseLabels(level, those labels, first_new + the clusters kept). Returns the clusters kept. This default
   /// runs the K-means on framePoints(level); the CUDA backend runs it on the device (the same rules as kmeansCentres'
-  /// there) and downloads only the centres.
+  /// there), which writes the uncovered pixels' labels, and downloads only its answer.
   virtual int initialiseLabelsWithUncoveredClusters(int level, ImageI32 hard, int first_new, int clusters,
                                                     const Config& config);
   /// @brief Stream mode (a warm start), right after initialiseLabels: the initial labels below `carried_labels` are the
@@ -190,6 +190,11 @@ std::size_t stageCarryInputs(const Result& previous, bool dormant, unsigned char
 /// @brief Checks initial hard labels (size, values in [-1, motion_labels), motion_labels >= 1); throws
 /// InputError naming the value.
 void validateHardLabels(const ImageI32& hard, int motion_labels, int width, int height);
+/// @brief Throws InputError unless motion_labels >= 1 (initial labels need a motion label).
+void requireMotionLabels(int motion_labels);
+/// @brief Checks a warm start's carried hard labels before its uncovered pixels are clustered
+/// (initialiseLabelsWithUncoveredClusters): size, values in [-1, first_new), first_new >= 0; throws InputError.
+void validateCarriedHardLabels(const ImageI32& hard, int first_new, int width, int height);
 
 /// @brief True when the CUDA backend is compiled in and CUDA device `device` exists and is usable; otherwise `why`
 /// says why not. The calling thread's current device is left as it was.

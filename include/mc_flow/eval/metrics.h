@@ -21,6 +21,8 @@ namespace mc_flow {
 
 /// @brief The element at index size / 2 of the sorted values (the upper median for an even count); 0 when empty.
 double median(std::vector<double> values);
+/// @brief The nearest-rank percentile: the value at rank ceil(q n) of the sorted values (q in (0, 1]); 0 when empty.
+double percentile(std::vector<double> values, double q);
 
 struct FlowErrors {
   double epe = 0;      ///< mean end-point error [px]

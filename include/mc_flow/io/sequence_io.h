@@ -57,7 +57,7 @@ std::string odometryCsvRow(long pair, const OdometryStep& step);
 /// malformed line.
 std::vector<OdometryStep> readOdometryCsv(const std::string& path);
 
-/// tumTrajectoryLine (one line of a TUM RGB-D trajectory file): mc_flow/io/flow_io.h.
+// tumTrajectoryLine (one line of a TUM RGB-D trajectory file): mc_flow/io/flow_io.h.
 
 /// @brief A trajectory in the TUM RGB-D format: stamp -> pose. Lines starting with '#' and empty lines are skipped.
 /// Throws InputError naming the file and line of a malformed line or a quaternion far from unit length.
