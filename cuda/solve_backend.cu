@@ -271,11 +271,11 @@ class CudaSolveBackend final : public SolveBackend {
     labelsFromHardLabels(level, int(centres.size()));
   }
 
-  int initialiseLabelsWithUncoveredClusters(int level, ImageI32 hard, int first_new, int clusters,
+  int initialiseLabelsWithUncoveredClusters(int level, const ImageI32& hard, int first_new, int clusters,
                                             const Config& config) override {
     // Outside what the kernel argument holds (Config caps initial_labels at its size), or refused: the host's.
     if (clusters < 1 || clusters > cuda_detail::KMeansCentres::kMax || config.kmeans_max_iterations < 0)
-      return SolveBackend::initialiseLabelsWithUncoveredClusters(level, std::move(hard), first_new, clusters, config);
+      return SolveBackend::initialiseLabelsWithUncoveredClusters(level, hard, first_new, clusters, config);
     const DeviceLevel& L = levelAt(level);
     validateCarriedHardLabels(hard, first_new, L.width, L.height);
     uploadHardLabels(hard);

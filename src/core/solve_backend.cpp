@@ -66,10 +66,11 @@ void SolveBackend::initialiseLabelsFromCentres(int level, const std::vector<Eige
   initialiseLabels(level, assignToNearestCentre(framePoints(level), centres), int(centres.size()));
 }
 
-int SolveBackend::initialiseLabelsWithUncoveredClusters(int level, ImageI32 hard, int first_new, int clusters,
+int SolveBackend::initialiseLabelsWithUncoveredClusters(int level, const ImageI32& carried, int first_new, int clusters,
                                                         const Config& config) {
   const ImageF& points = framePoints(level);
-  validateCarriedHardLabels(hard, first_new, points.width, points.height);
+  validateCarriedHardLabels(carried, first_new, points.width, points.height);
+  ImageI32 hard = carried;  // the carried labels, then the clusters
   // The uncovered pixels' points in pixel order, as kmeansPoints takes an image's valid points (a list of the few
   // instead of an image of the level: no pages to fill per pair).
   std::vector<Eigen::Vector3f> open_points;

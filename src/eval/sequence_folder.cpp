@@ -31,16 +31,13 @@ void writeSequenceFrame(const std::string& dir, std::size_t index, const RgbdFra
 void writeSequenceIndex(const std::string& dir, const Intrinsics& K, const std::vector<double>& stamps) {
   std::filesystem::create_directories(dir);
   const std::filesystem::path folder(dir);
-  std::ofstream intrinsics(folder / "intrinsics.txt");
+  std::ostringstream intrinsics, list;
   intrinsics.precision(17);
   intrinsics << K.fx << " " << K.fy << " " << K.cx << " " << K.cy << "\n";
-  intrinsics.flush();
-  if (!intrinsics) throw io::FileError("cannot write " + (folder / "intrinsics.txt").string());
-  std::ofstream list(folder / "stamps.txt");
+  io::writeTextFile((folder / "intrinsics.txt").string(), intrinsics.str());
   list.precision(17);
   for (const double stamp : stamps) list << stamp << "\n";
-  list.flush();
-  if (!list) throw io::FileError("cannot write " + (folder / "stamps.txt").string());
+  io::writeTextFile((folder / "stamps.txt").string(), list.str());
 }
 
 RgbdFrame SequenceFolder::frame(std::size_t index) const {
@@ -86,8 +83,7 @@ SequenceFolder readSequenceFolder(const std::string& dir) {
     out.stamps.push_back(stamp);
   }
   if (out.stamps.size() < 2)
-    throw InputError((folder / "stamps.txt").string() + ": " + std::to_string(out.stamps.size()) +
-                     " frame(s), a sequence needs 2");
+    throw InputError(stamps_path + ": " + std::to_string(out.stamps.size()) + " frame(s), a sequence needs 2");
   return out;
 }
 

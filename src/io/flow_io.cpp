@@ -296,6 +296,19 @@ SoftLabels readSoftLabelsNpy(const std::string& path) {
   return labels;
 }
 
+void writeTextFile(const std::string& path, const std::string& text) {
+  std::ofstream out = openForWriting(path);
+  out << text;
+  finishWriting(out, path);
+}
+
+std::string readTextFile(const std::string& path) {
+  std::ifstream in = openForReading(path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
 std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose) {
   const Eigen::Quaterniond q(Eigen::Matrix3d(pose.topLeftCorner<3, 3>()));
   char line[256];

@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -204,22 +203,6 @@ std::string groundTruthSegmentsJson(const std::vector<SyntheticPart>& parts) {
                     {"twist", numbers(twistValues(p.twist))},
                     {"transform", numbers(transformValues(se3Exp(p.twist)))}});
   return dump({{"units", "twist: v [m], w [rad] over the frame interval, frame-1 camera frame"}, {"parts", list}});
-}
-
-void writeTextFile(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  if (!out) throw FileError("cannot create '" + path + "'");
-  out << text;
-  out.flush();
-  if (!out) throw FileError("error while writing '" + path + "'");
-}
-
-std::string readTextFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError("cannot open '" + path + "' for reading (missing or unreadable)");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
 }
 
 nlohmann::json readJsonFile(const std::string& path) {

@@ -36,7 +36,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <fstream>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -343,12 +342,7 @@ int runRealSequence(const Options& opt, const SequenceFolder& folder, bool warm)
     warm_starts += r.start == StartKind::Warm;
     fallbacks += r.start == StartKind::ColdFallback;
   }
-  if (!opt.trajectory.empty()) {
-    std::ofstream file(opt.trajectory);
-    file << trajectory;
-    file.flush();
-    if (!file) throw io::FileError("cannot write " + opt.trajectory + " (disk full or not writable?)");
-  }
+  if (!opt.trajectory.empty()) io::writeTextFile(opt.trajectory, trajectory);
   const double p90 = percentile(push_ms, 0.9);
   const double n = std::max<double>(1.0, double(push_ms.size()));
   std::printf(

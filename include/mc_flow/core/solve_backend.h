@@ -89,7 +89,7 @@ class SolveBackend : public LabelStore {
   /// then initialiseLabels(level, those labels, first_new + the clusters kept). Returns the clusters kept. This default
   /// runs the K-means on framePoints(level); the CUDA backend runs it on the device (the same rules as kmeansCentres'
   /// there), which writes the uncovered pixels' labels, and downloads only its answer.
-  virtual int initialiseLabelsWithUncoveredClusters(int level, ImageI32 hard, int first_new, int clusters,
+  virtual int initialiseLabelsWithUncoveredClusters(int level, const ImageI32& hard, int first_new, int clusters,
                                                     const Config& config);
   /// @brief Stream mode (a warm start), right after initialiseLabels: the initial labels below `carried_labels` are the
   /// previous pair's segments. From then on each label step adds Config::warm_switch_cost to every other label's data

@@ -37,6 +37,11 @@ void writePfm(const std::string& path, const ImageF& image);
 /// @brief Reads a PFM file of either endianness into a top-row-first image.
 ImageF readPfm(const std::string& path);
 
+/// @brief Writes `text` to `path`; throws FileError naming the path.
+void writeTextFile(const std::string& path, const std::string& text);
+/// @brief Reads a whole file; throws InputError naming the path.
+std::string readTextFile(const std::string& path);
+
 /// @brief One line of a TUM RGB-D trajectory file: "stamp tx ty tz qx qy qz qw" (the pose's translation [m] and
 /// rotation as a unit quaternion).
 std::string tumTrajectoryLine(double stamp, const Eigen::Matrix4d& pose);

@@ -14,6 +14,7 @@
 #include "mc_flow/core/config.h"
 #include "mc_flow/core/solver.h"
 #include "mc_flow/eval/synthetic_scene.h"
+#include "mc_flow/io/flow_io.h"
 
 namespace mc_flow {
 namespace io {
@@ -69,10 +70,7 @@ std::string evalTable(const EvalMetrics& metrics);
 /// @brief Ground-truth parts of a synthetic pair: id, name, twist, transform.
 std::string groundTruthSegmentsJson(const std::vector<SyntheticPart>& parts);
 
-/// @brief Writes `text` to `path`; throws FileError naming the path.
-void writeTextFile(const std::string& path, const std::string& text);
-/// @brief Reads a whole file; throws InputError naming the path.
-std::string readTextFile(const std::string& path);
+// writeTextFile, readTextFile: mc_flow/io/flow_io.h.
 /// @brief Parses a JSON file (e.g. one of the outputs above; null stands for a missing or non-finite number).
 /// Throws InputError naming the path and line when the file is missing or is not valid JSON.
 /// Include <nlohmann/json.hpp> to use the returned value.
