@@ -137,7 +137,11 @@ __device__ void se3ExpDevice(const double xi[6], float T[12]) {
   for (int k = 0; k < 12; ++k) T[k] = float(Td[k]);
 }
 
-// Left Jacobian of SE(3) (se3_coefficients.h), cast to float (row-major 6x6).
+// Left Jacobian of SE(3) (se3_coefficients.h), cast to float (row-major 6x6). Q's seven 3x3 products are written with
+// the skew identities FP = rho phi^T - (phi.rho) I, FPF = -(phi.rho) F, F^2 P + P F^2 = phi (phi x rho)^T - (phi x rho)
+// phi^T - 2 |phi|^2 P and FPF^2 = F^2 PF = -(phi.rho) F^2: the same matrix in double (the last bits of a few entries
+// differ, below what the cast to float keeps) in a quarter of the double-precision operations, which a blended pixel
+// pays (docs/decisions/0009).
 __device__ void se3LeftJacobianDevice(const double xi[6], float J[36]) {
   const double* rho = xi;
   const double* phi = xi + 3;
@@ -145,23 +149,22 @@ __device__ void se3LeftJacobianDevice(const double xi[6], float J[36]) {
   skew3(phi, F);
   mul3(F, F, F2);
   skew3(rho, P);
+  const double t2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2];
   double a, b, c, d;
-  se3LeftJacobianCoefficients(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2], a, b, c, d);
-  double FP[9], PF[9], FPF[9], F2P[9], PF2[9], FPF2[9], F2PF[9];
-  mul3(F, P, FP);
-  mul3(P, F, PF);
-  mul3(FP, F, FPF);
-  mul3(F2, P, F2P);
-  mul3(P, F2, PF2);
-  mul3(FP, F2, FPF2);
-  mul3(F2P, F, F2PF);
+  se3LeftJacobianCoefficients(t2, a, b, c, d);
+  const double phi_dot_rho = phi[0] * rho[0] + phi[1] * rho[1] + phi[2] * rho[2];
+  const double cross[3] = {phi[1] * rho[2] - phi[2] * rho[1], phi[2] * rho[0] - phi[0] * rho[2],
+                           phi[0] * rho[1] - phi[1] * rho[0]};
   for (int k = 0; k < 36; ++k) J[k] = 0.f;
   for (int r = 0; r < 3; ++r) {
     for (int col = 0; col < 3; ++col) {
       const int e = r * 3 + col;
-      const float so3 = float((r == col ? 1.0 : 0.0) + a * F[e] + b * F2[e]);
-      const double q =
-          0.5 * P[e] + b * (FP[e] + PF[e] + FPF[e]) + c * (F2P[e] + PF2[e] - 3.0 * FPF[e]) + d * (FPF2[e] + F2PF[e]);
+      const double identity = r == col ? 1.0 : 0.0;
+      const float so3 = float(identity + a * F[e] + b * F2[e]);
+      const double fp_pf = rho[r] * phi[col] + phi[r] * rho[col] - 2.0 * phi_dot_rho * identity;  // FP + PF
+      const double f2p_pf2 = phi[r] * cross[col] - cross[r] * phi[col] - 2.0 * t2 * P[e];         // F^2 P + P F^2
+      const double fpf = -phi_dot_rho * F[e];
+      const double q = 0.5 * P[e] + b * (fp_pf + fpf) + c * (f2p_pf2 - 3.0 * fpf) + d * (-2.0 * phi_dot_rho * F2[e]);
       J[r * 6 + col] = so3;
       J[(r + 3) * 6 + col + 3] = so3;
       J[r * 6 + col + 3] = float(q);
