@@ -29,6 +29,13 @@ Json numbers(const std::vector<double>& values) {
 
 std::vector<double> twistValues(const Vector6d& xi) { return {xi(0), xi(1), xi(2), xi(3), xi(4), xi(5)}; }
 
+std::vector<double> covarianceValues(const Matrix6d& C) {
+  std::vector<double> v;
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) v.push_back(C(r, c));
+  return v;
+}
+
 std::vector<double> transformValues(const Eigen::Matrix4d& T) {
   std::vector<double> v;
   for (int r = 0; r < 4; ++r)
@@ -54,18 +61,25 @@ std::string dump(const Json& json) { return json.dump(2) + "\n"; }
 
 std::string segmentsJson(const Result& result) {
   Json segments = Json::array();
-  for (const Segment& s : result.segments)
+  for (const Segment& s : result.segments) {
+    const std::vector<int>& world_ids = result.world.ids;
+    const bool world = result.world.found && std::find(world_ids.begin(), world_ids.end(), s.id) != world_ids.end();
     segments.push_back({{"id", s.id},
                         {"twist", numbers(twistValues(s.twist))},
                         {"transform", numbers(transformValues(s.transform))},
                         {"support", s.support},
                         {"centroid", numbers({s.centroid.x(), s.centroid.y(), s.centroid.z()})},
                         {"speed", number(s.twist.head<3>().norm())},
-                        {"rotation_angle", number(s.twist.tail<3>().norm())}});
+                        {"rotation_angle", number(s.twist.tail<3>().norm())},
+                        {"covariance", numbers(covarianceValues(s.covariance))},
+                        {"world", world}});
+  }
   return dump({{"frame",
                 "camera optical frame of frame 1 (x right, y down, z forward); transform maps frame-1 "
                 "points to their frame-2 positions"},
-               {"units", "twist: v [m], w [rad] over the frame interval; centroid [m]; support [pixels]"},
+               {"units",
+                "twist: v [m], w [rad] over the frame interval; covariance: of the twist, 6x6 row-major [m^2, m rad, "
+                "rad^2]; centroid [m]; support [pixels]; world: the segment is part of the static world"},
                {"segments", segments}});
 }
 
@@ -128,6 +142,14 @@ std::string reportJson(const Result& result, const Config& config, const RunInfo
   report["iterations"] = iterations;
   report["final_energy"] = number(result.energy);
   report["segments"] = int(result.segments.size());
+  // The static world: which segments, why, and its motion (the camera moved by the inverse).
+  const StaticWorld& w = result.world;
+  report["static_world"] = {{"found", w.found},
+                            {"chosen_by", w.chosen_by},
+                            {"ids", w.ids},
+                            {"twist", numbers(twistValues(w.twist))},
+                            {"covariance", numbers(covarianceValues(w.covariance))},
+                            {"pixels", number(w.pixels)}};
   return dump(report);
 }
 

@@ -625,6 +625,15 @@ Result resultWithTwoSegments() {
     r.segments.push_back(s);
   }
   r.segments[1].centroid.x() = std::nan("");  // e.g. a segment without valid points
+  r.segments[0].covariance = Matrix6d::Identity() * 1e-6;
+  r.segments[0].covariance(0, 5) = r.segments[0].covariance(5, 0) = 2e-7;
+  r.world.found = true;
+  r.world.ids = {2};
+  r.world.labels = {1};
+  r.world.twist << 0.001, 0.002, -0.003, 0.01, -0.02, 0.0;
+  r.world.covariance = Matrix6d::Identity() * 4e-6;
+  r.world.pixels = 812.5;
+  r.world.chosen_by = "widest";
   OuterIterationStats it;
   it.iteration = 0;
   it.labels_before = 4;
@@ -657,6 +666,13 @@ TEST(Json, SegmentsParseBackWithEveryField) {
     EXPECT_NEAR(s.at("rotation_angle").get<double>(), expected.twist.tail<3>().norm(), 1e-15);
     ASSERT_EQ(s.at("centroid").size(), 3u);
   }
+  // The twist's covariance row-major, and which segment is the static world.
+  ASSERT_EQ(j["segments"][0].at("covariance").size(), 36u);
+  for (int k = 0; k < 36; ++k)
+    EXPECT_EQ(j["segments"][0]["covariance"][k].get<double>(), r.segments[0].covariance(k / 6, k % 6));
+  EXPECT_EQ(j["segments"][0]["covariance"][5].get<double>(), 2e-7);
+  EXPECT_FALSE(j["segments"][0].at("world").get<bool>());
+  EXPECT_TRUE(j["segments"][1].at("world").get<bool>());
   EXPECT_TRUE(j["segments"][1]["centroid"][0].is_null());  // NaN is written as null
   EXPECT_EQ(j["segments"][1]["centroid"][2].get<double>(), 2.5);
 }
@@ -681,6 +697,16 @@ TEST(Json, ReportParsesBackWithConfigTimingsAndIterations) {
   EXPECT_EQ(j.at("timings_ms").at("motion").get<double>(), 4.5);
   EXPECT_EQ(j.at("final_energy").get<double>(), 123.25);
   EXPECT_EQ(j.at("segments").get<int>(), 2);
+  const nlohmann::json& world = j.at("static_world");
+  EXPECT_TRUE(world.at("found").get<bool>());
+  EXPECT_EQ(world.at("chosen_by").get<std::string>(), "widest");
+  EXPECT_EQ(world.at("ids").get<std::vector<int>>(), std::vector<int>{2});
+  ASSERT_EQ(world.at("twist").size(), 6u);
+  for (int k = 0; k < 6; ++k) EXPECT_EQ(world["twist"][k].get<double>(), r.world.twist(k));
+  ASSERT_EQ(world.at("covariance").size(), 36u);
+  EXPECT_EQ(world["covariance"][0].get<double>(), 4e-6);
+  EXPECT_EQ(world["covariance"][1].get<double>(), 0.0);
+  EXPECT_EQ(world.at("pixels").get<double>(), 812.5);
   ASSERT_EQ(j.at("iterations").size(), 1u);
   EXPECT_EQ(j["iterations"][0].at("labels_before").get<int>(), 4);
   EXPECT_EQ(j["iterations"][0].at("label_change").get<double>(), 0.125);

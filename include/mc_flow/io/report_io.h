@@ -26,10 +26,12 @@ struct RunInfo {
   double load_ms = 0, write_ms = 0;        ///< file reading / writing wall time [ms]
 };
 
-/// @brief Per-segment id, twist (vx vy vz [m], wx wy wz [rad]), 4x4 transform (row-major), support, centroid [m].
+/// @brief Per-segment id, twist (vx vy vz [m], wx wy wz [rad]), 4x4 transform (row-major), support, centroid [m], the
+/// twist's 6x6 covariance (row-major) and whether the segment is part of the static world (Result::world).
 std::string segmentsJson(const Result& result);
 /// @brief Resolution, processing resolution, intrinsics, every Config field, stage timings [ms],
-/// per-outer-iteration statistics, final energy, backend.
+/// per-outer-iteration statistics, final energy, backend, the static world (found, chosen_by, ids, twist, 6x6
+/// covariance row-major, pixels).
 std::string reportJson(const Result& result, const Config& config, const RunInfo& info);
 
 /// @brief The numbers `mcflow eval` computes; fields whose `has_*` flag is false are written as null.
