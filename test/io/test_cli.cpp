@@ -237,8 +237,17 @@ TEST(Cli, RunWritesEveryOutputAtInputResolution) {
 
   const std::string report = io::readTextFile((out / "report.json").string());
   EXPECT_EQ(jsonNumber(report, "width"), kWidth);
-  for (const char* key : {"\"lambda_quadratic\"", "\"motion\"", "\"labels_after\"", "\"final_energy\"", "\"backend\""})
+  for (const char* key : {"\"lambda_quadratic\"", "\"motion\"", "\"labels_after\"", "\"final_energy\"", "\"backend\"",
+                          "\"static_world\"", "\"chosen_by\""})
     EXPECT_NE(report.find(key), std::string::npos) << key;
+  // The static world (the scene's room) is named alike in the summary on stdout and in segments.json.
+  auto count = [](const std::string& text, const std::string& what) {
+    std::size_t n = 0;
+    for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+    return n;
+  };
+  EXPECT_GE(count(run.out, ", static world"), 1u) << run.out;
+  EXPECT_EQ(count(run.out, ", static world"), count(segments, "\"world\": true")) << run.out << segments;
 }
 
 TEST(Cli, EvalOfExactDepthRunRecoversMotion) {
