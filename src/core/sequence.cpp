@@ -221,9 +221,8 @@ SequenceStep SequencePipeline::push(StreamFrame input) {
   const double interval = previous_frame_->stamp - pair_first_->stamp;
   updateOdometry(*last_result_, interval, previous_frame_->stamp);
   for (const Segment& s : last_result_->segments) {
-    const bool is_world = std::find(last_result_->world.ids.begin(), last_result_->world.ids.end(), s.id) !=
-                          last_result_->world.ids.end();
-    step.world_velocities.push_back(worldVelocity(s, s.covariance, last_result_->world, is_world, interval, config_));
+    step.world_velocities.push_back(
+        worldVelocity(s, s.covariance, last_result_->world, last_result_->world.contains(s.id), interval, config_));
   }
   step.outcome = SequenceStep::Outcome::Solved;
   step.first = pair_first_.get();

@@ -267,6 +267,8 @@ StaticWorld estimateStaticWorld(LabelStore& labels, const std::vector<Segment>& 
   return world;
 }
 
+bool StaticWorld::contains(int segment_id) const { return std::find(ids.begin(), ids.end(), segment_id) != ids.end(); }
+
 WorldVelocity worldVelocity(const Segment& segment, const Matrix6d& segment_covariance, const StaticWorld& world,
                             bool is_world, double interval_s, const Config& config) {
   if (!(interval_s > 0))

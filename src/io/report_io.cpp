@@ -29,17 +29,12 @@ Json numbers(const std::vector<double>& values) {
 
 std::vector<double> twistValues(const Vector6d& xi) { return {xi(0), xi(1), xi(2), xi(3), xi(4), xi(5)}; }
 
-std::vector<double> covarianceValues(const Matrix6d& C) {
+// A matrix's entries row by row (a 4x4 transform, a 6x6 covariance).
+template <typename Matrix>
+std::vector<double> rowMajorValues(const Matrix& m) {
   std::vector<double> v;
-  for (int r = 0; r < 6; ++r)
-    for (int c = 0; c < 6; ++c) v.push_back(C(r, c));
-  return v;
-}
-
-std::vector<double> transformValues(const Eigen::Matrix4d& T) {
-  std::vector<double> v;
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) v.push_back(T(r, c));
+  for (Eigen::Index r = 0; r < m.rows(); ++r)
+    for (Eigen::Index c = 0; c < m.cols(); ++c) v.push_back(m(r, c));
   return v;
 }
 
@@ -61,19 +56,16 @@ std::string dump(const Json& json) { return json.dump(2) + "\n"; }
 
 std::string segmentsJson(const Result& result) {
   Json segments = Json::array();
-  for (const Segment& s : result.segments) {
-    const std::vector<int>& world_ids = result.world.ids;
-    const bool world = result.world.found && std::find(world_ids.begin(), world_ids.end(), s.id) != world_ids.end();
+  for (const Segment& s : result.segments)
     segments.push_back({{"id", s.id},
                         {"twist", numbers(twistValues(s.twist))},
-                        {"transform", numbers(transformValues(s.transform))},
+                        {"transform", numbers(rowMajorValues(s.transform))},
                         {"support", s.support},
                         {"centroid", numbers({s.centroid.x(), s.centroid.y(), s.centroid.z()})},
                         {"speed", number(s.twist.head<3>().norm())},
                         {"rotation_angle", number(s.twist.tail<3>().norm())},
-                        {"covariance", numbers(covarianceValues(s.covariance))},
-                        {"world", world}});
-  }
+                        {"covariance", numbers(rowMajorValues(s.covariance))},
+                        {"world", result.world.contains(s.id)}});
   return dump({{"frame",
                 "camera optical frame of frame 1 (x right, y down, z forward); transform maps frame-1 "
                 "points to their frame-2 positions"},
@@ -148,7 +140,7 @@ std::string reportJson(const Result& result, const Config& config, const RunInfo
                             {"chosen_by", w.chosen_by},
                             {"ids", w.ids},
                             {"twist", numbers(twistValues(w.twist))},
-                            {"covariance", numbers(covarianceValues(w.covariance))},
+                            {"covariance", numbers(rowMajorValues(w.covariance))},
                             {"pixels", number(w.pixels)}};
   return dump(report);
 }
@@ -223,7 +215,7 @@ std::string groundTruthSegmentsJson(const std::vector<SyntheticPart>& parts) {
     list.push_back({{"id", p.id},
                     {"name", p.name},
                     {"twist", numbers(twistValues(p.twist))},
-                    {"transform", numbers(transformValues(se3Exp(p.twist)))}});
+                    {"transform", numbers(rowMajorValues(se3Exp(p.twist)))}});
   return dump({{"units", "twist: v [m], w [rad] over the frame interval, frame-1 camera frame"}, {"parts", list}});
 }
 

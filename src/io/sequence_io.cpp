@@ -147,7 +147,7 @@ std::string trajectoryCsvRows(long pair, double stamp, const Result& result, con
     for (int k = 0; k < 6; ++k) out << ',' << s.twist[k];
     out << ',' << s.support;
     if (world) {
-      const bool is_world = std::find(result.world.ids.begin(), result.world.ids.end(), s.id) != result.world.ids.end();
+      const bool is_world = result.world.contains(s.id);
       const WorldVelocity& v = (*world)[i];
       out << ',' << (is_world ? 1 : 0) << ',' << (v.moving ? 1 : 0);
       for (int k = 0; k < 3; ++k) out << ',' << v.linear[k];

@@ -300,7 +300,7 @@ mc_flow::SegmentArray makeSegmentArray(const mc_flow::Result& result, const Pair
     out.color.a = 1.f;
     if (pair.world && i < pair.world->size()) {
       const mc_flow::WorldVelocity& w = (*pair.world)[i];
-      out.world = std::find(result.world.ids.begin(), result.world.ids.end(), s.id) != result.world.ids.end();
+      out.world = result.world.contains(s.id);
       out.moving = w.moving;
       out.world_velocity.linear.x = w.linear.x();
       out.world_velocity.linear.y = w.linear.y();

@@ -373,13 +373,10 @@ Result solveAndWrite(const io::PairPaths& paths, const IntrinsicsSource& intrins
 
 void printSegments(const Result& result) {
   std::printf("%zu segment(s) (motion over the frame interval):\n", result.segments.size());
-  const std::vector<int>& world = result.world.ids;
   for (const Segment& s : result.segments)
-    std::printf(
-        "  segment %2d: |v| = %7.1f mm, |w| = %6.2f deg, support %8.0f px, centroid (%.2f, %.2f, %.2f) m%s\n", s.id,
-        1000.0 * s.twist.head<3>().norm(), s.twist.tail<3>().norm() * 180.0 / M_PI, s.support, s.centroid.x(),
-        s.centroid.y(), s.centroid.z(),
-        result.world.found && std::find(world.begin(), world.end(), s.id) != world.end() ? ", static world" : "");
+    std::printf("  segment %2d: |v| = %7.1f mm, |w| = %6.2f deg, support %8.0f px, centroid (%.2f, %.2f, %.2f) m%s\n",
+                s.id, 1000.0 * s.twist.head<3>().norm(), s.twist.tail<3>().norm() * 180.0 / M_PI, s.support,
+                s.centroid.x(), s.centroid.y(), s.centroid.z(), result.world.contains(s.id) ? ", static world" : "");
 }
 
 void printTimings(const Result& result) {

@@ -35,6 +35,9 @@ struct StaticWorld {
   /// Config::world_outgrown_ratio) or "behind" (the segment that the remembered world, or the widest, is in front of:
   /// DepthOrder).
   std::string chosen_by;
+
+  /// @brief Whether the segment of this id (Segment::id) is part of the world.
+  bool contains(int segment_id) const;
 };
 
 /// @brief Which segment is in front of which where they meet, over the depth edges of a pair's frame 1: neighbouring
