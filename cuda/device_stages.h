@@ -352,10 +352,12 @@ void launchLabelSupports(const float* u, std::size_t plane, int motion_labels, D
 /// @brief Per motion label: owned-pixel moments, 10 doubles (count, sum xyz, sum xx xy xz yy yz zz).
 void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_labels, DeviceBuffer<double>& scratch,
                         double* out, cudaStream_t stream);
-/// @brief Cuts (parent, centre xyz, axis xyz as doubles; 7 values each) appended as planes
-/// [motion_labels, motion_labels + cuts) of `out` (count + cuts planes); counts the moved pixels per cut.
+/// @brief Cuts (parent, centre xyz, axis xyz, cost_above, cost plane as doubles; kCutValues each) appended as planes
+/// [motion_labels, motion_labels + cuts) of `out` (count + cuts planes); counts the moved pixels per cut. A cut with
+/// cost_above > 0 moves the parent's pixels whose value in plane `cost plane` of `cut_costs` exceeds it (LabelCut).
+constexpr int kCutValues = 9;
 void launchCutLabels(const float* in, const DeviceImage& points, int count, const double* cuts, int cut_count,
-                     float* out, unsigned long long* moved, cudaStream_t stream);
+                     const float* cut_costs, float* out, unsigned long long* moved, cudaStream_t stream);
 /// @brief Sum over planes of |a - b| per pixel, added into one double (fixed order).
 void launchAbsoluteChange(const float* a, const float* b, std::size_t values, DeviceBuffer<double>& scratch,
                           double* out, cudaStream_t stream);

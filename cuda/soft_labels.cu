@@ -165,8 +165,8 @@ struct MomentPixel : LabelPlanesAndPoints {
 };
 
 __global__ void cutKernel(const float* __restrict__ in, const DeviceImage points, int count,
-                          const double* __restrict__ cuts, int cut_count, float* __restrict__ out,
-                          unsigned long long* __restrict__ moved) {
+                          const double* __restrict__ cuts, int cut_count, const float* __restrict__ cut_costs,
+                          float* __restrict__ out, unsigned long long* __restrict__ moved) {
   const std::size_t plane = std::size_t(points.width) * points.height;
   const std::size_t idx = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (idx >= plane) return;
@@ -178,12 +178,16 @@ __global__ void cutKernel(const float* __restrict__ in, const DeviceImage points
   if (!isfinite(z)) return;
   const double P[3] = {points.data[idx * 3], points.data[idx * 3 + 1], z};
   for (int c = 0; c < cut_count; ++c) {
-    const double* cut = cuts + 7 * c;
+    const double* cut = cuts + kCutValues * c;
     const int parent = int(cut[0]);
     float* from = out + std::size_t(parent) * plane + idx;
     if (*from < 0.5f) continue;
-    const double side = (P[0] - cut[1]) * cut[4] + (P[1] - cut[2]) * cut[5] + (P[2] - cut[3]) * cut[6];
-    if (side <= 0) continue;
+    if (cut[7] > 0) {  // by the data: the pixels that pay more than cut[7] under the cut's twist
+      if (!(double(cut_costs[std::size_t(cut[8]) * plane + idx]) > cut[7])) continue;
+    } else {
+      const double side = (P[0] - cut[1]) * cut[4] + (P[1] - cut[2]) * cut[5] + (P[2] - cut[3]) * cut[6];
+      if (side <= 0) continue;
+    }
     out[std::size_t(motion + c) * plane + idx] = *from;
     *from = 0.f;
     atomicAdd(moved + c, 1ull);  // integer counts: the order does not matter
@@ -295,11 +299,12 @@ void launchOwnedMoments(const float* u, const DeviceImage& points, int motion_la
 }
 
 void launchCutLabels(const float* in, const DeviceImage& points, int count, const double* cuts, int cut_count,
-                     float* out, unsigned long long* moved, cudaStream_t stream) {
+                     const float* cut_costs, float* out, unsigned long long* moved, cudaStream_t stream) {
   unsigned long long* counts = moved;
   MCFLOW_CUDA_CHECK(cudaMemsetAsync(counts, 0, std::size_t(cut_count) * sizeof(unsigned long long), stream));
   const std::size_t plane = std::size_t(points.width) * points.height;
-  cutKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(in, points, count, cuts, cut_count, out, counts);
+  cutKernel<<<unsigned((plane + 255) / 256), 256, 0, stream>>>(in, points, count, cuts, cut_count, cut_costs, out,
+                                                               counts);
   MCFLOW_CUDA_CHECK_LAUNCH("cutKernel");
 }
 

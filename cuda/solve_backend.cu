@@ -609,7 +609,7 @@ class CudaSolveBackend final : public SolveBackend {
       throw InputError("CUDA backend trialCuts: " + std::to_string(twists.size()) + " twists for " +
                        std::to_string(count_ - 1 + m) + " motion labels");
     // The trial labelling goes to the scratch buffer; the labels stay as they are.
-    cutInto(cuts);
+    cutInto(cuts, use_occlusion, config);
     const DeviceLevel& L = levels_[std::size_t(level_)];
     accumulator_->bind(L, scratch(), count_ + m, use_occlusion ? occlusion_.get() : nullptr, config);
     MotionNormalEquations equations;
@@ -621,9 +621,9 @@ class CudaSolveBackend final : public SolveBackend {
     return trial;
   }
 
-  void applyCuts(const std::vector<LabelCut>& cuts) override {
+  void applyCuts(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config) override {
     if (cuts.empty()) return;
-    cutInto(cuts);
+    cutInto(cuts, use_occlusion, config);
     swapLabels();
     // A cut's pixels are free of the switching cost: the label step decides between the halves on the data alone.
     if (carried_held_)
@@ -701,31 +701,50 @@ class CudaSolveBackend final : public SolveBackend {
     label_buffers_[1 - current_].reserve(values);  // the scratch buffer
   }
   // Writes the labels with `cuts` applied into the scratch buffer and counts the moved pixels into moved_.
-  void cutInto(const std::vector<LabelCut>& cuts) {
+  void cutInto(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config) {
     const int m = int(cuts.size());
     if (m == 0) return;
     for (const LabelCut& c : cuts)
       if (c.parent < 0 || c.parent >= count_ - 1)
         throw InputError("label cut: parent " + std::to_string(c.parent) + " is not a motion label (count " +
                          std::to_string(count_) + ")");
-    double* staged = staged_doubles_.reserve(std::size_t(m) * 7);
+    constexpr int kValues = cuda_detail::kCutValues;
+    double* staged = staged_doubles_.reserve(std::size_t(m) * kValues);
+    std::vector<Vector6d> judged_at;  // the cuts by the data: one plane of data costs each, under its twist
     for (int c = 0; c < m; ++c) {
       const LabelCut& cut = cuts[std::size_t(c)];
-      double* v = staged + 7 * c;
+      double* v = staged + kValues * c;
       v[0] = cut.parent;
       for (int k = 0; k < 3; ++k) {
         v[1 + k] = cut.centre(k);
         v[4 + k] = cut.axis(k);
       }
+      v[7] = cut.cost_above > 0 ? cut.cost_above : 0.0;
+      v[8] = cut.cost_above > 0 ? double(judged_at.size()) : 0.0;
+      if (cut.cost_above > 0) judged_at.push_back(cut.judged_at);
     }
-    cuts_.reserve(std::size_t(m) * 7);
+    cuts_.reserve(std::size_t(m) * kValues);
     moved_.reserve(std::size_t(m));
     cudaStream_t s = stream_.stream;
+    const DeviceLevel& L = levels_[std::size_t(level_)];
     MCFLOW_CUDA_CHECK(
-        cudaMemcpyAsync(cuts_.get(), staged, std::size_t(m) * 7 * sizeof(double), cudaMemcpyHostToDevice, s));
+        cudaMemcpyAsync(cuts_.get(), staged, std::size_t(m) * kValues * sizeof(double), cudaMemcpyHostToDevice, s));
+    if (!judged_at.empty()) {
+      const std::size_t j = judged_at.size();
+      // Room for as many as there are labels (j <= count_ - 1): fewer regrowths as the count changes.
+      auto* transforms = staged_cut_transforms_.reserve(std::size_t(count_));
+      for (std::size_t i = 0; i < j; ++i) transforms[i] = cuda_detail::deviceTransform(judged_at[i]);
+      cut_transforms_.reserve(std::size_t(count_));
+      MCFLOW_CUDA_CHECK(cudaMemcpyAsync(cut_transforms_.get(), transforms, j * sizeof(cuda_detail::DeviceTransform),
+                                        cudaMemcpyHostToDevice, s));
+      cut_costs_.reserve(plane() * std::size_t(count_ + 1));
+      cut_outlier_only_.reserve(plane());
+      cuda_detail::launchDataCosts(L, cut_transforms_.get(), int(j), use_occlusion ? occlusion_.get() : nullptr, config,
+                                   cut_costs_.get(), cut_outlier_only_.get(), s);
+    }
     reserveLabels(plane(), count_ + m);  // may move the labels to the other buffer
-    cuda_detail::launchCutLabels(labels(), levels_[std::size_t(level_)].points1, count_, cuts_.get(), m, scratch(),
-                                 moved_.get(), s);
+    cuda_detail::launchCutLabels(labels(), L.points1, count_, cuts_.get(), m,
+                                 judged_at.empty() ? nullptr : cut_costs_.get(), scratch(), moved_.get(), s);
     MCFLOW_CUDA_WAIT(s);  // the staging buffer is reused next
   }
 
@@ -826,6 +845,7 @@ class CudaSolveBackend final : public SolveBackend {
   PinnedBuffer<int> staged_ints_;
   PinnedBuffer<double> staged_doubles_;
   PinnedBuffer<cuda_detail::DeviceTransform> staged_transforms_;
+  PinnedBuffer<cuda_detail::DeviceTransform> staged_cut_transforms_;  // the cuts by the data's twists
   PinnedBuffer<unsigned long long> staged_counts_;
   PinnedBuffer<std::uint8_t> staged_bytes_;
   PinnedBuffer<double> staged_motions_;
@@ -855,6 +875,9 @@ class CudaSolveBackend final : public SolveBackend {
   DeviceBuffer<float> dual_;
   DeviceBuffer<double> scalar_, partials_, motions_, cuts_;  // partials_: chunked sums' scratch
   DeviceBuffer<cuda_detail::DeviceTransform> transforms_;
+  DeviceBuffer<cuda_detail::DeviceTransform> cut_transforms_;
+  DeviceBuffer<float> cut_costs_;  // data costs of the cuts by the data, one plane each (+ outlier)
+  DeviceBuffer<std::uint8_t> cut_outlier_only_;
   DeviceBuffer<int> counts_, hard_labels_;
   // kmeansCentres: the level's valid points, the seeding's distances, the clusters, the answer.
   DeviceBuffer<float> kmeans_points_;

@@ -11,6 +11,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "mc_flow/core/error.h"
+#include "mc_flow/core/label_optimization.h"
 #include "mc_flow/core/solve_backend.h"
 #include "mc_flow/core/union_refit_step.h"
 
@@ -281,44 +282,78 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
   }
   if (cuts.empty()) return stats;
 
-  // All candidates at once: the second halves become extra labels (hard labels barely interact), and
-  // one pass gives every half's cost model at the parent's twist.
-  const int m = int(cuts.size());
-  std::vector<Vector6d> trial_twists = twists;
-  for (const LabelCut& c : cuts) trial_twists.push_back(twists[std::size_t(c.parent)]);
-  const CutTrial trial = labels.trialCuts(cuts, trial_twists, use_occlusion, config);
-  const LabelCostModel& model = trial.model;
-
+  // A family of cuts (one per label at most) is tried at once: the second halves become extra labels (hard labels
+  // barely interact), and one pass gives every half's cost model at the parent's twist.
   const double price = labelCost(config, valid_pixels);
-  std::vector<std::pair<double, int>> gains;
-  for (int c = 0; c < m; ++c) {
-    const double moved = trial.moved[std::size_t(c)];
-    if (moved < min_half || owned[std::size_t(c)] - moved < min_half) continue;
-    const int p = cuts[std::size_t(c)].parent;
-    const Matrix6d& H1 = model.curvature[std::size_t(p)];
-    const Matrix6d& H2 = model.curvature[std::size_t(n + c)];
-    const Vector6d& g1 = model.gradient[std::size_t(p)];
-    const Vector6d& g2 = model.gradient[std::size_t(n + c)];
-    // What two motions gain over the one best motion for the whole label.
-    const double gain = newtonDecrement(H1, g1) + newtonDecrement(H2, g2) - newtonDecrement(H1 + H2, g1 + g2);
-    if (gain > priceFor(price, model.cost[std::size_t(p)], model.cost[std::size_t(n + c)], config))
-      gains.emplace_back(gain, c);
+  struct Candidate {
+    double gain;
+    LabelCut cut;
+    Vector6d stay, leave;  // the halves' Gauss-Newton motions
+  };
+  std::vector<Candidate> candidates;
+  // Each cut label's cost and pixels under its own motion: its halves' at its twist in the first trial (one pass less).
+  std::vector<double> own_cost(std::size_t(n), 0.0), own_pixels(std::size_t(n), 0.0);
+  auto tryCuts = [&](const std::vector<LabelCut>& family, const std::vector<double>& family_owned) {
+    const int m = int(family.size());
+    std::vector<Vector6d> trial_twists = twists;
+    for (const LabelCut& c : family) trial_twists.push_back(twists[std::size_t(c.parent)]);
+    const CutTrial trial = labels.trialCuts(family, trial_twists, use_occlusion, config);
+    const LabelCostModel& model = trial.model;
+    for (int c = 0; c < m; ++c) {
+      const std::size_t p = std::size_t(family[std::size_t(c)].parent);
+      own_cost[p] = model.cost[p] + model.cost[std::size_t(n + c)];
+      own_pixels[p] = model.pixels[p] + model.pixels[std::size_t(n + c)];
+    }
+    for (int c = 0; c < m; ++c) {
+      const double moved = trial.moved[std::size_t(c)];
+      if (moved < min_half || family_owned[std::size_t(c)] - moved < min_half) continue;
+      const int p = family[std::size_t(c)].parent;
+      const Matrix6d& H1 = model.curvature[std::size_t(p)];
+      const Matrix6d& H2 = model.curvature[std::size_t(n + c)];
+      const Vector6d& g1 = model.gradient[std::size_t(p)];
+      const Vector6d& g2 = model.gradient[std::size_t(n + c)];
+      // What two motions gain over the one best motion for the whole label.
+      const double gain = newtonDecrement(H1, g1) + newtonDecrement(H2, g2) - newtonDecrement(H1 + H2, g1 + g2);
+      if (gain > priceFor(price, model.cost[std::size_t(p)], model.cost[std::size_t(n + c)], config)) {
+        const Vector6d& base = twists[std::size_t(p)];
+        candidates.push_back(
+            {gain, family[std::size_t(c)], base + gaussNewtonStep(H1, g1), base + gaussNewtonStep(H2, g2)});
+      }
+    }
+  };
+  tryCuts(cuts, owned);
+
+  // The cuts by the data: each label's pixels that pay more than kSplitCostFactor times its own cost per pixel under
+  // its motion.
+  std::vector<LabelCut> by_cost;
+  std::vector<double> by_cost_owned;
+  for (const LabelCut& c : cuts) {
+    const double per_pixel = own_cost[std::size_t(c.parent)] / std::max(1.0, own_pixels[std::size_t(c.parent)]);
+    if (!(per_pixel > 0)) continue;
+    LabelCut cut;
+    cut.parent = c.parent;
+    cut.cost_above = kSplitCostFactor * per_pixel;
+    cut.judged_at = twists[std::size_t(c.parent)];
+    by_cost.push_back(cut);
+    by_cost_owned.push_back(moments[std::size_t(c.parent)].count);
   }
-  std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
-  const int take = std::min({int(gains.size()), room, config.max_splits_per_iteration});
-  if (take == 0) return stats;
-  // The taken halves become labels n .. n+take-1, largest gain first: the labels change once.
+  if (!by_cost.empty()) tryCuts(by_cost, by_cost_owned);
+
+  // The best-paying cut of each label, largest gain first; the taken halves become labels n .. n+take-1 (the labels
+  // change once).
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const Candidate& a, const Candidate& b) { return a.gain > b.gain; });
   std::vector<LabelCut> taken;
-  for (int t = 0; t < take; ++t) {
-    const int c = gains[std::size_t(t)].second;
-    const int p = cuts[std::size_t(c)].parent;
-    taken.push_back(cuts[std::size_t(c)]);
-    const Vector6d base = twists[std::size_t(p)];
-    twists[std::size_t(p)] = base + gaussNewtonStep(model.curvature[std::size_t(p)], model.gradient[std::size_t(p)]);
-    twists.push_back(base + gaussNewtonStep(model.curvature[std::size_t(n + c)], model.gradient[std::size_t(n + c)]));
+  const int most = std::min(room, config.max_splits_per_iteration);
+  for (const Candidate& c : candidates) {
+    if (int(taken.size()) >= most) break;
+    if (std::any_of(taken.begin(), taken.end(), [&](const LabelCut& t) { return t.parent == c.cut.parent; })) continue;
+    taken.push_back(c.cut);
+    twists[std::size_t(c.cut.parent)] = c.stay;
+    twists.push_back(c.leave);
     ++stats.split;
   }
-  labels.applyCuts(taken);
+  if (!taken.empty()) labels.applyCuts(taken, use_occlusion, config);
   return stats;
 }
 
@@ -751,7 +786,8 @@ std::vector<LabelMoments> HostLabelStore::ownedMoments() {
   return out;
 }
 
-SoftLabels HostLabelStore::withCuts(const std::vector<LabelCut>& cuts, std::vector<double>& moved) const {
+SoftLabels HostLabelStore::withCuts(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config,
+                                    std::vector<double>& moved) const {
   const int n = u_.count - 1, m = int(cuts.size());
   for (const LabelCut& c : cuts)
     if (c.parent < 0 || c.parent >= n)
@@ -763,14 +799,32 @@ SoftLabels HostLabelStore::withCuts(const std::vector<LabelCut>& cuts, std::vect
   std::copy_n(u_.plane(u_.outlier()), plane, grown.plane(grown.outlier()));
   const ImageF& points = frame1_.points;
   moved.assign(std::size_t(m), 0.0);
+  // The cuts by the data: each one's data costs under its own twist, as one plane of a label problem.
+  std::vector<Vector6d> judged_at;
+  std::vector<int> cost_plane(std::size_t(m), -1);
+  for (int c = 0; c < m; ++c)
+    if (cuts[std::size_t(c)].cost_above > 0) {
+      cost_plane[std::size_t(c)] = int(judged_at.size());
+      judged_at.push_back(cuts[std::size_t(c)].judged_at);
+    }
+  LabelProblem costs;
+  if (!judged_at.empty())
+    computeDataCosts(frame1_, frame2_, judged_at, use_occlusion ? occluded_ : nullptr, config, costs);
   for (int c = 0; c < m; ++c) {
     const LabelCut& cut = cuts[std::size_t(c)];
     float* from = grown.plane(cut.parent);
     float* to = grown.plane(n + c);
+    const float* cost = cost_plane[std::size_t(c)] < 0
+                            ? nullptr
+                            : costs.data_cost.data() + std::size_t(cost_plane[std::size_t(c)]) * plane;
     for (std::size_t k = 0; k < plane; ++k) {
       if (from[k] < 0.5f || !std::isfinite(points.data[k * 3 + 2])) continue;
-      const Eigen::Vector3d P(points.data[k * 3], points.data[k * 3 + 1], points.data[k * 3 + 2]);
-      if ((P - cut.centre).dot(cut.axis) <= 0) continue;
+      if (cost) {
+        if (!(double(cost[k]) > cut.cost_above)) continue;
+      } else {
+        const Eigen::Vector3d P(points.data[k * 3], points.data[k * 3 + 1], points.data[k * 3 + 2]);
+        if ((P - cut.centre).dot(cut.axis) <= 0) continue;
+      }
       to[k] = from[k];
       from[k] = 0.f;
       ++moved[std::size_t(c)];
@@ -782,15 +836,15 @@ SoftLabels HostLabelStore::withCuts(const std::vector<LabelCut>& cuts, std::vect
 CutTrial HostLabelStore::trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists,
                                    bool use_occlusion, const Config& config) {
   CutTrial trial;
-  const SoftLabels grown = withCuts(cuts, trial.moved);
+  const SoftLabels grown = withCuts(cuts, use_occlusion, config, trial.moved);
   trial.model =
       labelCostModel(frame1_, frame2_, grown, use_occlusion ? occluded_ : nullptr, twists, config, *accumulator_);
   return trial;
 }
 
-void HostLabelStore::applyCuts(const std::vector<LabelCut>& cuts) {
+void HostLabelStore::applyCuts(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config) {
   std::vector<double> moved;
-  u_ = withCuts(cuts, moved);
+  u_ = withCuts(cuts, use_occlusion, config, moved);
 }
 
 LabelCostModel HostLabelStore::costModel(const std::vector<Vector6d>& twists, bool use_occlusion,

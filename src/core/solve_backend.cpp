@@ -277,10 +277,10 @@ class CpuSolveBackend final : public SolveBackend {
                      const Config& config) override {
     return store().trialCuts(cuts, twists, use_occlusion, config);
   }
-  void applyCuts(const std::vector<LabelCut>& cuts) override {
+  void applyCuts(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config) override {
     if (!cuts.empty()) dual_ = LabelDual();
     const int first_new = u_.count - 1;
-    store().applyCuts(cuts);
+    store().applyCuts(cuts, use_occlusion, config);
     // A cut's pixels are free of the switching cost: the label step decides between the halves on the data alone.
     if (!carried_.data.empty())
       for (std::size_t k = 0; k < carried_.data.size(); ++k)

@@ -103,9 +103,9 @@ class FaultInjectingBackend final : public SolveBackend {
     strike("trialCuts");
     return inner_->trialCuts(cuts, twists, use_occlusion, config);
   }
-  void applyCuts(const std::vector<LabelCut>& cuts) override {
+  void applyCuts(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config) override {
     strike("applyCuts");
-    inner_->applyCuts(cuts);
+    inner_->applyCuts(cuts, use_occlusion, config);
   }
   LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
     strike("costModel");

@@ -168,7 +168,9 @@ class ForwardingStore final : public LabelStore {
                      const Config& config) override {
     return store_.trialCuts(cuts, twists, use_occlusion, config);
   }
-  void applyCuts(const std::vector<LabelCut>& cuts) override { store_.applyCuts(cuts); }
+  void applyCuts(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config) override {
+    store_.applyCuts(cuts, use_occlusion, config);
+  }
   LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override {
     return store_.costModel(twists, use_occlusion, config);
   }
@@ -378,7 +380,28 @@ void compareStages(int width, int height, int variant, int carried_labels = 0) {
                           1e-3, "trial curvature of label " + std::to_string(i));
   EXPECT_EQ(gpu->labelCount(), new_count);
   EXPECT_EQ(maxAbsDifference(before_trial, gpu->downloadLabels()), 0.0) << "a trial changed the labels";
-  for (SolveBackend* b : {cpu.get(), gpu.get()}) b->applyCuts({cut});
+
+  // A cut by the data (label 0's pixels that pay more than a threshold under label 1's motion, so that many do): the
+  // data costs are the label step's on both, so the same pixels move.
+  {
+    const std::vector<Vector6d> current(trial_twists.begin(), trial_twists.end() - 1);  // the labels before the cut
+    const LabelCostModel own = cpu->costModel(current, true, config);
+    LabelCut by_cost;
+    by_cost.parent = 0;
+    by_cost.judged_at = trial_twists[1];
+    by_cost.cost_above = own.cost[0] / std::max(1.0, own.pixels[0]);
+    const CutTrial ca = cpu->trialCuts({by_cost}, trial_twists, true, config);
+    const CutTrial cb = gpu->trialCuts({by_cost}, trial_twists, true, config);
+    EXPECT_GT(cb.moved[0], 10);
+    EXPECT_LT(cb.moved[0], m0.count);
+    EXPECT_NEAR(ca.moved[0], cb.moved[0], 2.0);
+    for (int i = 0; i < new_count; ++i)
+      expectRelativelyClose(ca.model.curvature[std::size_t(i)].reshaped(),
+                            cb.model.curvature[std::size_t(i)].reshaped(), 1e-3,
+                            "cut by the data: trial curvature of label " + std::to_string(i));
+    EXPECT_EQ(maxAbsDifference(before_trial, gpu->downloadLabels()), 0.0) << "a trial by the data changed the labels";
+  }
+  for (SolveBackend* b : {cpu.get(), gpu.get()}) b->applyCuts({cut}, true, config);
   ASSERT_EQ(gpu->labelCount(), new_count + 1);
   EXPECT_LE(maxAbsDifference(cpu->downloadLabels(), gpu->downloadLabels()), 1e-3) << "after a cut";
 
@@ -442,7 +465,8 @@ TEST(CudaSolveBackend, RejectsInconsistentCalls) {
   EXPECT_THROW(gpu->initialiseLabels(1, beyond, n), InputError);  // a label >= motion_labels
   EXPECT_THROW(gpu->labelStep(std::vector<Vector6d>(std::size_t(n) + 1), false, 5, 0.0, config), InputError);
   EXPECT_THROW(gpu->remap(std::vector<int>(std::size_t(n) + 1, 0), n + 1), InputError);  // outlier not last
-  EXPECT_THROW(gpu->applyCuts({LabelCut{n, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX()}}), InputError);
+  EXPECT_THROW(gpu->applyCuts({LabelCut{n, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX()}}, true, Config()),
+               InputError);
   EXPECT_THROW(gpu->moveLabels(s.p1.size()), InputError);
 }
 

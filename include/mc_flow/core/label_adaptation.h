@@ -85,13 +85,22 @@ struct LabelMoments {
   Eigen::Vector3d principalAxis() const;
 };
 
-/// @brief A cut of label `parent`: its owned pixels (u >= 0.5, valid depth) with (P - centre) . axis > 0
-/// move to a new label (u value carried over, parent set to 0).
+/// @brief A cut of label `parent`: its owned pixels (u >= 0.5, valid depth) with (P - centre) . axis > 0 move to a new
+/// label (u value carried over, parent set to 0). A cut by the data (`cost_above` > 0) moves instead the owned pixels
+/// whose data cost D (eq. 5, computeDataCosts under `judged_at`, with the store's occlusion mask when the call uses
+/// it) exceeds `cost_above`.
 struct LabelCut {
   int parent = 0;
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
   Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
+  double cost_above = 0;  ///< > 0: a cut by the data [normalised Cauchy cost per pixel]
+  Vector6d judged_at = Vector6d::Zero();
 };
+
+/// @brief proposeSplits also tries, for each label, the cut by the data of its pixels that pay more than this many
+/// times the label's own cost per pixel under its motion: where K-means' labels mixed parts with the room and merged,
+/// the parts stand out by their residuals, not by where they are (docs/decisions/0019, chosen there).
+inline constexpr double kSplitCostFactor = 5.0;
 
 /// @brief What a set of cuts would do: the pixels each moves, and the cost model with all of them applied.
 struct CutTrial {
@@ -119,9 +128,9 @@ class LabelStore {
   /// labelling).
   virtual CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
                              const Config& config) = 0;
-  /// @brief Applies the cuts; cut c becomes motion label labelCount()-1+c (before the outlier label).
-  /// Resets the dual variables.
-  virtual void applyCuts(const std::vector<LabelCut>& cuts) = 0;
+  /// @brief Applies the cuts (`use_occlusion` and `config` as trialCuts had them: a cut by the data moves the pixels it
+  /// moved there); cut c becomes motion label labelCount()-1+c (before the outlier label). Resets the dual variables.
+  virtual void applyCuts(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config) = 0;
   /// @brief One pass over the pixels: the cost model of every motion label at `twists`, with the occlusion
   /// mask of the labels' level when `use_occlusion`.
   virtual LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) = 0;
@@ -191,11 +200,11 @@ AdaptationStats adaptLabelCount(LabelStore& labels, std::vector<Vector6d>& twist
                                 int valid_pixels, const Config& config, bool remove_small = true,
                                 std::vector<LabelLineage>* lineage = nullptr);
 
-/// @brief Proposes to split each large label in two along its principal 3D axis, predicts the data-cost
-/// decrease of giving each half its own Gauss-Newton motion (one pass over the pixels for all
-/// candidates), and splits those whose decrease exceeds the label cost (largest first, at most
-/// max_splits_per_iteration). The halves start from their Gauss-Newton motions; the next motion step
-/// refines them.
+/// @brief Proposes to split each large label in two, across its principal 3D axis and by the data (its pixels that pay
+/// more than kSplitCostFactor times its cost per pixel: LabelCut::cost_above), predicts the data-cost decrease of
+/// giving each half its own Gauss-Newton motion (one pass over the pixels per family of cuts), and splits, with the
+/// better-paying cut of each label, those whose decrease exceeds the label cost (largest first, at most
+/// max_splits_per_iteration). The halves start from their Gauss-Newton motions; the next motion step refines them.
 AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists, bool use_occlusion, int valid_pixels,
                               const Config& config);
 
@@ -286,7 +295,7 @@ class HostLabelStore final : public LabelStore {
   std::vector<LabelMoments> ownedMoments() override;
   CutTrial trialCuts(const std::vector<LabelCut>& cuts, const std::vector<Vector6d>& twists, bool use_occlusion,
                      const Config& config) override;
-  void applyCuts(const std::vector<LabelCut>& cuts) override;
+  void applyCuts(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config) override;
   LabelCostModel costModel(const std::vector<Vector6d>& twists, bool use_occlusion, const Config& config) override;
 
  private:
@@ -295,7 +304,8 @@ class HostLabelStore final : public LabelStore {
   const PyramidLevel& frame2_;
   const ImageU8* occluded_;
   /// The labels with `cuts` applied (count + cuts planes) and the pixels each moved.
-  SoftLabels withCuts(const std::vector<LabelCut>& cuts, std::vector<double>& moved) const;
+  SoftLabels withCuts(const std::vector<LabelCut>& cuts, bool use_occlusion, const Config& config,
+                      std::vector<double>& moved) const;
   std::unique_ptr<MotionAccumulator> own_accumulator_;
   MotionAccumulator* accumulator_;
 };
