@@ -7,7 +7,9 @@
 #include "mc_flow/eval/synthetic_scene.h"
 #include <map>
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
 #include <cstdio>
 #include <string>
 
@@ -337,6 +339,15 @@ int partId(const SyntheticPair& pair, const std::string& name) {
   return -1;
 }
 
+// Two planes at the scene's label level: label 0 over the pixels of the parts `in_label` accepts, the outlier label
+// over the rest.
+SoftLabels oneLabelOver(const ArmScene& s, const std::function<bool(int part)>& in_label) {
+  const ImageF& points = s.pyr1[s.level].points;
+  SoftLabels u(points.width, points.height, 2, 0.f);
+  for (std::size_t k = 0; k < s.parts.size(); ++k) (in_label(s.parts[k]) ? u.plane(0) : u.plane(1))[k] = 1.f;
+  return u;
+}
+
 }  // namespace
 
 TEST(LabelSplits, OneLabelOverTheTwoArmLinksIsSplitTowardsTheirOwnMotions) {
@@ -384,9 +395,7 @@ TEST(LabelSplits, ALabelWhoseMotionExplainsItIsNotSplit) {
   const ArmScene s = renderArmScene();
   const int box = partId(s.pair, "box");
   ASSERT_GE(box, 0);
-  const ImageF& points = s.pyr1[s.level].points;
-  SoftLabels u(points.width, points.height, 2, 0.f);
-  for (std::size_t k = 0; k < s.parts.size(); ++k) (s.parts[k] == box ? u.plane(0) : u.plane(1))[k] = 1.f;
+  SoftLabels u = oneLabelOver(s, [box](int part) { return part == box; });
   std::vector<Vector6d> twists{trueTwist(s.pair, "box")};
   Config config;
   HostLabelStore store(u, s.pyr1[s.level], s.pyr2[s.level], nullptr);
@@ -396,19 +405,14 @@ TEST(LabelSplits, ALabelWhoseMotionExplainsItIsNotSplit) {
 }
 
 // Where one label holds the room and a moving box (K-means' labels mixed them and merged), the box is no end of the
-// label: the cut by the data, the pixels that pay far above the noise level under the label's motion, finds it.
+// label: the cut by the data, the pixels that pay far more than the label's cost per pixel under its motion, finds it.
 TEST(LabelSplits, ABoxThatOneLabelHoldsWithTheRoomIsCutOffByItsData) {
   const ArmScene s = renderArmScene();
   const int box = partId(s.pair, "box");
   ASSERT_GE(box, 0);
   const ImageF& points = s.pyr1[s.level].points;
-  SoftLabels u(points.width, points.height, 2, 0.f);
-  int box_pixels = 0;
-  for (std::size_t k = 0; k < s.parts.size(); ++k) {
-    const bool room_or_box = s.parts[k] == 0 || s.parts[k] == box;
-    (room_or_box ? u.plane(0) : u.plane(1))[k] = 1.f;
-    box_pixels += s.parts[k] == box ? 1 : 0;
-  }
+  SoftLabels u = oneLabelOver(s, [box](int part) { return part == 0 || part == box; });
+  const int box_pixels = int(std::count(s.parts.begin(), s.parts.end(), box));
   ASSERT_GT(box_pixels, 100);
   // The true occlusions (the room the box hides in frame 2 pays nothing, as the solver's occlusion mask makes it).
   ImageU8 occluded(points.width, points.height, 1, 0);
