@@ -293,17 +293,19 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
   std::vector<Candidate> candidates;
   // Each cut label's cost and pixels under its own motion: its halves' at its twist in the first trial (one pass less).
   std::vector<double> own_cost(std::size_t(n), 0.0), own_pixels(std::size_t(n), 0.0);
+  int families_tried = 0;
   auto tryCuts = [&](const std::vector<LabelCut>& family, const std::vector<double>& family_owned) {
     const int m = int(family.size());
     std::vector<Vector6d> trial_twists = twists;
     for (const LabelCut& c : family) trial_twists.push_back(twists[std::size_t(c.parent)]);
     const CutTrial trial = labels.trialCuts(family, trial_twists, use_occlusion, config);
     const LabelCostModel& model = trial.model;
-    for (int c = 0; c < m; ++c) {
-      const std::size_t p = std::size_t(family[std::size_t(c)].parent);
-      own_cost[p] = model.cost[p] + model.cost[std::size_t(n + c)];
-      own_pixels[p] = model.pixels[p] + model.pixels[std::size_t(n + c)];
-    }
+    if (families_tried++ == 0)
+      for (int c = 0; c < m; ++c) {
+        const std::size_t p = std::size_t(family[std::size_t(c)].parent);
+        own_cost[p] = model.cost[p] + model.cost[std::size_t(n + c)];
+        own_pixels[p] = model.pixels[p] + model.pixels[std::size_t(n + c)];
+      }
     for (int c = 0; c < m; ++c) {
       const double moved = trial.moved[std::size_t(c)];
       if (moved < min_half || family_owned[std::size_t(c)] - moved < min_half) continue;
