@@ -291,24 +291,16 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
     Vector6d stay, leave;  // the halves' Gauss-Newton motions
   };
   std::vector<Candidate> candidates;
-  // Each cut label's cost and pixels under its own motion: its halves' at its twist in the first trial (one pass less).
-  std::vector<double> own_cost(std::size_t(n), 0.0), own_pixels(std::size_t(n), 0.0);
-  int families_tried = 0;
-  auto tryCuts = [&](const std::vector<LabelCut>& family, const std::vector<double>& family_owned) {
+  // `family[c]` cuts `cuts[c]`'s parent (the same labels, in the same order); returns the trial.
+  auto tryCuts = [&](const std::vector<LabelCut>& family) {
     const int m = int(family.size());
     std::vector<Vector6d> trial_twists = twists;
     for (const LabelCut& c : family) trial_twists.push_back(twists[std::size_t(c.parent)]);
-    const CutTrial trial = labels.trialCuts(family, trial_twists, use_occlusion, config);
+    CutTrial trial = labels.trialCuts(family, trial_twists, use_occlusion, config);
     const LabelCostModel& model = trial.model;
-    if (families_tried++ == 0)
-      for (int c = 0; c < m; ++c) {
-        const std::size_t p = std::size_t(family[std::size_t(c)].parent);
-        own_cost[p] = model.cost[p] + model.cost[std::size_t(n + c)];
-        own_pixels[p] = model.pixels[p] + model.pixels[std::size_t(n + c)];
-      }
     for (int c = 0; c < m; ++c) {
       const double moved = trial.moved[std::size_t(c)];
-      if (moved < min_half || family_owned[std::size_t(c)] - moved < min_half) continue;
+      if (moved < min_half || owned[std::size_t(c)] - moved < min_half) continue;
       const int p = family[std::size_t(c)].parent;
       const Matrix6d& H1 = model.curvature[std::size_t(p)];
       const Matrix6d& H2 = model.curvature[std::size_t(n + c)];
@@ -322,24 +314,26 @@ AdaptationStats proposeSplits(LabelStore& labels, std::vector<Vector6d>& twists,
             {gain, family[std::size_t(c)], base + gaussNewtonStep(H1, g1), base + gaussNewtonStep(H2, g2)});
       }
     }
+    return trial;
   };
-  tryCuts(cuts, owned);
+  const CutTrial across = tryCuts(cuts);
 
   // The cuts by the data: each label's pixels that pay more than kSplitCostFactor times its own cost per pixel under
-  // its motion.
+  // its motion (its two halves' cost and pixels at its twist in the first trial: no pass of its own). A label that pays
+  // nothing gets an infinite threshold: its cut moves no pixel (and the families stay aligned with `owned`).
   std::vector<LabelCut> by_cost;
-  std::vector<double> by_cost_owned;
-  for (const LabelCut& c : cuts) {
-    const double per_pixel = own_cost[std::size_t(c.parent)] / std::max(1.0, own_pixels[std::size_t(c.parent)]);
-    if (!(per_pixel > 0)) continue;
+  for (std::size_t c = 0; c < cuts.size(); ++c) {
+    const std::size_t p = std::size_t(cuts[c].parent), half = std::size_t(n) + c;
+    const double cost = across.model.cost[p] + across.model.cost[half];
+    const double pixels = across.model.pixels[p] + across.model.pixels[half];
     LabelCut cut;
-    cut.parent = c.parent;
-    cut.cost_above = kSplitCostFactor * per_pixel;
-    cut.judged_at = twists[std::size_t(c.parent)];
+    cut.parent = cuts[c].parent;
+    cut.cost_above =
+        cost > 0 ? kSplitCostFactor * cost / std::max(1.0, pixels) : std::numeric_limits<double>::infinity();
+    cut.judged_at = twists[p];
     by_cost.push_back(cut);
-    by_cost_owned.push_back(moments[std::size_t(c.parent)].count);
   }
-  if (!by_cost.empty()) tryCuts(by_cost, by_cost_owned);
+  tryCuts(by_cost);
 
   // The best-paying cut of each label, largest gain first; the taken halves become labels n .. n+take-1 (the labels
   // change once).

@@ -432,12 +432,17 @@ TEST(LabelSplits, ABoxThatOneLabelHoldsWithTheRoomIsCutOffByItsData) {
   HostLabelStore copy_store(copy, s.pyr1[s.level], s.pyr2[s.level], &occluded);
   copy_store.applyCuts({by_cost}, true, config);
   ASSERT_EQ(copy.count, 3);
+  // The pixels label 1 (the new one) owns, and how many of them are the box's.
+  auto ownedByTheNewLabel = [&](const SoftLabels& labels, int& owned, int& on_box) {
+    owned = on_box = 0;
+    for (std::size_t k = 0; k < s.parts.size(); ++k)
+      if (labels.plane(1)[k] >= 0.5f) {
+        ++owned;
+        on_box += s.parts[k] == box ? 1 : 0;
+      }
+  };
   int moved = 0, moved_on_box = 0;
-  for (std::size_t k = 0; k < s.parts.size(); ++k)
-    if (copy.plane(1)[k] >= 0.5f) {
-      ++moved;
-      moved_on_box += s.parts[k] == box ? 1 : 0;
-    }
+  ownedByTheNewLabel(copy, moved, moved_on_box);
   std::printf("cut by the data: %d px moved (trial %.0f), %d of the box's %d\n", moved, trial.moved[0], moved_on_box,
               box_pixels);
   EXPECT_EQ(double(moved), trial.moved[0]) << "the trial and the cut moved different pixels";
@@ -448,12 +453,8 @@ TEST(LabelSplits, ABoxThatOneLabelHoldsWithTheRoomIsCutOffByItsData) {
   const AdaptationStats st = proposeSplits(store, twists, true, s.pyr1[s.level].validCount(), config);
   ASSERT_EQ(st.split, 1);
   ASSERT_EQ(u.count, 3);
-  int on_box = 0, total = 0;
-  for (std::size_t k = 0; k < s.parts.size(); ++k)
-    if (u.plane(1)[k] >= 0.5f) {
-      ++total;
-      on_box += s.parts[k] == box ? 1 : 0;
-    }
+  int total = 0, on_box = 0;
+  ownedByTheNewLabel(u, total, on_box);
   EXPECT_GT(double(on_box), 0.8 * total);
 }
 
