@@ -133,9 +133,10 @@ void segmentationPixels(const SoftLabels& labels, const std::vector<Rgb8>& colou
 #if defined(__x86_64__) && defined(__GNUC__)
 // segmentationPixels for 8 pixels at a time with AVX2: the sums stay in registers over the planes. The same double
 // operations in the same order per pixel (a multiply, then an add: no FMA), so the same bits as the loop above.
+// `colour_values`: each plane's colour as three doubles (r, g, b), the values the scalar loop converts per pixel.
 __attribute__((target("avx2"))) void segmentationRowAvx2(const SoftLabels& labels, const std::vector<Rgb8>& colours,
-                                                         const float* grey_row, double blend, int y,
-                                                         std::uint8_t* out) {
+                                                         const double* colour_values, const float* grey_row,
+                                                         double blend, int y, std::uint8_t* out) {
   const int w = labels.width, chunks = w / 8;
   const std::size_t row = std::size_t(y) * std::size_t(w);
   for (int chunk = 0; chunk < chunks; ++chunk) {
@@ -145,8 +146,8 @@ __attribute__((target("avx2"))) void segmentationRowAvx2(const SoftLabels& label
       __m256 u = _mm256_loadu_ps(labels.plane(i) + row + std::size_t(x0));
       u = _mm256_and_ps(u, _mm256_cmp_ps(u, _mm256_setzero_ps(), _CMP_GT_OQ));  // +0 unless u > 0
       const __m256d lo = _mm256_cvtps_pd(_mm256_castps256_ps128(u)), hi = _mm256_cvtps_pd(_mm256_extractf128_ps(u, 1));
-      const Rgb8 c = colours[std::size_t(i)];
-      const __m256d cr = _mm256_set1_pd(c.r), cg = _mm256_set1_pd(c.g), cb = _mm256_set1_pd(c.b);
+      const double* c = colour_values + 3 * i;
+      const __m256d cr = _mm256_broadcast_sd(c), cg = _mm256_broadcast_sd(c + 1), cb = _mm256_broadcast_sd(c + 2);
       r0 = _mm256_add_pd(r0, _mm256_mul_pd(lo, cr));
       r1 = _mm256_add_pd(r1, _mm256_mul_pd(hi, cr));
       g0 = _mm256_add_pd(g0, _mm256_mul_pd(lo, cg));
@@ -158,7 +159,7 @@ __attribute__((target("avx2"))) void segmentationRowAvx2(const SoftLabels& label
     // that keep a NaN where std::clamp keeps it, the mask that sends NaN and negatives to +0.
     const __m128 grey_floats = grey_row ? _mm_loadu_ps(grey_row + x0) : _mm_setzero_ps();
     const __m128 grey_floats_hi = grey_row ? _mm_loadu_ps(grey_row + x0 + 4) : _mm_setzero_ps();
-    alignas(32) std::int32_t channel[3][8];
+    __m128i channel[3][2];  // per channel its 8 values, 4 per part
     const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0), full = _mm256_set1_pd(255.0),
                   half = _mm256_set1_pd(0.5), weight = _mm256_set1_pd(blend), rest = _mm256_set1_pd(1 - blend);
     for (int part = 0; part < 2; ++part) {
@@ -180,47 +181,68 @@ __attribute__((target("avx2"))) void segmentationRowAvx2(const SoftLabels& label
         // up is all ones (-1 as an integer) where the fraction is at least a half.
         const __m128i carry = _mm256_castsi256_si128(
             _mm256_permutevar8x32_epi32(_mm256_castpd_si256(up), _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7)));
-        _mm_store_si128(reinterpret_cast<__m128i*>(channel[c] + 4 * part), _mm_sub_epi32(whole, carry));
+        channel[c][part] = _mm_sub_epi32(whole, carry);
       }
     }
+    // The values are in [0, 255]: packed to bytes (r0..r7 g0..g7 and b0..b7) and interleaved to r g b per pixel by
+    // two byte shuffles (24 single-byte stores cost a third of the row's time).
+    const __m128i rg = _mm_packus_epi16(_mm_packus_epi32(channel[0][0], channel[0][1]),
+                                        _mm_packus_epi32(channel[1][0], channel[1][1]));
+    const __m128i b = _mm_packus_epi16(_mm_packus_epi32(channel[2][0], channel[2][1]), _mm_setzero_si128());
+    const __m128i first =
+        _mm_or_si128(_mm_shuffle_epi8(rg, _mm_setr_epi8(0, 8, -1, 1, 9, -1, 2, 10, -1, 3, 11, -1, 4, 12, -1, 5)),
+                     _mm_shuffle_epi8(b, _mm_setr_epi8(-1, -1, 0, -1, -1, 1, -1, -1, 2, -1, -1, 3, -1, -1, 4, -1)));
+    const __m128i last =
+        _mm_or_si128(_mm_shuffle_epi8(rg, _mm_setr_epi8(13, -1, 6, 14, -1, 7, 15, -1, -1, -1, -1, -1, -1, -1, -1, -1)),
+                     _mm_shuffle_epi8(b, _mm_setr_epi8(-1, 5, -1, -1, 6, -1, -1, 7, -1, -1, -1, -1, -1, -1, -1, -1)));
     std::uint8_t* to = out + 3 * std::size_t(x0);
-    for (int k = 0; k < 8; ++k) {
-      to[3 * k] = std::uint8_t(channel[0][k]);
-      to[3 * k + 1] = std::uint8_t(channel[1][k]);
-      to[3 * k + 2] = std::uint8_t(channel[2][k]);
-    }
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(to), first);
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(to + 16), last);
   }
   segmentationPixels(labels, colours, grey_row, blend, y, 8 * chunks, w - 8 * chunks,
                      out + 3 * std::size_t(8 * chunks));
 }
 #endif
 
-void segmentationRow(const SoftLabels& labels, const std::vector<Rgb8>& colours, const float* grey_row, double blend,
-                     int y, std::uint8_t* out) {
+void segmentationRow(const SoftLabels& labels, const std::vector<Rgb8>& colours, const double* colour_values,
+                     const float* grey_row, double blend, int y, std::uint8_t* out) {
 #if defined(__x86_64__) && defined(__GNUC__)
   static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2) return segmentationRowAvx2(labels, colours, grey_row, blend, y, out);
+  if (avx2) return segmentationRowAvx2(labels, colours, colour_values, grey_row, blend, y, out);
+#else
+  (void)colour_values;
 #endif
   segmentationPixels(labels, colours, grey_row, blend, y, 0, labels.width, out);
 }
 
 }  // namespace
 
-void segmentationPictureInto(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
-                             double blend, const std::vector<int>& world_ids, std::uint8_t* rgb) {
+SegmentationPainter::SegmentationPainter(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
+                                         double blend, const std::vector<int>& world_ids)
+    : labels_(labels),
+      intensity_(intensity && intensity->sameSize(labels.width, labels.height) ? intensity : nullptr),
+      blend_(blend) {
   if (labels.count < 1 || int(ids.size()) != labels.count - 1)
     throw InputError("segmentation picture: " + std::to_string(ids.size()) + " segment ids for " +
                      std::to_string(labels.count) + " label planes (expected count - 1)");
-  std::vector<Rgb8> colours;
-  for (const int id : ids) colours.push_back(displayColour(std::uint32_t(std::max(id, 0)), world_ids));
-  colours.push_back(colourForId(0));  // the outlier plane
-  const bool have_image = intensity && intensity->sameSize(labels.width, labels.height);
-  const int w = labels.width;
+  for (const int id : ids) colours_.push_back(displayColour(std::uint32_t(std::max(id, 0)), world_ids));
+  colours_.push_back(colourForId(0));  // the outlier plane
+  for (const Rgb8& c : colours_) colour_values_.insert(colour_values_.end(), {double(c.r), double(c.g), double(c.b)});
+}
+
+void SegmentationPainter::paintRows(int first_row, int end_row, std::uint8_t* rgb) const {
+  const std::size_t row_bytes = std::size_t(labels_.width) * 3;
+  for (int y = std::max(first_row, 0); y < std::min(end_row, labels_.height); ++y)
+    segmentationRow(labels_, colours_, colour_values_.data(), intensity_ ? &(*intensity_)(0, y) : nullptr, blend_, y,
+                    rgb + std::size_t(y) * row_bytes);
+}
+
+void segmentationPictureInto(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
+                             double blend, const std::vector<int>& world_ids, std::uint8_t* rgb) {
+  const SegmentationPainter painter(labels, ids, intensity, blend, world_ids);
   // Rows in parallel (the nodelet builds this picture for every pair).
 #pragma omp parallel for schedule(static)
-  for (int y = 0; y < labels.height; ++y)
-    segmentationRow(labels, colours, have_image ? &(*intensity)(0, y) : nullptr, blend, y,
-                    rgb + std::size_t(y) * std::size_t(w) * 3);
+  for (int y = 0; y < labels.height; ++y) painter.paintRows(y, y + 1, rgb);
 }
 
 ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,

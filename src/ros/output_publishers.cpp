@@ -76,24 +76,31 @@ void OutputPublishers::publish(const mc_flow::Result& result, const PairContext&
   // A subscriber that arrived during the solve gets the soft labels and the scene flow from the next pair on (the solve
   // left out what nobody had asked for: wantedOutputs).
   const bool have_soft_labels = result.soft_labels.count > 0, have_scene_flow = !result.scene_flow.empty();
-  if (soft_labels_.getNumSubscribers() > 0 && have_soft_labels)
-    soft_labels_.publish(makeSoftLabelsImage(result, pair, &soft_labels_pool_));
+  // The three large messages are filled together (one wake of the OpenMP threads), then published in turn.
+  ImageOutputRequest request;
+  request.soft_labels = soft_labels_.getNumSubscribers() > 0 && have_soft_labels;
+  request.segmentation = segmentation_.getNumSubscribers() > 0 && have_soft_labels;
+  request.scene_flow = cloud_.getNumSubscribers() > 0 && have_scene_flow;
+  request.segmentation_blend = params_.segmentation_blend;
+  request.cloud_colour = cloud_colour_;
+  request.soft_labels_pool = &soft_labels_pool_;
+  request.segmentation_pool = &segmentation_pool_;
+  request.cloud_pool = &cloud_pool_;
+  const ImageOutputs built = makeImageOutputs(result, pair, request);
+  if (built.soft_labels) soft_labels_.publish(built.soft_labels);
   if (labels_.getNumSubscribers() > 0) labels_.publish(makeLabelsImage(result, pair, &labels_pool_));
   if (occlusion_.getNumSubscribers() > 0) occlusion_.publish(makeOcclusionImage(result, pair, &occlusion_pool_));
   // The picture is rendered into the message; save_dir reads it there (or, without a subscriber, from a picture of its
-  // own).
+  // own). `built` holds the message to the end.
   cv::Mat segmentation;
-  sensor_msgs::ImagePtr segmentation_message;  // held to the end: `segmentation` may read its data
-  if (segmentation_.getNumSubscribers() > 0 && have_soft_labels) {
-    segmentation_message = makeSegmentationImage(result, pair, params_.segmentation_blend, &segmentation_pool_);
-    segmentation_.publish(segmentation_message);
-    segmentation = cv::Mat(int(segmentation_message->height), int(segmentation_message->width), CV_8UC3,
-                           segmentation_message->data.data(), segmentation_message->step);
+  if (built.segmentation) {
+    segmentation_.publish(built.segmentation);
+    segmentation = cv::Mat(int(built.segmentation->height), int(built.segmentation->width), CV_8UC3,
+                           built.segmentation->data.data(), built.segmentation->step);
   } else if (!params_.save_dir.empty() && have_soft_labels) {
     segmentation = segmentationPicture(result, pair, params_.segmentation_blend);
   }
-  if (cloud_.getNumSubscribers() > 0 && have_scene_flow)
-    cloud_.publish(makeSceneFlowCloud(result, pair, cloud_colour_, &cloud_pool_));
+  if (built.scene_flow) cloud_.publish(built.scene_flow);
   if (markers_.getNumSubscribers() > 0) markers_.publish(makeMotionMarkers(result, pair, params_.marker_seconds_ahead));
   if (info_.getNumSubscribers() > 0) info_.publish(processingCameraInfo(*pair.current));
   if (moving_mask_.getNumSubscribers() > 0 && pair.world) {

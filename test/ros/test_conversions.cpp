@@ -4,6 +4,8 @@
 #include <any>
 #include <cmath>
 #include <cstring>
+#include <limits>
+#include <random>
 
 #include <cv_bridge/cv_bridge.h>
 #include <sensor_msgs/image_encodings.h>
@@ -422,6 +424,154 @@ TEST(Conversions, SoftLabelsImageIsLossless) {
   for (int y = 0; y < 3; ++y)
     for (int x = 0; x < 4; ++x)
       for (int c = 0; c < 3; ++c) EXPECT_EQ(data[(y * 4 + x) * 3 + c], f.result.soft_labels.at(c, x, y));
+}
+
+// A result of `planes` label planes (planes - 1 segments + the outlier) on an odd-sized frame: rows beyond one block
+// of makeImageOutputs' 16, columns that leave a tail after the 8-pixel blocks; random labels, flow, occlusion and depth
+// (some invalid: zero, NaN, infinite).
+Fixture makeLargerFixture(int planes, unsigned seed) {
+  Fixture f;
+  const int w = 37, h = 21;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> unit(0.f, 1.f);
+  mc_flow::Result& r = f.result;
+  r.width = w;
+  r.height = h;
+  r.intrinsics = {30.0, 31.0, 18.2, 10.1};
+  for (int i = 0; i + 1 < planes; ++i) {
+    mc_flow::Segment s;
+    s.id = 3 + 2 * i;
+    r.segments.push_back(s);
+  }
+  r.world.ids = {3};
+  r.soft_labels = mc_flow::SoftLabels(w, h, planes, 0.f);
+  r.labels = mc_flow::ImageI32(w, h, 1, 0);
+  r.occlusion = mc_flow::ImageU8(w, h, 1, 0);
+  r.scene_flow = mc_flow::ImageF(w, h, 3, 0.f);
+  f.previous.frame.depth = mc_flow::ImageF(w, h, 1, 0.f);
+  f.previous.frame.intensity = mc_flow::ImageF(w, h, 1, 0.f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < planes; ++c) r.soft_labels.at(c, x, y) = unit(rng);
+      const int segment = int(unit(rng) * float(planes));
+      r.labels(x, y) = segment + 1 < planes ? r.segments[std::size_t(segment)].id : 0;
+      r.occlusion(x, y) = unit(rng) < 0.2f ? 255 : 0;
+      for (int c = 0; c < 3; ++c) r.scene_flow(x, y, c) = unit(rng) - 0.5f;
+      const float draw = unit(rng);
+      f.previous.frame.depth(x, y) = draw < 0.05f   ? 0.f
+                                     : draw < 0.08f ? std::nanf("")
+                                     : draw < 0.1f  ? std::numeric_limits<float>::infinity()
+                                                    : 0.5f + 3.f * unit(rng);
+      f.previous.frame.intensity(x, y) = unit(rng);
+    }
+  f.previous.colour = cv::Mat(h, w, CV_8UC3);
+  cv::randu(f.previous.colour, 0, 255);
+  f.previous.K = r.intrinsics;
+  f.current = f.previous;
+  f.pair.header.frame_id = "camera_rgb_optical_frame";
+  f.pair.header.stamp = ros::Time(100, 200000000);
+  f.pair.previous_stamp = ros::Time(100, 100000000);
+  f.pair.previous = &f.previous;
+  f.pair.current = &f.current;
+  return f;
+}
+
+// Every plane count (the interleave takes 2-8 planes 8 pixels at a time where the CPU has AVX2, others one at a time):
+// each pixel's channels are its planes' values, bit for bit.
+TEST(Conversions, SoftLabelsOfEveryPlaneCountAreInterleavedExactly) {
+  for (int planes = 1; planes <= 10; ++planes) {
+    SCOPED_TRACE(std::to_string(planes) + " planes");
+    const Fixture f = makeLargerFixture(planes, unsigned(planes));
+    const auto msg = mc_flow_ros::makeSoftLabelsImage(f.result, f.pair);
+    ASSERT_EQ(msg->encoding, "32FC" + std::to_string(planes));
+    ASSERT_EQ(msg->data.size(), std::size_t(37 * 21 * planes) * sizeof(float));
+    const auto* data = reinterpret_cast<const float*>(msg->data.data());
+    int wrong = 0;
+    for (int y = 0; y < 21; ++y)
+      for (int x = 0; x < 37; ++x)
+        for (int c = 0; c < planes; ++c) {
+          const float expected = f.result.soft_labels.at(c, x, y);
+          wrong += std::memcmp(&data[(y * 37 + x) * planes + c], &expected, sizeof expected) != 0;
+        }
+    EXPECT_EQ(wrong, 0);
+  }
+}
+
+// The cloud's points against their definitions on a frame with invalid depth and image colours: x y z the ray times
+// the depth (NaN without depth), v the scene flow (NaN without depth), label the id, occluded 0/1, rgb the image's.
+TEST(Conversions, SceneFlowCloudPointsFollowTheirDefinitionOnALargerFrame) {
+  const Fixture f = makeLargerFixture(4, 11);
+  for (const auto colour : {mc_flow_ros::CloudColour::Image, mc_flow_ros::CloudColour::Segment}) {
+    const auto cloud = mc_flow_ros::makeSceneFlowCloud(f.result, f.pair, colour);
+    sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), vx(*cloud, "vx");
+    sensor_msgs::PointCloud2ConstIterator<std::uint32_t> rgb(*cloud, "rgb"), label(*cloud, "label");
+    sensor_msgs::PointCloud2ConstIterator<std::uint8_t> occluded(*cloud, "occluded");
+    const mc_flow::Intrinsics& K = f.result.intrinsics;
+    int wrong = 0;
+    for (int v = 0; v < 21; ++v)
+      for (int u = 0; u < 37; ++u, ++x, ++vx, ++rgb, ++label, ++occluded) {
+        const float z = f.previous.frame.depth(u, v);
+        const bool valid = std::isfinite(z) && z > 0.f;
+        const float expected_xyz[3] = {float((u - K.cx) / K.fx * z), float((v - K.cy) / K.fy * z), z};
+        for (int k = 0; k < 3; ++k) {
+          wrong += valid ? x[k] != expected_xyz[k] : !std::isnan(x[k]);
+          wrong += valid ? vx[k] != f.result.scene_flow(u, v, k) : !std::isnan(vx[k]);
+        }
+        const std::uint32_t id = std::uint32_t(f.result.labels(u, v));
+        wrong += *label != id;
+        wrong += *occluded != (f.result.occlusion(u, v) > 0 ? 1 : 0);
+        const cv::Vec3b& p = f.previous.colour.at<cv::Vec3b>(v, u);
+        const mc_flow::Rgb8 c = colour == mc_flow_ros::CloudColour::Image
+                                    ? mc_flow::Rgb8{p[0], p[1], p[2]}
+                                    : mc_flow::displayColour(id, f.result.world.ids);
+        wrong += *rgb != ((std::uint32_t(c.r) << 16) | (std::uint32_t(c.g) << 8) | std::uint32_t(c.b));
+      }
+    EXPECT_EQ(wrong, 0) << (colour == mc_flow_ros::CloudColour::Image ? "image colours" : "segment colours");
+    // The padding after `occluded` is zero.
+    for (std::size_t at = 33; at < cloud->data.size(); at += 36)
+      ASSERT_EQ(cloud->data[at] | cloud->data[at + 1] | cloud->data[at + 2], 0) << "point " << at / 36;
+  }
+}
+
+// makeImageOutputs (the nodelet's path: the three large messages in one parallel region, from pools) gives the bytes
+// of the make* functions, for every selection of them.
+TEST(Conversions, ImageOutputsBuiltTogetherAreTheMessagesBuiltAlone) {
+  const Fixture f = makeLargerFixture(6, 5);
+  mc_flow_ros::ImagePool soft_pool, segmentation_pool;
+  mc_flow_ros::CloudPool cloud_pool;
+  for (int selection = 0; selection < 8; ++selection) {
+    SCOPED_TRACE("selection " + std::to_string(selection));
+    mc_flow_ros::ImageOutputRequest request;
+    request.soft_labels = selection & 1;
+    request.segmentation = selection & 2;
+    request.scene_flow = selection & 4;
+    request.segmentation_blend = 0.6;
+    request.cloud_colour = mc_flow_ros::CloudColour::Image;
+    request.soft_labels_pool = &soft_pool;
+    request.segmentation_pool = &segmentation_pool;
+    request.cloud_pool = &cloud_pool;
+    const mc_flow_ros::ImageOutputs built = mc_flow_ros::makeImageOutputs(f.result, f.pair, request);
+    ASSERT_EQ(bool(built.soft_labels), request.soft_labels);
+    ASSERT_EQ(bool(built.segmentation), request.segmentation);
+    ASSERT_EQ(bool(built.scene_flow), request.scene_flow);
+    if (built.soft_labels) {
+      const auto alone = mc_flow_ros::makeSoftLabelsImage(f.result, f.pair);
+      EXPECT_EQ(built.soft_labels->data, alone->data);
+      EXPECT_EQ(built.soft_labels->encoding, alone->encoding);
+      EXPECT_EQ(built.soft_labels->step, alone->step);
+    }
+    if (built.segmentation) {
+      const auto alone = mc_flow_ros::makeSegmentationImage(f.result, f.pair, 0.6);
+      EXPECT_EQ(built.segmentation->data, alone->data);
+      EXPECT_EQ(built.segmentation->encoding, alone->encoding);
+    }
+    if (built.scene_flow) {
+      const auto alone = mc_flow_ros::makeSceneFlowCloud(f.result, f.pair, mc_flow_ros::CloudColour::Image);
+      EXPECT_EQ(built.scene_flow->data, alone->data);
+      EXPECT_EQ(built.scene_flow->row_step, alone->row_step);
+      EXPECT_EQ(built.scene_flow->header.stamp, alone->header.stamp);
+    }
+  }
 }
 
 TEST(Conversions, LabelAndOcclusionImages) {

@@ -40,4 +40,21 @@ ImageU8 segmentationPicture(const SoftLabels& labels, const std::vector<int>& id
 void segmentationPictureInto(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity,
                              double blend, const std::vector<int>& world_ids, std::uint8_t* rgb);
 
+/// @brief segmentationPictureInto by ranges of rows, for callers that fill several outputs in one parallel region.
+/// Holds references to `labels`, `intensity` and a copy of the colours; throws InputError as segmentationPicture does.
+class SegmentationPainter {
+ public:
+  SegmentationPainter(const SoftLabels& labels, const std::vector<int>& ids, const ImageF* intensity, double blend,
+                      const std::vector<int>& world_ids);
+  /// Rows [first_row, end_row) of the picture into `rgb` (the whole picture's memory, as segmentationPictureInto's).
+  void paintRows(int first_row, int end_row, std::uint8_t* rgb) const;
+
+ private:
+  const SoftLabels& labels_;
+  const ImageF* intensity_;  // null where there is none of the labels' size
+  double blend_;
+  std::vector<Rgb8> colours_;          // per plane, the outlier plane last
+  std::vector<double> colour_values_;  // the same as r, g, b doubles (the AVX2 rows' broadcasts)
+};
+
 }  // namespace mc_flow

@@ -149,6 +149,27 @@ enum class CloudColour { Segment, Image };
 sensor_msgs::PointCloud2Ptr makeSceneFlowCloud(const mc_flow::Result& result, const PairContext& pair,
                                                CloudColour colour = CloudColour::Segment, CloudPool* pool = nullptr);
 
+/// @brief Which of the three large outputs makeImageOutputs builds, and how (the make* functions' arguments).
+struct ImageOutputRequest {
+  bool soft_labels = false, segmentation = false, scene_flow = false;
+  double segmentation_blend = 0.5;
+  CloudColour cloud_colour = CloudColour::Segment;
+  ImagePool* soft_labels_pool = nullptr;
+  ImagePool* segmentation_pool = nullptr;
+  CloudPool* cloud_pool = nullptr;
+};
+/// @brief The messages of makeImageOutputs; null where not requested.
+struct ImageOutputs {
+  sensor_msgs::ImagePtr soft_labels, segmentation;
+  sensor_msgs::PointCloud2Ptr scene_flow;
+};
+/// @brief ~soft_labels, ~segmentation and ~scene_flow as requested, the same bytes as makeSoftLabelsImage,
+/// makeSegmentationImage(result, pair, blend) and makeSceneFlowCloud, their rows filled in one parallel region: each
+/// region wakes the OpenMP threads, which under OMP_WAIT_POLICY=passive cost about 0.15 ms on a 2-core VM (docs/
+/// PERFORMANCE.md, "Nodelet overhead per pair"). ~segmentation needs the soft labels.
+ImageOutputs makeImageOutputs(const mc_flow::Result& result, const PairContext& pair,
+                              const ImageOutputRequest& request);
+
 /// @brief ~motion_markers: per segment an arrow from its centroid along its centroid's velocity
 /// (length = speed x `seconds_ahead`) and a text with id and speed; starts with a DELETEALL marker.
 visualization_msgs::MarkerArray makeMotionMarkers(const mc_flow::Result& result, const PairContext& pair,
