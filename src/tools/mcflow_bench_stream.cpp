@@ -325,7 +325,12 @@ ModeStats runSequence(const std::vector<SyntheticPair>& pairs, const Config& con
       st.late_delay = int(t) - kLateStartPair;
     if (world) scoreWorld(p, step, pipeline->odometry(), config, print_ids, *world);
     previous_ids = ids;
-    if (!pipeline) previous = std::move(solved);
+    if (!pipeline) {
+      // As a stream does (SequencePipeline): the result before the previous one gives its image memory to the next
+      // solve's outputs (without it every pair's outputs would land on fresh pages).
+      if (t > 0) solver->recycle(std::move(previous));
+      previous = std::move(solved);
+    }
   }
   return st;
 }
