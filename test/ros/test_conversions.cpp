@@ -497,6 +497,34 @@ TEST(Conversions, SoftLabelsOfEveryPlaneCountAreInterleavedExactly) {
   }
 }
 
+// A range of pixels writes exactly its own floats (threads fill neighbouring ranges of one buffer): every plane count,
+// ranges that start and end anywhere in an 8-pixel block or cover less than one, the buffer's last pixel included;
+// every float outside the range keeps its sentinel, every one inside is the plane's value.
+TEST(Conversions, SoftLabelRangesWriteExactlyTheirOwnFloats) {
+  const float sentinel = -12345.f;
+  for (int planes = 1; planes <= 10; ++planes) {
+    SCOPED_TRACE(std::to_string(planes) + " planes");
+    const Fixture f = makeLargerFixture(planes, unsigned(100 + planes));
+    const mc_flow::SoftLabels& u = f.result.soft_labels;
+    const std::size_t pixels = std::size_t(u.width) * std::size_t(u.height);
+    int wrong = 0;
+    for (const std::size_t begin : {std::size_t(0), std::size_t(1), std::size_t(5), std::size_t(13), pixels - 9})
+      for (const std::size_t length : {std::size_t(1), std::size_t(3), std::size_t(7), std::size_t(8), std::size_t(9),
+                                       std::size_t(16), std::size_t(21), std::size_t(37)}) {
+        const std::size_t end = std::min(pixels, begin + length);
+        std::vector<float> out(pixels * std::size_t(planes), sentinel);
+        mc_flow_ros::interleaveSoftLabels(u, begin, end, out.data());
+        for (std::size_t p = 0; p < pixels; ++p)
+          for (int c = 0; c < planes; ++c) {
+            const float got = out[p * std::size_t(planes) + std::size_t(c)];
+            const bool inside = p >= begin && p < end;
+            wrong += inside ? got != u.plane(c)[p] : got != sentinel;
+          }
+      }
+    EXPECT_EQ(wrong, 0);
+  }
+}
+
 // The cloud's points against their definitions on a frame with invalid depth and image colours: x y z the ray times
 // the depth (NaN without depth), v the scene flow (NaN without depth), label the id, occluded 0/1, rgb the image's.
 TEST(Conversions, SceneFlowCloudPointsFollowTheirDefinitionOnALargerFrame) {
