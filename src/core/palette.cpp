@@ -144,7 +144,11 @@ __attribute__((target("avx2"))) void segmentationRowAvx2(const SoftLabels& label
     __m256d r0 = _mm256_setzero_pd(), r1 = r0, g0 = r0, g1 = r0, b0 = r0, b1 = r0;
     for (int i = 0; i < labels.count; ++i) {
       __m256 u = _mm256_loadu_ps(labels.plane(i) + row + std::size_t(x0));
-      u = _mm256_and_ps(u, _mm256_cmp_ps(u, _mm256_setzero_ps(), _CMP_GT_OQ));  // +0 unless u > 0
+      const __m256 positive = _mm256_cmp_ps(u, _mm256_setzero_ps(), _CMP_GT_OQ);
+      // A plane with no share in these 8 pixels would add +0 to sums that are >= +0, which leaves them as they are:
+      // skipped (most blocks hold one or two of the planes).
+      if (_mm256_movemask_ps(positive) == 0) continue;
+      u = _mm256_and_ps(u, positive);  // +0 unless u > 0
       const __m256d lo = _mm256_cvtps_pd(_mm256_castps256_ps128(u)), hi = _mm256_cvtps_pd(_mm256_extractf128_ps(u, 1));
       const double* c = colour_values + 3 * i;
       const __m256d cr = _mm256_broadcast_sd(c), cg = _mm256_broadcast_sd(c + 1), cb = _mm256_broadcast_sd(c + 2);
@@ -231,6 +235,7 @@ SegmentationPainter::SegmentationPainter(const SoftLabels& labels, const std::ve
 }
 
 void SegmentationPainter::paintRows(int first_row, int end_row, std::uint8_t* rgb) const {
+  if (labels_.width <= 0) return;  // no pixels (and no row to point into)
   const std::size_t row_bytes = std::size_t(labels_.width) * 3;
   for (int y = std::max(first_row, 0); y < std::min(end_row, labels_.height); ++y)
     segmentationRow(labels_, colours_, colour_values_.data(), intensity_ ? &(*intensity_)(0, y) : nullptr, blend_, y,

@@ -264,16 +264,28 @@ void SequencePipeline::updateTracks(const Result& result) {
   tracks_ = std::move(next);
 }
 
-ImageU8 movingMask(const Result& result, const std::vector<WorldVelocity>& world) {
+void movingMaskInto(const Result& result, const std::vector<WorldVelocity>& world, std::uint8_t* mask) {
   if (world.size() != result.segments.size())
     throw InputError("moving mask: " + std::to_string(world.size()) + " world velocities for " +
                      std::to_string(result.segments.size()) + " segments");
-  std::set<int> moving;
+  // 255 or 0 per id up to the largest segment id (a look-up per pixel instead of a search: the nodelet makes this mask
+  // for every pair); ids beyond it, negative ones and 0 are no segment's.
+  int largest = 0;
+  for (const Segment& s : result.segments) largest = std::max(largest, s.id);
+  std::vector<std::uint8_t> value_of(std::size_t(largest) + 1, 0);
   for (std::size_t i = 0; i < world.size(); ++i)
-    if (world[i].moving) moving.insert(result.segments[i].id);
+    if (world[i].moving && result.segments[i].id > 0) value_of[std::size_t(result.segments[i].id)] = 255;
+  const std::int32_t* ids = result.labels.data.data();
+  const std::size_t count = result.labels.data.size(), table = value_of.size();
+  for (std::size_t k = 0; k < count; ++k) {
+    const std::size_t id = std::size_t(std::uint32_t(ids[k]));  // negative ids become huge: outside the table
+    mask[k] = id < table ? value_of[id] : 0;
+  }
+}
+
+ImageU8 movingMask(const Result& result, const std::vector<WorldVelocity>& world) {
   ImageU8 mask(result.labels.width, result.labels.height, 1, 0);
-  for (std::size_t k = 0; k < result.labels.data.size(); ++k)
-    if (moving.count(result.labels.data[k])) mask.data[k] = 255;
+  movingMaskInto(result, world, mask.data.data());
   return mask;
 }
 

@@ -458,9 +458,11 @@ nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Ti
 sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result,
                                           const std::vector<mc_flow::WorldVelocity>& world, const PairContext& pair,
                                           ImagePool* pool) {
-  const mc_flow::ImageU8 mask = mc_flow::movingMask(result, world);
-  auto msg = emptyImage(pair, mask.width, mask.height, enc::MONO8, 1, pool);
-  std::copy(mask.data.begin(), mask.data.end(), msg->data.begin());
+  if (world.size() != result.segments.size())  // before a pooled message is taken
+    throw mc_flow::InputError("moving mask: " + std::to_string(world.size()) + " world velocities for " +
+                              std::to_string(result.segments.size()) + " segments");
+  auto msg = emptyImage(pair, result.labels.width, result.labels.height, enc::MONO8, 1, pool);
+  mc_flow::movingMaskInto(result, world, msg->data.data());
   return msg;
 }
 
@@ -575,6 +577,7 @@ class SceneFlowCloudWriter {
 
   void fillRows(int first_row, int end_row) const {
     const mc_flow::Result& result = result_;
+    if (result.width <= 0) return;  // no points (and no row to point into)
     const float nan = std::numeric_limits<float>::quiet_NaN();
     const bool have_labels = !result.labels.empty();
     const std::size_t flow_channels = have_flow_ ? std::size_t(result.scene_flow.channels) : 0;
@@ -611,12 +614,14 @@ class SceneFlowCloudWriter {
           }
           rgb = cached_rgb;
         }
-#if defined(__SSE2__)
-        // x y z rgb and vx vy vz label as two 16-byte stores (built in registers).
-        _mm_storeu_ps(reinterpret_cast<float*>(point),
-                      _mm_setr_ps(px, py, pz, _mm_cvtss_f32(_mm_castsi128_ps(_mm_cvtsi32_si128(int(rgb))))));
-        _mm_storeu_ps(reinterpret_cast<float*>(point + kAtV),
-                      _mm_setr_ps(vx, vy, vz, _mm_cvtss_f32(_mm_castsi128_ps(_mm_cvtsi32_si128(int(id))))));
+#if defined(__x86_64__)
+        // x y z rgb and vx vy vz label as two 16-byte stores built in registers (x86-64 keeps floats in SSE registers,
+        // so the id's and colour's bits pass unchanged; a vector built through memory stalled on store forwarding).
+        const auto asFloat = [](std::uint32_t bits) {
+          return _mm_cvtss_f32(_mm_castsi128_ps(_mm_cvtsi32_si128(int(bits))));
+        };
+        _mm_storeu_ps(reinterpret_cast<float*>(point), _mm_setr_ps(px, py, pz, asFloat(rgb)));
+        _mm_storeu_ps(reinterpret_cast<float*>(point + kAtV), _mm_setr_ps(vx, vy, vz, asFloat(id)));
 #else
         put(point, px);
         put(point + 4, py);
@@ -627,8 +632,14 @@ class SceneFlowCloudWriter {
         put(point + kAtV + 8, vz);
         put(point + kAtLabel, id);
 #endif
-        // The occluded byte and the padding after it (zeros) as one word.
-        put(point + kAtOccluded, std::uint32_t((occlusion_row && occlusion_row[x] > 0) ? 1 : 0));
+        // The occluded byte and the padding after it (zeros) as one word, the byte first in memory (a 4-byte array
+        // copied instead went through memory and stalled on store forwarding).
+        const std::uint32_t occluded = (occlusion_row && occlusion_row[x] > 0) ? 1u : 0u;
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+        put(point + kAtOccluded, occluded << 24);
+#else
+        put(point + kAtOccluded, occluded);
+#endif
       }
     }
   }

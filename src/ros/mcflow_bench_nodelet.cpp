@@ -37,6 +37,7 @@
 #include "mc_flow/ros/conversions.h"
 #include "mc_flow/ros/message_validation.h"
 #include "mc_flow/ros/node_parameters.h"
+#include "mc_flow/ros/output_publishers.h"
 #include "mc_flow/testing/bench.h"
 #include "mc_flow/eval/synthetic_scene.h"
 
@@ -240,6 +241,10 @@ int run(int argc, char** argv) {
     pair.previous = &first;
     pair.current = &second;
     pair.previous_frame = &step.first->frame;
+    pair.world = &step.world_velocities;
+    // ~camera_path's poses as the nodelet holds them after a long stream.
+    const std::deque<Eigen::Matrix4d> camera_poses(mc_flow_ros::OutputPublishers::kCameraPathPoses,
+                                                   pipeline.odometry().pose);
     pair.solve_time_ms = cli.has("dump") ? 0.0 : solve_ms;  // a dump compares builds: no clock in it
 
     // What arrives from a driver in another process (the length prefix, then the message).
@@ -247,7 +252,7 @@ int run(int argc, char** argv) {
                                                          ros::serialization::serializeMessage(m1.depth),
                                                          ros::serialization::serializeMessage(m1.info)};
     // The nodelet's message pools (OutputPublishers'): a pair's messages are reused by the next once released.
-    mc_flow_ros::ImagePool soft_pool, labels_pool, occlusion_pool, segmentation_pool;
+    mc_flow_ros::ImagePool soft_pool, labels_pool, occlusion_pool, segmentation_pool, moving_pool;
     mc_flow_ros::CloudPool cloud_pool;
     StepTimes own, alone, wire;
     std::map<std::string, std::size_t> bytes;
@@ -270,6 +275,9 @@ int run(int argc, char** argv) {
       sensor_msgs::ImagePtr soft, labels, occlusion, segmentation;
       sensor_msgs::PointCloud2Ptr cloud;
       visualization_msgs::MarkerArray markers;
+      sensor_msgs::ImagePtr moving;
+      nav_msgs::Odometry odom;
+      nav_msgs::Path path;
       sensor_msgs::CameraInfo info;
       std::vector<geometry_msgs::TransformStamped> transforms;
       own.time("~segments", [&] { segments = mc_flow_ros::makeSegmentArray(result, pair); });
@@ -291,6 +299,13 @@ int run(int argc, char** argv) {
       own.time("~motion_markers",
                [&] { markers = mc_flow_ros::makeMotionMarkers(result, pair, defaults.marker_seconds_ahead); });
       own.time("~camera_info", [&] { info = mc_flow_ros::processingCameraInfo(*pair.current); });
+      own.time("~moving_mask",
+               [&] { moving = mc_flow_ros::makeMovingMaskImage(result, *pair.world, pair, &moving_pool); });
+      own.time("~odom, ~camera_path", [&] {
+        odom = mc_flow_ros::makeOdometry(pipeline.odometry(), pair.header.stamp, defaults.odom_frame,
+                                         pair.header.frame_id, Eigen::Isometry3d::Identity());
+        path = mc_flow_ros::makeCameraPath(camera_poses, pair.header);
+      });
       own.time("TF transforms", [&] {
         transforms = mc_flow_ros::makeSegmentTransforms(result, pipeline.tracks(), pair, defaults.segment_frame_prefix);
       });
@@ -346,7 +361,7 @@ int run(int argc, char** argv) {
       }
       sink += segments.segments.size() + soft->data.size() + labels->data.size() + occlusion->data.size() +
               segmentation->data.size() + cloud->data.size() + markers.markers.size() + info.D.size() +
-              transforms.size();
+              transforms.size() + moving->data.size() + path.poses.size() + odom.child_frame_id.size();
     }
 
     std::cout << "mcflow_bench_nodelet: " << input_name << ", input " << m1.rgb.width << "x" << m1.rgb.height

@@ -174,6 +174,11 @@ TEST(SequenceIo, TheMovingMaskHoldsThePixelsOfMovingSegments) {
   world[1].moving = true;
   const ImageU8 mask = movingMask(r, world);
   EXPECT_EQ(mask.data, (std::vector<std::uint8_t>{0, 255, 0}));
+  // Ids that are no segment's (negative, beyond the largest, 0) are not moving; a moving segment's id anywhere.
+  r.labels = ImageI32(6, 1, 1, 0);
+  r.labels.data = {-1, 8, 9, 1000, 3, 8};
+  world[0].moving = true;
+  EXPECT_EQ(movingMask(r, world).data, (std::vector<std::uint8_t>{0, 255, 0, 0, 255, 255}));
   world.pop_back();
   EXPECT_THROW(movingMask(r, world), InputError);
 }

@@ -528,36 +528,46 @@ TEST(Conversions, SoftLabelRangesWriteExactlyTheirOwnFloats) {
 // The cloud's points against their definitions on a frame with invalid depth and image colours: x y z the ray times
 // the depth (NaN without depth), v the scene flow (NaN without depth), label the id, occluded 0/1, rgb the image's.
 TEST(Conversions, SceneFlowCloudPointsFollowTheirDefinitionOnALargerFrame) {
-  const Fixture f = makeLargerFixture(4, 11);
-  for (const auto colour : {mc_flow_ros::CloudColour::Image, mc_flow_ros::CloudColour::Segment}) {
-    const auto cloud = mc_flow_ros::makeSceneFlowCloud(f.result, f.pair, colour);
-    sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), vx(*cloud, "vx");
-    sensor_msgs::PointCloud2ConstIterator<std::uint32_t> rgb(*cloud, "rgb"), label(*cloud, "label");
-    sensor_msgs::PointCloud2ConstIterator<std::uint8_t> occluded(*cloud, "occluded");
-    const mc_flow::Intrinsics& K = f.result.intrinsics;
-    int wrong = 0;
-    for (int v = 0; v < 21; ++v)
-      for (int u = 0; u < 37; ++u, ++x, ++vx, ++rgb, ++label, ++occluded) {
-        const float z = f.previous.frame.depth(u, v);
-        const bool valid = std::isfinite(z) && z > 0.f;
-        const float expected_xyz[3] = {float((u - K.cx) / K.fx * z), float((v - K.cy) / K.fy * z), z};
-        for (int k = 0; k < 3; ++k) {
-          wrong += valid ? x[k] != expected_xyz[k] : !std::isnan(x[k]);
-          wrong += valid ? vx[k] != f.result.scene_flow(u, v, k) : !std::isnan(vx[k]);
+  Fixture f = makeLargerFixture(4, 11);
+  // A scene flow with a fourth channel: each pixel's first three are its flow.
+  mc_flow::ImageF wide(f.result.width, f.result.height, 4, 9.f);
+  for (int v = 0; v < f.result.height; ++v)
+    for (int u = 0; u < f.result.width; ++u)
+      for (int k = 0; k < 3; ++k) wide(u, v, k) = f.result.scene_flow(u, v, k);
+  const mc_flow::ImageF three = f.result.scene_flow;
+  for (const int channels : {3, 4}) {
+    f.result.scene_flow = channels == 3 ? three : wide;
+    for (const auto colour : {mc_flow_ros::CloudColour::Image, mc_flow_ros::CloudColour::Segment}) {
+      const auto cloud = mc_flow_ros::makeSceneFlowCloud(f.result, f.pair, colour);
+      sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), vx(*cloud, "vx");
+      sensor_msgs::PointCloud2ConstIterator<std::uint32_t> rgb(*cloud, "rgb"), label(*cloud, "label");
+      sensor_msgs::PointCloud2ConstIterator<std::uint8_t> occluded(*cloud, "occluded");
+      const mc_flow::Intrinsics& K = f.result.intrinsics;
+      int wrong = 0;
+      for (int v = 0; v < 21; ++v)
+        for (int u = 0; u < 37; ++u, ++x, ++vx, ++rgb, ++label, ++occluded) {
+          const float z = f.previous.frame.depth(u, v);
+          const bool valid = std::isfinite(z) && z > 0.f;
+          const float expected_xyz[3] = {float((u - K.cx) / K.fx * z), float((v - K.cy) / K.fy * z), z};
+          for (int k = 0; k < 3; ++k) {
+            wrong += valid ? x[k] != expected_xyz[k] : !std::isnan(x[k]);
+            wrong += valid ? vx[k] != f.result.scene_flow(u, v, k) : !std::isnan(vx[k]);
+          }
+          const std::uint32_t id = std::uint32_t(f.result.labels(u, v));
+          wrong += *label != id;
+          wrong += *occluded != (f.result.occlusion(u, v) > 0 ? 1 : 0);
+          const cv::Vec3b& p = f.previous.colour.at<cv::Vec3b>(v, u);
+          const mc_flow::Rgb8 c = colour == mc_flow_ros::CloudColour::Image
+                                      ? mc_flow::Rgb8{p[0], p[1], p[2]}
+                                      : mc_flow::displayColour(id, f.result.world.ids);
+          wrong += *rgb != ((std::uint32_t(c.r) << 16) | (std::uint32_t(c.g) << 8) | std::uint32_t(c.b));
         }
-        const std::uint32_t id = std::uint32_t(f.result.labels(u, v));
-        wrong += *label != id;
-        wrong += *occluded != (f.result.occlusion(u, v) > 0 ? 1 : 0);
-        const cv::Vec3b& p = f.previous.colour.at<cv::Vec3b>(v, u);
-        const mc_flow::Rgb8 c = colour == mc_flow_ros::CloudColour::Image
-                                    ? mc_flow::Rgb8{p[0], p[1], p[2]}
-                                    : mc_flow::displayColour(id, f.result.world.ids);
-        wrong += *rgb != ((std::uint32_t(c.r) << 16) | (std::uint32_t(c.g) << 8) | std::uint32_t(c.b));
-      }
-    EXPECT_EQ(wrong, 0) << (colour == mc_flow_ros::CloudColour::Image ? "image colours" : "segment colours");
-    // The padding after `occluded` is zero.
-    for (std::size_t at = 33; at < cloud->data.size(); at += 36)
-      ASSERT_EQ(cloud->data[at] | cloud->data[at + 1] | cloud->data[at + 2], 0) << "point " << at / 36;
+      EXPECT_EQ(wrong, 0) << (colour == mc_flow_ros::CloudColour::Image ? "image colours" : "segment colours") << ", "
+                          << channels << " flow channels";
+      // The padding after `occluded` is zero.
+      for (std::size_t at = 33; at < cloud->data.size(); at += 36)
+        ASSERT_EQ(cloud->data[at] | cloud->data[at + 1] | cloud->data[at + 2], 0) << "point " << at / 36;
+    }
   }
 }
 

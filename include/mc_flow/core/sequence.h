@@ -183,5 +183,7 @@ std::string toString(SequenceStep::Outcome outcome);
 /// @brief Pixels of moving segments (WorldVelocity::moving, one per segment of `result`) in `result.labels`: 255, else
 /// 0 (input resolution). Throws InputError when the counts differ.
 ImageU8 movingMask(const Result& result, const std::vector<WorldVelocity>& world);
+/// @brief movingMask into caller memory: `mask` holds result.labels' pixel count bytes (a ROS image's data, say).
+void movingMaskInto(const Result& result, const std::vector<WorldVelocity>& world, std::uint8_t* mask);
 
 }  // namespace mc_flow

@@ -47,6 +47,9 @@ class OutputPublishers {
   void publish(const mc_flow::Result& result, const PairContext& pair, const mc_flow::SequencePipeline& pipeline,
                long pair_index, long frames_dropped, const Warn& warn);
 
+  /// ~camera_path: the camera's last poses (10 s at 30 Hz).
+  static constexpr std::size_t kCameraPathPoses = 300;
+
  private:
   void publishOdometry(const PairContext& pair, const mc_flow::Odometry& odometry, const Warn& warn);
   void saveAndSummarise(const mc_flow::Result& result, const PairContext& pair, const cv::Mat& segmentation,
@@ -62,9 +65,7 @@ class OutputPublishers {
   // The image and cloud messages, reused once their subscribers let go of them (message_pool.h).
   ImagePool soft_labels_pool_, labels_pool_, segmentation_pool_, occlusion_pool_, moving_mask_pool_;
   CloudPool cloud_pool_;
-  // ~camera_path: the camera's last poses (10 s at 30 Hz), oldest first.
-  static constexpr std::size_t kCameraPathPoses = 300;
-  std::deque<Eigen::Matrix4d> camera_poses_;
+  std::deque<Eigen::Matrix4d> camera_poses_;  // the last kCameraPathPoses, oldest first
 };
 
 }  // namespace mc_flow_ros
