@@ -573,6 +573,15 @@ class SceneFlowCloudWriter {
     ray_y_.resize(std::size_t(std::max(result.height, 0)));
     for (int x = 0; x < result.width; ++x) ray_x_[std::size_t(x)] = (x - K.cx) / K.fx;
     for (int y = 0; y < result.height; ++y) ray_y_[std::size_t(y)] = (y - K.cy) / K.fy;
+    // Segment colours by id, up to the largest segment id (a palette look-up per pixel, fmod and lround, cost more
+    // than the rest of a point; ids at noisy boundaries change too often to keep the last one's). Id 0 (outlier, no
+    // depth) in its own grey, as a row that starts with it.
+    int largest = 0;
+    for (const mc_flow::Segment& s : result.segments) largest = std::max(largest, s.id);
+    colour_of_id_.resize(std::size_t(largest) + 1);
+    colour_of_id_[0] = packedColour(mc_flow::colourForId(0));
+    for (int id = 1; id <= largest; ++id)
+      colour_of_id_[std::size_t(id)] = packedColour(mc_flow::displayColour(std::uint32_t(id), result.world.ids));
   }
 
   void fillRows(int first_row, int end_row) const {
@@ -583,10 +592,6 @@ class SceneFlowCloudWriter {
     const std::size_t flow_channels = have_flow_ ? std::size_t(result.scene_flow.channels) : 0;
     const auto put = [](std::uint8_t* to, auto value) { std::memcpy(to, &value, sizeof value); };
     for (int y = first_row; y < end_row; ++y) {
-      // Segment colours: a palette look-up per pixel cost more than the rest of the point (fmod, lround); the
-      // pixels of a segment come in runs, so the last id's colour is kept.
-      std::uint32_t cached_id = 0;
-      std::uint32_t cached_rgb = packedColour(mc_flow::colourForId(0));
       const float* depth_row = have_depth_ ? &first_frame_->depth(0, y) : nullptr;
       const float* flow_row = have_flow_ ? &result.scene_flow(0, y, 0) : nullptr;
       const std::int32_t* label_row = have_labels ? &result.labels(0, y) : nullptr;
@@ -608,11 +613,8 @@ class SceneFlowCloudWriter {
           const cv::Vec3b& p = colour_row[x];
           rgb = packedColour({p[0], p[1], p[2]});
         } else {
-          if (id != cached_id) {
-            cached_id = id;
-            cached_rgb = packedColour(mc_flow::displayColour(id, result.world.ids));
-          }
-          rgb = cached_rgb;
+          rgb = id < colour_of_id_.size() ? colour_of_id_[id]
+                                          : packedColour(mc_flow::displayColour(id, result.world.ids));
         }
 #if defined(__x86_64__)
         // x y z rgb and vx vy vz label as two 16-byte stores built in registers (x86-64 keeps floats in SSE registers,
@@ -652,6 +654,7 @@ class SceneFlowCloudWriter {
   const mc_flow::RgbdFrame* first_frame_ = nullptr;
   bool have_depth_ = false, image_colour_ = false, have_flow_ = false, have_occlusion_ = false;
   std::vector<double> ray_x_, ray_y_;
+  std::vector<std::uint32_t> colour_of_id_;  // packed rgb per id 0 .. the largest segment id
 };
 
 }  // namespace
