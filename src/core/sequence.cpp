@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstdlib>
 #include <limits>
-#include <set>
 
 #include "mc_flow/core/error.h"
 #include "mc_flow/core/label_optimization.h"
