@@ -129,21 +129,21 @@ sensor_msgs::ImagePtr emptyImage(const PairContext& pair, int w, int h, const st
   return msg;
 }
 
-// How many values mc_flow::isValidDepth accepts (finite and > 0), as two comparisons that vectorise (isfinite in the
-// loop did not): NaN fails both, +inf the second, -inf, zeros and negatives the first.
-int countValidDepth(const std::vector<float>& depth) {
-  constexpr float kInfinity = std::numeric_limits<float>::infinity();
-  int valid = 0;
-  for (const float z : depth) valid += int(z > 0.f) & int(z < kInfinity);
-  return valid;
-}
-
 // PCL's rgb field: 0x00RRGGBB in the bytes of a float.
 std::uint32_t packedColour(const Rgb8& c) {
   return (std::uint32_t(c.r) << 16) | (std::uint32_t(c.g) << 8) | std::uint32_t(c.b);
 }
 
 }  // namespace
+
+int countValidDepth(const std::vector<float>& depth) {
+  // mc_flow::isValidDepth as two comparisons that vectorise (isfinite in the loop did not): NaN fails both, +inf the
+  // second, -inf, zeros and negatives the first.
+  constexpr float kInfinity = std::numeric_limits<float>::infinity();
+  int valid = 0;
+  for (const float z : depth) valid += int(z > 0.f) & int(z < kInfinity);
+  return valid;
+}
 
 mc_flow::Intrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info, int width, int height) {
   validateCameraInfo(info);
@@ -458,9 +458,6 @@ nav_msgs::Odometry makeOdometry(const mc_flow::Odometry& odometry, const ros::Ti
 sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result,
                                           const std::vector<mc_flow::WorldVelocity>& world, const PairContext& pair,
                                           ImagePool* pool) {
-  if (world.size() != result.segments.size())  // before a pooled message is taken
-    throw mc_flow::InputError("moving mask: " + std::to_string(world.size()) + " world velocities for " +
-                              std::to_string(result.segments.size()) + " segments");
   auto msg = emptyImage(pair, result.labels.width, result.labels.height, enc::MONO8, 1, pool);
   mc_flow::movingMaskInto(result, world, msg->data.data());
   return msg;

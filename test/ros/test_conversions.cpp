@@ -497,6 +497,28 @@ TEST(Conversions, SoftLabelsOfEveryPlaneCountAreInterleavedExactly) {
   }
 }
 
+// The vectorised count takes the values mc_flow::isValidDepth takes: NaNs, infinities, zeros of both signs, negatives,
+// denormals, the largest float.
+TEST(Conversions, ValidDepthCountIsIsValidDepths) {
+  const float inf = std::numeric_limits<float>::infinity();
+  const std::vector<float> depth = {std::nanf(""),
+                                    -std::nanf(""),
+                                    inf,
+                                    -inf,
+                                    0.f,
+                                    -0.f,
+                                    -1.f,
+                                    std::numeric_limits<float>::denorm_min(),
+                                    -std::numeric_limits<float>::denorm_min(),
+                                    std::numeric_limits<float>::max(),
+                                    1.5f,
+                                    1e-30f};
+  int expected = 0;
+  for (const float z : depth) expected += mc_flow::isValidDepth(z) ? 1 : 0;
+  EXPECT_EQ(mc_flow_ros::countValidDepth(depth), expected);
+  EXPECT_EQ(expected, 4);
+}
+
 // A range of pixels writes exactly its own floats (threads fill neighbouring ranges of one buffer): every plane count,
 // ranges that start and end anywhere in an 8-pixel block or cover less than one, the buffer's last pixel included;
 // every float outside the range keeps its sentinel, every one inside is the plane's value.

@@ -126,6 +126,10 @@ sensor_msgs::ImagePtr makeMovingMaskImage(const mc_flow::Result& result,
 /// last channel the outlier label; values exactly as the solver produced them (lossless, sum to 1).
 sensor_msgs::ImagePtr makeSoftLabelsImage(const mc_flow::Result& result, const PairContext& pair,
                                           ImagePool* pool = nullptr);
+/// @brief How many of `depth`'s values mc_flow::isValidDepth accepts (the count toFrameInput checks), in a loop that
+/// vectorises.
+int countValidDepth(const std::vector<float>& depth);
+
 /// @brief Pixels [begin, end) of `labels`' planes interleaved per pixel into `out` (labels.count floats per pixel,
 /// pixel p at out + p * count: ~soft_labels' data). Writes exactly those floats, so that threads may fill disjoint
 /// ranges of one buffer; 2-8 planes 8 pixels at a time with AVX2 where the CPU has it.
